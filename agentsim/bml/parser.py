@@ -1,0 +1,328 @@
+"""BML 1.0 parser: XML text in, a :class:`~agentsim.bml.model.Block` out, every problem with line and column.
+
+The XML is read by a hardened expat reader (defusedxml: no entity declarations, no external references),
+without namespace processing, so that attributes with undeclared prefixes are extensions to warn about
+rather than fatal errors. Problems that spoil the whole block raise :class:`~agentsim.errors.BMLError`;
+problems with one behaviour or constraint become :class:`~agentsim.bml.model.ParseWarning` entries and the
+rest of the block is kept.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+import xml.sax
+import xml.sax.handler
+from dataclasses import dataclass, field
+
+from defusedxml.common import DefusedXmlException
+from defusedxml.expatreader import create_parser
+
+from agentsim.bml.model import Behaviour, Block, Constraint, ParseWarning, SyncRef
+from agentsim.bml.vocabulary import BEHAVIOUR_TYPES, BML_NAMESPACE, PARAMETER_CHILDREN
+from agentsim.errors import BMLError
+
+#: Largest time or offset (seconds) accepted in a reference; beyond it a behaviour is refused.
+MAX_TIME = 1.0e6
+
+ALL_SYNC_NAMES = {s for t in BEHAVIOUR_TYPES.values() for s in t.syncs}
+_NAME = r"[A-Za-z_][\w.\-]*"
+_NUMBER = r"(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?"
+_LAZY_NAME = r"[A-Za-z_][\w.\-]*?"
+_REF = re.compile(
+    rf"^(?P<path>{_LAZY_NAME}(?::{_LAZY_NAME}){{1,2}})\s*(?:(?P<sign>[+-])\s*(?P<offset>{_NUMBER}))?$"
+)
+_ABSOLUTE = re.compile(rf"^[+-]?{_NUMBER}$")
+_BLOCK_ID = re.compile(r"<(?:\w+:)?bml\b[^>]*?\bid\s*=\s*[\"']([^\"']*)[\"']", re.S)
+
+
+@dataclass
+class _Node:
+    tag: str
+    attrs: dict[str, str]
+    line: int
+    column: int
+    children: list["_Node | str"] = field(default_factory=list)
+    namespaces: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def local(self) -> str:
+        return self.tag.split(":", 1)[-1]
+
+    @property
+    def prefix(self) -> str | None:
+        return self.tag.split(":", 1)[0] if ":" in self.tag else None
+
+    def elements(self) -> list["_Node"]:
+        return [c for c in self.children if isinstance(c, _Node)]
+
+
+class _TreeBuilder(xml.sax.handler.ContentHandler):
+    """Builds :class:`_Node` trees, recording where each element starts."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.root: _Node | None = None
+        self.stack: list[_Node] = []
+        self.locator = None
+
+    def setDocumentLocator(self, locator):  # noqa: N802 (SAX API)
+        self.locator = locator
+
+    def startElement(self, name, attrs):  # noqa: N802 (SAX API)
+        line = self.locator.getLineNumber() if self.locator else 0
+        column = self.locator.getColumnNumber() + 1 if self.locator else 0
+        parent_ns = self.stack[-1].namespaces if self.stack else {}
+        namespaces = dict(parent_ns)
+        plain = {}
+        for key, value in attrs.items():
+            if key == "xmlns":
+                namespaces[""] = value
+            elif key.startswith("xmlns:"):
+                namespaces[key[6:]] = value
+            else:
+                plain[key] = value
+        node = _Node(name, plain, line, column, namespaces=namespaces)
+        if self.stack:
+            self.stack[-1].children.append(node)
+        else:
+            self.root = node
+        self.stack.append(node)
+
+    def endElement(self, name):  # noqa: N802 (SAX API)
+        self.stack.pop()
+
+    def characters(self, content):
+        if self.stack:
+            children = self.stack[-1].children
+            if children and isinstance(children[-1], str):
+                children[-1] += content
+            else:
+                children.append(content)
+
+
+def _read_tree(text: str | bytes) -> _Node:
+    data = text.encode("utf-8") if isinstance(text, str) else text
+    builder = _TreeBuilder()
+    parser = create_parser(forbid_dtd=False, forbid_entities=True, forbid_external=True)
+    parser.setContentHandler(builder)
+    parser.setFeature(xml.sax.handler.feature_namespaces, False)
+    parser.setFeature(xml.sax.handler.feature_external_ges, False)
+    source = xml.sax.xmlreader.InputSource()
+    source.setByteStream(io.BytesIO(data))
+    try:
+        parser.parse(source)
+    except xml.sax.SAXParseException as exc:
+        raise BMLError(f"malformed XML: {exc.getMessage()}", exc.getLineNumber(), exc.getColumnNumber() + 1) from None
+    except DefusedXmlException as exc:
+        loc = builder.locator
+        line = loc.getLineNumber() if loc else None
+        column = loc.getColumnNumber() + 1 if loc else None
+        raise BMLError(f"refused XML construct ({type(exc).__name__}): entity and external references "
+                       "are not allowed in BML", line, column) from None
+    if builder.root is None:
+        raise BMLError("empty document: expected a <bml> element", 1, 1)
+    return builder.root
+
+
+def guess_block_id(text: str | bytes) -> str:
+    """The ``id`` of the ``<bml>`` element, read leniently (for naming a block that fails to parse)."""
+    if isinstance(text, bytes):
+        text = text.decode("utf-8", "replace")
+    match = _BLOCK_ID.search(text)
+    return match.group(1) if match else ""
+
+
+def parse_ref(text: str, line: int | None = None, column: int | None = None) -> SyncRef:
+    """Parse a sync reference: ``2.5``, ``g1:stroke``, ``g1:end+0.5``, ``bml2:g1:start-2``,
+    ``anticipators:metronome:beat3+0.1``."""
+    raw = text.strip()
+    if _ABSOLUTE.match(raw):
+        value = float(raw)
+        _check_magnitude(value, raw, line, column)
+        return SyncRef("absolute", offset=value, text=raw, line=line, column=column)
+    match = _REF.match(raw)
+    if not match:
+        raise BMLError(f"invalid sync reference {text!r}: expected a number, behaviour:sync[+-offset], "
+                       "block:behaviour:sync or anticipators:id:sync", line, column)
+    parts = match.group("path").split(":")
+    offset = 0.0
+    if match.group("offset") is not None:
+        offset = float(match.group("offset")) * (-1.0 if match.group("sign") == "-" else 1.0)
+        _check_magnitude(offset, raw, line, column)
+    if len(parts) == 3 and parts[0] == "anticipators":
+        return SyncRef("anticipator", offset=offset, anticipator=parts[1], sync=parts[2], text=raw,
+                       line=line, column=column)
+    block = parts[0] if len(parts) == 3 else None
+    return SyncRef("sync", offset=offset, block=block, behaviour=parts[-2], sync=parts[-1], text=raw,
+                   line=line, column=column)
+
+
+def normalize_space(raw: str) -> tuple[str, list[int]]:
+    """Collapse runs of white space to one space and strip the ends.
+
+    Returns the new text and, for every offset into ``raw`` (0 to ``len(raw)``), the offset it maps to.
+    """
+    out: list[str] = []
+    positions = [0] * (len(raw) + 1)
+    after_space = True
+    for i, ch in enumerate(raw):
+        positions[i] = len(out)
+        if ch.isspace():
+            if not after_space:
+                out.append(" ")
+                after_space = True
+        else:
+            out.append(ch)
+            after_space = False
+    positions[len(raw)] = len(out)
+    return "".join(out).rstrip(), positions
+
+
+def _check_magnitude(value: float, raw: str, line, column) -> None:
+    if not math.isfinite(value) or abs(value) > MAX_TIME:
+        raise BMLError(f"time {raw!r} is out of range (at most {MAX_TIME:g} s)", line, column)
+
+
+def parse_bml(text: str | bytes) -> Block:
+    """Parse one BML block. Raises :class:`BMLError` if the block as a whole cannot be used."""
+    root = _read_tree(text)
+    if root.local != "bml":
+        raise BMLError(f"expected a <bml> element, found <{root.tag}>", root.line, root.column)
+    block_id = root.attrs.get("id", "").strip()
+    if not block_id:
+        raise BMLError("the <bml> block has no id", root.line, root.column)
+    composition = root.attrs.get("composition", "MERGE").strip().upper() or "MERGE"
+    if composition not in ("MERGE", "APPEND", "REPLACE"):
+        raise BMLError(f"unknown composition {root.attrs['composition']!r}: expected MERGE, APPEND or REPLACE",
+                       root.line, root.column)
+    block = Block(block_id, root.attrs.get("characterId", "agent") or "agent", composition,
+                  line=root.line, column=root.column)
+    for key in root.attrs:
+        if ":" in key:
+            block.warnings.append(ParseWarning("CUSTOM_ATTRIBUTE_NOT_SUPPORTED",
+                                               f"attribute {key!r} of <bml> ignored", [], root.line, root.column))
+    _Reader(block).read(root.elements(), required=False)
+    return block
+
+
+class _Reader:
+    """Reads the children of a <bml> (or <required>) element into a block."""
+
+    def __init__(self, block: Block):
+        self.block = block
+        self.seen: set[str] = set()
+
+    def warn(self, kind: str, text: str, node: _Node, behaviours: list[str] | None = None) -> None:
+        self.block.warnings.append(ParseWarning(kind, f"{text} (line {node.line}, column {node.column})",
+                                                behaviours or [], node.line, node.column))
+
+    def is_bml(self, node: _Node) -> bool:
+        uri = node.namespaces.get(node.prefix or "", None)
+        return uri in (None, "", BML_NAMESPACE) if node.prefix is None else uri == BML_NAMESPACE
+
+    def read(self, nodes: list[_Node], required: bool) -> None:
+        for node in nodes:
+            if not self.is_bml(node):
+                self.warn("BEHAVIOR_TYPE_NOT_SUPPORTED", f"extension element <{node.tag}> ignored", node)
+            elif node.local == "required":
+                self.read(node.elements(), required=True)
+            elif node.local == "constraint":
+                self.constraint(node, required)
+            elif node.local in BEHAVIOUR_TYPES:
+                self.behaviour(node, required)
+            else:
+                self.warn("BEHAVIOR_TYPE_NOT_SUPPORTED", f"unknown behaviour <{node.tag}> ignored", node,
+                          [node.attrs.get("id", "")] if node.attrs.get("id") else [])
+
+    def behaviour(self, node: _Node, required: bool) -> None:
+        kind = BEHAVIOUR_TYPES[node.local]
+        bid = node.attrs.get("id", "").strip()
+        if not bid:
+            self.warn("PARSING_FAILURE", f"<{node.tag}> has no id and is ignored", node)
+            return
+        if bid in self.seen:
+            self.warn("PARSING_FAILURE", f"duplicate behaviour id {bid!r}: the second one is ignored", node, [bid])
+            return
+        self.seen.add(bid)
+        beh = Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), required=required,
+                        index=len(self.block.behaviours), line=node.line, column=node.column)
+        if kind.name == "speech":
+            if not self.speech_text(node, beh):
+                return
+        for key, value in node.attrs.items():
+            if ":" in key:
+                self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"attribute {key!r} of {bid} ignored", node, [bid])
+            elif key in beh.sync_ids and key in kind.syncs:
+                try:
+                    beh.refs[key] = parse_ref(value, node.line, node.column)
+                except BMLError as exc:
+                    self.warn("PARSING_FAILURE", f"{bid}: {exc.reason}; behaviour ignored", node, [bid])
+                    return
+            elif key in ALL_SYNC_NAMES:
+                self.warn("PARSING_FAILURE", f"{bid}: <{node.tag}> has no sync point {key!r}; behaviour ignored",
+                          node, [bid])
+                return
+        for child in node.elements():
+            if child.local not in PARAMETER_CHILDREN and self.is_bml(child):
+                self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"{bid}: child <{child.tag}> ignored", child, [bid])
+        self.block.behaviours.append(beh)
+
+    def speech_text(self, node: _Node, beh: Behaviour) -> bool:
+        texts = [c for c in node.elements() if c.local == "text"]
+        if not texts:
+            self.warn("PARSING_FAILURE", f"speech {beh.id} has no <text>; behaviour ignored", node, [beh.id])
+            return False
+        raw = ""
+        marks: list[tuple[int, str]] = []
+        for child in texts[0].children:
+            if isinstance(child, str):
+                raw += child
+            elif child.local == "sync":
+                sid = child.attrs.get("id", "").strip()
+                if not sid:
+                    self.warn("PARSING_FAILURE", f"speech {beh.id}: <sync> without id ignored", child, [beh.id])
+                elif sid in beh.sync_ids:
+                    self.warn("PARSING_FAILURE", f"speech {beh.id}: duplicate sync id {sid!r} ignored", child,
+                              [beh.id])
+                else:
+                    marks.append((len(raw), sid))
+                    beh.sync_ids.insert(len(beh.sync_ids) - 1, sid)
+        beh.text, positions = normalize_space(raw)
+        beh.marks = [(min(positions[offset], len(beh.text)), sid) for offset, sid in marks]
+        if not beh.text:
+            self.warn("PARSING_FAILURE", f"speech {beh.id} has empty text; behaviour ignored", node, [beh.id])
+            return False
+        return True
+
+    def constraint(self, node: _Node, required: bool) -> None:
+        for child in node.elements():
+            kind = child.local
+            if kind not in ("synchronize", "before", "after"):
+                self.warn("PARSING_FAILURE", f"unknown constraint <{child.tag}> ignored", child)
+                continue
+            refs = []
+            for sync in child.elements():
+                if sync.local != "sync" or "ref" not in sync.attrs:
+                    self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
+                    continue
+                try:
+                    refs.append(parse_ref(sync.attrs["ref"], sync.line, sync.column))
+                except BMLError as exc:
+                    self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
+            anchor = None
+            if "ref" in child.attrs:
+                try:
+                    anchor = parse_ref(child.attrs["ref"], child.line, child.column)
+                except BMLError as exc:
+                    self.warn("PARSING_FAILURE", f"{exc.reason}; constraint ignored", child)
+                    continue
+            if kind in ("before", "after") and anchor is None:
+                self.warn("PARSING_FAILURE", f"<{kind}> needs a ref attribute; constraint ignored", child)
+                continue
+            if kind == "synchronize" and anchor is not None:
+                refs.insert(0, anchor)
+                anchor = None
+            self.block.constraints.append(Constraint(kind, refs, anchor, node.attrs.get("id", ""), required,
+                                                     line=child.line, column=child.column))

@@ -1,0 +1,111 @@
+"""The ``agentsim`` command line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from agentsim.errors import AgentsimError
+from agentsim.feedback import to_json
+
+
+class UsageError(AgentsimError):
+    """The command line itself is wrong (exit status 2)."""
+
+
+def _times(text: str) -> list[float]:
+    try:
+        values = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated seconds, got {text!r}") from None
+    if any(v < 0 or v != v for v in values):
+        raise argparse.ArgumentTypeError("times must be non-negative seconds")
+    return values
+
+
+def _metronome(text: str) -> tuple[float, float]:
+    parts = text.split(",")
+    try:
+        bpm = float(parts[0])
+        start = float(parts[1]) if len(parts) > 1 else 0.0
+    except (ValueError, IndexError):
+        raise argparse.ArgumentTypeError(f"expected BPM[,START], got {text!r}") from None
+    if not bpm > 0:
+        raise argparse.ArgumentTypeError("the metronome tempo must be positive")
+    return bpm, start
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="agentsim", description="A BML realizer on a discrete-event clock.")
+    commands = parser.add_subparsers(dest="command", required=True)
+    realize = commands.add_parser(
+        "realize", help="realise BML files and print their feedback as JSON lines",
+        description="Send each FILE as a BML block (at the --at times, default all at 0, in order), run until "
+                    "every block has ended (or --until), and print the feedback to stdout, one JSON object "
+                    "per line. Diagnostics go to stderr.")
+    realize.add_argument("files", nargs="+", metavar="FILE", help="BML 1.0 files ('-' reads standard input)")
+    realize.add_argument("--at", type=_times, metavar="T1,T2,...", help="submission time of each file (seconds)")
+    realize.add_argument("--until", type=float, metavar="SECONDS", help="stop the run at this simulated time")
+    realize.add_argument("--realtime", action="store_true", help="run in real time instead of simulated time")
+    realize.add_argument("--metronome", type=_metronome, metavar="BPM[,START]",
+                         help="provide a metronome anticipator (anticipators:metronome:beatN)")
+    return parser
+
+
+def _read(path: str) -> str | bytes:
+    if path == "-":
+        return sys.stdin.buffer.read()
+    p = Path(path)
+    if not p.is_file():
+        raise UsageError(f"no such file: {path}")
+    return p.read_bytes()
+
+
+def realize(args: argparse.Namespace) -> int:
+    from agentsim.realizer import Realizer
+
+    documents = [(path, _read(path)) for path in args.files]
+    at = args.at if args.at is not None else [0.0] * len(documents)
+    if len(at) != len(documents):
+        raise UsageError(f"--at gives {len(at)} times for {len(documents)} files")
+    if args.until is not None and not args.until >= 0:
+        raise UsageError("--until must be a non-negative number of seconds")
+    realizer = Realizer(realtime=args.realtime)
+    if args.metronome:
+        from anticipators.metronome import Metronome
+        bpm, start = args.metronome
+        realizer.add_anticipator(Metronome("metronome", bpm=bpm, start=start))
+    out = sys.stdout
+
+    def emit(feedback):
+        out.write(to_json(feedback) + "\n")
+        out.flush()
+
+    realizer.feedback.listen(emit)
+    order = sorted(range(len(documents)), key=lambda i: (at[i], i))
+    for i in order:
+        realizer.submit_at(at[i], documents[i][1], source=documents[i][0])
+    realizer.run(until=args.until)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "realize":
+            return realize(args)
+    except UsageError as exc:
+        print(f"agentsim: {exc}", file=sys.stderr)
+        return 2
+    except AgentsimError as exc:
+        print(f"agentsim: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

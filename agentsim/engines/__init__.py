@@ -1,0 +1,1 @@
+"""Engines: each one a Planner, a Plan and a Player for one output channel (speech, animation, waiting)."""

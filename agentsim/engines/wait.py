@@ -1,0 +1,26 @@
+"""The wait engine: ``<wait>`` behaviours that only hold time between their start and end."""
+
+from __future__ import annotations
+
+from agentsim.bml.model import Behaviour
+from agentsim.plan import Engine, Planner, ScheduleError
+
+
+class WaitPlanner(Planner):
+    """A wait lasts one second unless its start and end are tied; any non-negative duration is valid."""
+
+    behaviour_types = ("wait",)
+
+    def preferred(self, behaviour: Behaviour) -> list[float]:
+        return [0.0, 1.0]
+
+    def check_times(self, behaviour, preferred, times) -> None:
+        if times[-1] < times[0] - 1e-9:
+            raise ScheduleError("the wait would end before it starts")
+
+
+class WaitEngine(Engine):
+    name = "wait"
+
+    def __init__(self, env, on_sync):
+        super().__init__(env, WaitPlanner(), on_sync)

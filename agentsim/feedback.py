@@ -1,0 +1,91 @@
+"""BML 1.0 feedback: block progress, sync point progress, predictions and warnings, as plain dicts.
+
+Every feedback is a dict with a ``type`` and the BML 1.0 names (``id``, ``time``, ``globalTime``,
+``characterId``, ``warningType``, ...), so that it can be written as one JSON object per line.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any, Callable, Iterable
+
+Feedback = dict[str, Any]
+
+#: BML 1.0 warning types used by the realizer.
+WARNING_TYPES = (
+    "PARSING_FAILURE",
+    "NO_SUCH_TARGET",
+    "IMPOSSIBLE_TO_SCHEDULE",
+    "BEHAVIOR_TYPE_NOT_SUPPORTED",
+    "CUSTOM_ATTRIBUTE_NOT_SUPPORTED",
+    "INTERRUPTED",
+)
+
+
+def block_progress(block_id: str, which: str, global_time: float, character_id: str) -> Feedback:
+    return {"type": "blockProgress", "id": f"{block_id}:{which}", "globalTime": global_time,
+            "characterId": character_id}
+
+
+def sync_point_progress(block_id: str, behaviour_id: str, sync_id: str, time: float, global_time: float,
+                        character_id: str) -> Feedback:
+    return {"type": "syncPointProgress", "id": f"{block_id}:{behaviour_id}:{sync_id}", "time": time,
+            "globalTime": global_time, "characterId": character_id}
+
+
+def warning(target_id: str, warning_type: str, description: str, global_time: float, character_id: str,
+            modified: Iterable[str] = ()) -> Feedback:
+    if warning_type not in WARNING_TYPES:
+        raise ValueError(f"unknown warning type {warning_type!r}")
+    return {"type": "warningFeedback", "id": target_id, "warningType": warning_type, "description": description,
+            "modifiedBehaviours": list(modified), "globalTime": global_time, "characterId": character_id}
+
+
+def prediction(block_id: str, global_time: float, character_id: str, block_start: float, block_end: float,
+               behaviours: list[dict[str, Any]]) -> Feedback:
+    """Predicted timing of a block and its behaviours (global seconds)."""
+    return {"type": "predictionFeedback", "id": block_id, "globalTime": global_time, "characterId": character_id,
+            "bml": {"id": block_id, "globalStart": block_start, "globalEnd": block_end},
+            "behaviours": behaviours}
+
+
+def _clean(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_clean(v) for v in value]
+    return value
+
+
+def to_json(feedback: Feedback) -> str:
+    """One line of JSON for a feedback."""
+    return json.dumps(_clean(feedback), separators=(", ", ": "))
+
+
+class FeedbackLog:
+    """Collects feedback in the order it was sent and passes each one to the listeners."""
+
+    def __init__(self) -> None:
+        self.items: list[Feedback] = []
+        self._listeners: list[Callable[[Feedback], None]] = []
+
+    def listen(self, listener: Callable[[Feedback], None]) -> None:
+        self._listeners.append(listener)
+
+    def send(self, feedback: Feedback) -> None:
+        self.items.append(feedback)
+        for listener in self._listeners:
+            listener(feedback)
+
+    def of_type(self, kind: str) -> list[Feedback]:
+        return [f for f in self.items if f["type"] == kind]
+
+    def sync_times(self) -> dict[str, float]:
+        """Global time of every sync point passed, by ``block:behaviour:sync`` id."""
+        return {f["id"]: f["globalTime"] for f in self.items if f["type"] == "syncPointProgress"}
+
+    def warnings(self) -> list[Feedback]:
+        return self.of_type("warningFeedback")

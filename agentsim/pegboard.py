@@ -1,0 +1,176 @@
+"""Time pegs and the PegBoard: symbolic times that behaviours are tied to, and that can move.
+
+A :class:`TimePeg` holds a global time in seconds (or ``None`` while unknown). An :class:`OffsetPeg` is
+tied to another peg at a fixed offset, so moving the base moves every peg tied to it. Block pegs stand
+for the start of a BML block; anticipator pegs stand for predicted events in the world and are moved by
+their anticipator. Sync points that constraints tie together share one peg.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Iterable
+
+# Any change to any peg invalidates every cached time: cheap to bump, and evaluation stays O(1)
+# amortised for long chains of offset pegs.
+_generation = 0
+
+
+def _bump() -> None:
+    global _generation
+    _generation += 1
+
+
+class TimePeg:
+    """A symbolic time: a global time in seconds, or ``None`` while it is not known yet."""
+
+    __slots__ = ("name", "board", "_time", "_cache", "_cache_gen")
+
+    def __init__(self, time: float | None = None, name: str = "", board: "PegBoard | None" = None):
+        self.name = name
+        self.board = board
+        self._time = time
+        self._cache: float | None = None
+        self._cache_gen = -1
+
+    @property
+    def time(self) -> float | None:
+        """Global time of the peg in seconds, ``None`` if unknown."""
+        return self._time
+
+    def set(self, time: float | None) -> None:
+        """Move the peg to ``time`` (global seconds); everything tied to it moves along."""
+        if time == self._time:
+            return
+        self._time = time
+        _bump()
+        if self.board is not None:
+            self.board.moved(self)
+
+    def root(self) -> "TimePeg":
+        """The peg this one is ultimately tied to (itself for a plain peg)."""
+        return self
+
+    def local(self, block_peg: "TimePeg") -> float | None:
+        """Time relative to ``block_peg`` (seconds after the block start)."""
+        t, b = self.time, block_peg.time
+        return None if t is None or b is None else t - b
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r}, {self.time!r})"
+
+
+class OffsetPeg(TimePeg):
+    """A peg tied to ``base`` at a fixed ``offset`` (seconds): its time is ``base.time + offset``.
+
+    Setting an offset peg moves its base, as in Elckerlyc: the tie is kept. ``shift`` and ``rebase``
+    change the tie itself (the scheduler uses them while planning).
+    """
+
+    __slots__ = ("base", "offset", "anchor")
+
+    def __init__(self, base: TimePeg | None, offset: float = 0.0, name: str = "", anchor: bool = False,
+                 board: "PegBoard | None" = None):
+        super().__init__(None, name, board)
+        self.base = base
+        self.offset = offset
+        self.anchor = anchor
+
+    @property
+    def time(self) -> float | None:
+        if self._cache_gen == _generation:
+            return self._cache
+        # Walk up iteratively (chains can be long), then fill the caches on the way back.
+        chain: list[OffsetPeg] = []
+        peg: TimePeg | None = self
+        while isinstance(peg, OffsetPeg) and peg._cache_gen != _generation:
+            chain.append(peg)
+            peg = peg.base
+        value = None if peg is None else peg.time
+        for p in reversed(chain):
+            value = None if value is None else value + p.offset
+            p._cache, p._cache_gen = value, _generation
+        return value
+
+    def set(self, time: float | None) -> None:
+        if time is None or self.base is None:
+            raise ValueError("an offset peg can only be set when its base is known")
+        base_time = self.base.time
+        if base_time is None:
+            raise ValueError("an offset peg can only be set when its base is known")
+        self.base.set(time - self.offset)
+
+    def shift(self, delta: float) -> None:
+        """Change the offset by ``delta`` seconds, moving this peg and all tied to it."""
+        if delta:
+            self.offset += delta
+            _bump()
+            if self.board is not None:
+                self.board.moved(self)
+
+    def rebase(self, base: TimePeg, offset: float) -> None:
+        """Tie this peg to another ``base`` at ``offset``."""
+        self.base = base
+        self.offset = offset
+        _bump()
+        if self.board is not None:
+            self.board.moved(self)
+
+    def freeze(self, block_peg: TimePeg) -> None:
+        """Detach from whatever this peg was tied to: keep its current time, relative to ``block_peg``."""
+        t, b = self.time, block_peg.time
+        if t is not None and b is not None and self.base is not block_peg:
+            self.rebase(block_peg, t - b)
+
+    def root(self) -> TimePeg:
+        peg: TimePeg = self
+        while isinstance(peg, OffsetPeg) and peg.base is not None:
+            peg = peg.base
+        return peg
+
+
+class PegBoard:
+    """The shared board of time pegs: block pegs, anticipator pegs and named behaviour sync pegs.
+
+    Listeners registered with :meth:`on_move` are called whenever a peg is moved after planning, so that
+    the scheduler can re-time what is tied to it.
+    """
+
+    def __init__(self) -> None:
+        self.block_pegs: dict[str, TimePeg] = {}
+        self.sync_pegs: dict[tuple[str, str, str], tuple[TimePeg, float]] = {}
+        self._listeners: list[Callable[[TimePeg], None]] = []
+        self.muted = 0
+
+    def block_peg(self, block_id: str, time: float | None = None) -> TimePeg:
+        """The peg standing for the start of block ``block_id`` (created on first use)."""
+        peg = self.block_pegs.get(block_id)
+        if peg is None:
+            peg = TimePeg(time, name=f"{block_id}:start", board=self)
+            self.block_pegs[block_id] = peg
+        return peg
+
+    def register_sync(self, block_id: str, behaviour_id: str, sync_id: str, peg: TimePeg, offset: float) -> None:
+        """Make ``block:behaviour:sync`` (time = ``peg.time + offset``) findable by other blocks."""
+        self.sync_pegs[(block_id, behaviour_id, sync_id)] = (peg, offset)
+
+    def find_sync(self, block_id: str, behaviour_id: str, sync_id: str) -> tuple[TimePeg, float] | None:
+        return self.sync_pegs.get((block_id, behaviour_id, sync_id))
+
+    def forget_block(self, block_id: str) -> None:
+        """Drop the named sync pegs of a block (its pegs stay valid for whoever holds them)."""
+        for key in [k for k in self.sync_pegs if k[0] == block_id]:
+            del self.sync_pegs[key]
+
+    def on_move(self, listener: Callable[[TimePeg], None]) -> None:
+        self._listeners.append(listener)
+
+    def moved(self, peg: TimePeg) -> None:
+        if self.muted:
+            return
+        for listener in self._listeners:
+            listener(peg)
+
+    def adopt(self, pegs: Iterable[TimePeg]) -> None:
+        """Attach pegs created while planning so that their later moves are reported."""
+        for peg in pegs:
+            peg.board = self

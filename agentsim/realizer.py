@@ -1,0 +1,87 @@
+"""The realizer: clock, PegBoard, engines, scheduler, anticipators and feedback, put together."""
+
+from __future__ import annotations
+
+from typing import Iterable
+
+import simpy
+
+from agentsim.bml.model import Block
+from agentsim.clock import make_environment
+from agentsim.engines.animation import AnimationEngine
+from agentsim.engines.speech import SpeechEngine
+from agentsim.engines.wait import WaitEngine
+from agentsim.feedback import FeedbackLog
+from agentsim.pegboard import PegBoard
+from agentsim.scheduler import BlockRun, Scheduler
+from speech_timing.backend import TTSBackend
+
+
+class Realizer:
+    """Turns BML blocks into timed behaviour on one SimPy clock and reports BML feedback.
+
+    Parameters
+    ----------
+    env : simpy.Environment, optional
+        The clock; by default a new one (simulated, or real time if ``realtime``).
+    realtime : bool
+        Run in real time (``simpy.rt.RealtimeEnvironment``) instead of as fast as possible.
+    tts : TTSBackend, optional
+        Text-to-speech backend for speech timing; by default the deterministic built-in one.
+    anticipators : iterable of Anticipator
+        Anticipators whose pegs BML may refer to as ``anticipators:<id>:<sync>``.
+    """
+
+    def __init__(self, env: simpy.Environment | None = None, realtime: bool = False,
+                 tts: TTSBackend | None = None, anticipators: Iterable = ()):
+        self.env = env if env is not None else make_environment(realtime)
+        self.board = PegBoard()
+        self.feedback = FeedbackLog()
+        if tts is None:
+            from speech_timing.builtin import BuiltinBackend
+            tts = BuiltinBackend()
+        self.engines = [
+            SpeechEngine(self.env, None, tts),
+            AnimationEngine(self.env, None),
+            WaitEngine(self.env, None),
+        ]
+        self.scheduler = Scheduler(self.env, self.board, self.engines, self.feedback)
+        self._submissions: list[simpy.Event] = []
+        for anticipator in anticipators:
+            self.add_anticipator(anticipator)
+
+    def add_anticipator(self, anticipator) -> None:
+        anticipator.attach(self.env, self.board)
+        self.scheduler.add_anticipator(anticipator)
+
+    def submit(self, bml: str | bytes | Block, source: str = "") -> BlockRun | None:
+        """Submit a BML block now."""
+        return self.scheduler.submit(bml, source)
+
+    def submit_at(self, time: float, bml: str | bytes | Block, source: str = "") -> simpy.Process:
+        """Submit a BML block at simulated time ``time`` (seconds)."""
+
+        def later():
+            delay = time - self.env.now
+            if delay > 0:
+                yield self.env.timeout(delay)
+            return self.submit(bml, source)
+
+        process = self.env.process(later())
+        self._submissions.append(process)
+        return process
+
+    def _all_done(self):
+        yield simpy.AllOf(self.env, self._submissions)
+        while True:
+            pending = [r.ended for r in self.scheduler.all_runs if not r.ended.triggered]
+            if not pending:
+                return
+            yield simpy.AllOf(self.env, pending)
+
+    def run(self, until: float | None = None) -> None:
+        """Run until every submitted block has ended, or until simulated time ``until``."""
+        done = self.env.process(self._all_done())
+        if until is not None:
+            done = done | self.env.timeout(max(0.0, until - self.env.now))
+        self.env.run(until=done)

@@ -1,0 +1,1 @@
+"""Scenarios: the virtual conductor and the virtual storyteller."""

@@ -1,0 +1,100 @@
+"""The text-to-speech backend interface: text with sync marks in, timed words, phonemes and audio out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol, Sequence, runtime_checkable
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SpeechText:
+    """Plain text to speak, with named sync marks at character offsets.
+
+    ``marks`` holds ``(offset, name)`` pairs: a mark at ``offset`` stands before the character at that
+    offset, so it is realised at the onset of the first word that starts at or after it.
+    """
+
+    text: str
+    marks: tuple[tuple[int, str], ...] = ()
+
+
+@dataclass(frozen=True)
+class Word:
+    """A word as it sounds: onset and offset in seconds from the start of the utterance."""
+
+    index: int
+    text: str
+    start: float
+    end: float
+    char_start: int
+    char_end: int
+
+
+@dataclass(frozen=True)
+class Phoneme:
+    """A phoneme as it sounds, in seconds from the start of the utterance."""
+
+    symbol: str
+    start: float
+    end: float
+    word_index: int
+    stressed: bool = False
+
+
+@dataclass(frozen=True)
+class Mark:
+    """A named sync mark and the time (seconds from utterance start) at which it is passed."""
+
+    name: str
+    time: float
+
+
+@dataclass
+class Utterance:
+    """What a backend produced for one text: the timeline and, when the backend makes sound, the audio."""
+
+    text: str
+    duration: float
+    words: list[Word]
+    phonemes: list[Phoneme] = field(default_factory=list)
+    marks: list[Mark] = field(default_factory=list)
+    sentences: list[float] = field(default_factory=list)
+    sample_rate: int = 22050
+    audio: np.ndarray | None = None
+    backend: str = ""
+
+    def mark_time(self, name: str) -> float:
+        """Time of the named mark, in seconds from utterance start (KeyError if absent)."""
+        for mark in self.marks:
+            if mark.name == name:
+                return mark.time
+        raise KeyError(name)
+
+
+@runtime_checkable
+class TTSBackend(Protocol):
+    """A text-to-speech backend."""
+
+    name: str
+
+    def synthesize(self, speech: SpeechText) -> Utterance:
+        """Speak ``speech`` and return its timeline (and audio, if the backend makes sound)."""
+        ...
+
+
+def mark_times_from_words(speech: SpeechText, words: Sequence[Word], duration: float) -> list[Mark]:
+    """Place each mark at the onset of the first word starting at or after its character offset.
+
+    A mark after the last word is placed at the end of the utterance.
+    """
+    marks = []
+    for offset, name in speech.marks:
+        time = duration
+        for word in words:
+            if word.char_start >= offset:
+                time = word.start
+                break
+        marks.append(Mark(name, time))
+    return marks
