@@ -13,7 +13,8 @@ class Metronome(Anticipator):
     """Predicts ``beat1``, ``beat2``, ... at ``start + (n - 1) * 60 / bpm`` seconds.
 
     :meth:`set_tempo` and :meth:`set_phase` re-space the beats from the change on; beats already passed
-    keep their times.
+    keep their times. A tempo change keeps the phase continuous: if 60 % of the current beat had elapsed
+    at the change, the next beat comes after the remaining 40 % of the new period.
     """
 
     def __init__(self, anticipator_id: str = "metronome", bpm: float = 120.0, start: float = 0.0):
@@ -56,9 +57,15 @@ class Metronome(Anticipator):
             raise ValueError(f"tempo must be positive, got {bpm!r} BPM")
         t = self._now(at)
         last = self.last_beat_before(t)
+        nxt = last + 1
+        new_period = 60.0 / bpm
         if last >= 1:
-            self.origin, self.origin_beat = self.beat_time(last), last
-        self.period = 60.0 / bpm
+            elapsed = (t - self.beat_time(last)) / self.period
+            self.origin = t + (1.0 - elapsed) * new_period
+        else:
+            self.origin = max(t, self.beat_time(1)) if t <= self.beat_time(1) else t
+        self.origin_beat = nxt
+        self.period = new_period
         self._update(last)
 
     def set_phase(self, next_beat_time: float, at: float | None = None) -> None:
