@@ -78,7 +78,7 @@ class _Ties:
         rb, db = self.find(b)
         if ra == rb:
             if abs(da - (db + d)) > TOLERANCE:
-                return "contradictory constraints (a cycle with different offsets)"
+                return "contradictory constraints: they put it at two different times"
             return None
         fa, fb = self.fixed_node.get(ra), self.fixed_node.get(rb)
         if fa is not None and fb is not None:
@@ -195,10 +195,11 @@ class BlockSolver:
                 resolved.append((node, offset, ref))
             if constraint.kind == "synchronize":
                 for node, offset, ref in resolved[1:]:
-                    n0, o0, _ = resolved[0]
+                    n0, o0, first = resolved[0]
                     reason = self.ties.union(n0, node, offset - o0)
                     if reason:
-                        self.constraint_issue(constraint, f"cannot synchronise {ref.text!r}: {reason}", ref)
+                        blame = ref if ref.kind == "sync" else first
+                        self.constraint_issue(constraint, f"cannot synchronise {ref.text!r}: {reason}", blame)
             else:
                 try:
                     anchor = self.node(constraint.anchor)
@@ -291,8 +292,7 @@ class BlockSolver:
             times = planner.resolve(beh, known)
             implied = self.self_ties(beh, groups, known, times)
             if implied:
-                known.update(implied)
-                times = planner.resolve(beh, known)
+                times = planner.resolve(beh, {**known, **implied})
         except ScheduleError as exc:
             self.drop(beh.id, str(exc))
             return []

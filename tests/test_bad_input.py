@@ -1,0 +1,199 @@
+"""Bad input gets warning feedback naming the block or behaviour and the reason; the rest keeps running."""
+
+from __future__ import annotations
+
+import signal
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from conftest import EXAMPLES, realize
+
+NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
+
+
+def block(body: str, attrs: str = 'id="bml1"') -> str:
+    return f"<bml {NS} {attrs}>{body}</bml>"
+
+
+def test_unknown_behaviour_type_is_skipped_and_the_rest_runs():
+    r = realize(block('<dance id="d1" start="0"/><head id="nod1" lexeme="NOD"/>'))
+    (w,) = r.warnings
+    assert w["warningType"] == "BEHAVIOR_TYPE_NOT_SUPPORTED" and "<dance>" in w["description"]
+    assert "line 1" in w["description"] and r.t("nod1:start") == 0.0
+
+
+def test_extension_element_in_another_namespace_is_ignored_with_a_warning():
+    r = realize(block('<ext:blink xmlns:ext="urn:x" id="b1"/><head id="nod1" lexeme="NOD"/>'))
+    (w,) = r.warnings
+    assert w["warningType"] == "BEHAVIOR_TYPE_NOT_SUPPORTED" and "ext:blink" in w["description"]
+    assert "nod1:end" in r.local
+
+
+def test_cyclic_constraints_drop_one_behaviour():
+    r = realize(block('<head id="a" lexeme="NOD" start="b:end"/><head id="b" lexeme="NOD" start="a:end"/>'))
+    assert r.dropped() == {"b"} and "a:end" in r.local
+    assert [b["id"] for b in r.blocks] == ["bml1:start", "bml1:end"]
+
+
+def test_contradictory_constraints_drop_the_behaviour_they_contradict():
+    body = ('<head id="a" lexeme="NOD" start="1"/><head id="b" lexeme="NOD" start="a:start"/>'
+            '<constraint><synchronize><sync ref="b:start"/><sync ref="2"/></synchronize></constraint>')
+    r = realize(block(body))
+    (w,) = r.warnings
+    assert w["modifiedBehaviours"] == ["b"] and "contradictory" in w["description"]
+    assert r.t("a:start") == 1.0 and "b:start" not in r.local
+
+
+def test_offset_cycle_within_one_group_is_contradictory():
+    body = ('<head id="a" lexeme="NOD"/><head id="b" lexeme="NOD" start="a:start+1"/>'
+            '<constraint><synchronize><sync ref="a:start"/><sync ref="b:start"/></synchronize></constraint>')
+    r = realize(block(body))
+    assert r.dropped() == {"b"} and "contradictory" in r.warnings[0]["description"]
+
+
+def test_huge_offsets_and_non_numbers_are_refused_per_behaviour():
+    r = realize(block('<head id="a" lexeme="NOD" start="1e9"/><head id="b" lexeme="NOD" start="nan"/>'
+                      '<head id="c" lexeme="NOD" start="d:start+1e7"/><head id="d" lexeme="NOD"/>'))
+    assert r.dropped() == {"a", "b", "c"}
+    assert all(w["warningType"] == "PARSING_FAILURE" for w in r.warnings)
+    assert any("out of range" in w["description"] for w in r.warnings)
+    assert r.t("d:start") == 0.0
+
+
+def test_billion_laughs_is_refused_fast():
+    lol = ('<?xml version="1.0"?><!DOCTYPE lolz [<!ENTITY lol "lol">'
+           + "".join(f'<!ENTITY lol{i} "{("&lol" + (str(i - 1) if i > 1 else "") + ";") * 10}">' for i in range(1, 10))
+           + f']><bml {NS} id="bml1"><speech id="s"><text>&lol9;</text></speech></bml>')
+    started = time.perf_counter()
+    r = realize(lol)
+    assert time.perf_counter() - started < 1.0
+    (w,) = r.warnings
+    assert w["warningType"] == "PARSING_FAILURE" and w["id"] == "bml1" and "entity" in w["description"]
+    assert not r.blocks
+
+
+def test_external_entity_is_refused(tmp_path):
+    secret = tmp_path / "secret.txt"
+    secret.write_text("top secret")
+    doc = (f'<?xml version="1.0"?><!DOCTYPE bml [<!ENTITY x SYSTEM "file://{secret}">]>'
+           + block('<speech id="s"><text>&x;</text></speech>'))
+    r = realize(doc)
+    assert r.warnings[0]["warningType"] == "PARSING_FAILURE" and not r.blocks
+    assert all("top secret" not in str(f) for f in r.items)
+
+
+def test_required_behaviour_that_cannot_run_refuses_the_block():
+    body = ('<required><head id="a" lexeme="NOD" start="2" end="0"/></required>'
+            '<head id="b" lexeme="NOD" start="1"/>')
+    r = realize(block(body))
+    assert not r.blocks and not r.syncs
+    assert any("block refused" in w["description"] for w in r.warnings)
+
+
+def test_required_constraint_that_cannot_hold_refuses_the_block():
+    body = ('<head id="a" lexeme="NOD" start="1"/><head id="b" lexeme="NOD" start="3"/>'
+            '<required><constraint><synchronize><sync ref="a:start"/><sync ref="b:start"/></synchronize>'
+            '</constraint></required>')
+    r = realize(block(body))
+    assert not r.blocks and any("required constraint" in w["description"] for w in r.warnings)
+
+
+def test_duplicate_ids_and_missing_ids_are_reported():
+    r = realize(block('<head id="a" lexeme="NOD"/><head id="a" lexeme="SHAKE" start="3"/><head lexeme="NOD"/>'))
+    kinds = [(w["warningType"], w["description"][:20]) for w in r.warnings]
+    assert len(kinds) == 2 and all(k == "PARSING_FAILURE" for k, _ in kinds)
+    assert r.t("a:start") == 0.0 and r.t("a:end") < 3
+
+
+def test_reference_to_an_unknown_block_or_anticipator():
+    r = realize(block('<head id="a" lexeme="NOD" start="bml9:x:end"/>'
+                      '<head id="b" lexeme="NOD" start="anticipators:nobody:beat1"/><head id="c" lexeme="NOD"/>'))
+    assert r.dropped() == {"a", "b"}
+    text = " ".join(w["description"] for w in r.warnings)
+    assert "bml9:x:end" in text and "no anticipator 'nobody'" in text
+
+
+def test_cross_block_reference_ties_to_the_other_block():
+    first = block('<speech id="s1"><text>One two <sync id="m"/>three.</text></speech>')
+    second = block('<head id="n" lexeme="NOD" stroke="bml1:s1:m"/>', 'id="bml2"')
+    r = realize(first, second)
+    assert r.glob["bml2:n:stroke"] == r.glob["bml1:s1:m"] and not r.warnings
+
+
+def test_duplicate_block_id_while_running_is_refused():
+    doc = block('<head id="a" lexeme="NOD" start="1"/>')
+    r = realize(doc, doc, at=[0, 0.5])
+    assert [w["warningType"] for w in r.warnings] == ["PARSING_FAILURE"]
+    assert [b["id"] for b in r.blocks] == ["bml1:start", "bml1:end"]
+
+
+def test_not_bml_and_bad_composition():
+    r = realize("<html/>", block("", 'id="b2" composition="SOMETIMES"'), "")
+    assert [w["warningType"] for w in r.warnings] == ["PARSING_FAILURE"] * 3
+    assert "expected a <bml> element" in r.warnings[0]["description"]
+    assert "composition" in r.warnings[1]["description"] and r.warnings[1]["id"] == "b2"
+
+
+# ---------------------------------------------------------------- property: never raises, never hangs
+SOURCES = sorted(EXAMPLES.glob("*.xml")) + sorted((Path(__file__).parent / "bml").glob("*.xml"))
+TOKENS = ["<", ">", "/>", '"', ":", "+", "-", "-1e9", "1e30", "0", "-3", "start=\"a:b\"", 'end="speech1:end-99"',
+          '<sync id="s9"/>', "&amp;", "&lol;", "<!ENTITY x 'y'>", 'composition="APPEND"', 'composition="REPLACE"',
+          'id=""', "</bml>", "<bml>", "<head id=\"n9\" lexeme=\"NOD\" start=\"n9:end\"/>",
+          '<constraint><after ref="speech1:end"><sync ref="nod1:start"/></after></constraint>',
+          '<required>', '</required>', "anticipators:metronome:beat2", "\u00e9\u4e2d", "\x00", "]]>"]
+
+
+@contextmanager
+def deadline(seconds: int):
+    def boom(*_):
+        raise TimeoutError("the realizer hung")
+    old = signal.signal(signal.SIGALRM, boom)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+@st.composite
+def mutated(draw):
+    text = draw(st.sampled_from(SOURCES)).read_text()
+    for _ in range(draw(st.integers(1, 4))):
+        i = draw(st.integers(0, len(text)))
+        j = draw(st.integers(i, min(len(text), i + 40)))
+        op = draw(st.sampled_from(["delete", "insert", "replace", "duplicate"]))
+        if op == "delete":
+            text = text[:i] + text[j:]
+        elif op == "duplicate":
+            text = text[:j] + text[i:j] + text[j:]
+        else:
+            token = draw(st.sampled_from(TOKENS) | st.text(max_size=6))
+            text = text[:i] + token + (text[i:] if op == "insert" else text[j:])
+    return text
+
+
+@settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(docs=st.lists(mutated(), min_size=1, max_size=3), gap=st.floats(0, 3))
+def test_mutated_examples_never_raise_or_hang(docs, gap):
+    from anticipators.metronome import Metronome
+
+    with deadline(20):
+        r = realize(*docs, at=[i * gap for i in range(len(docs))], anticipators=[Metronome(bpm=100)])
+    seen: dict[str, set[str]] = {}  # a block id may be used again once its block has ended
+    for f in r.items:
+        if f["type"] == "blockProgress" and f["id"].endswith(":start"):
+            seen[f["id"].rsplit(":", 1)[0]] = set()
+        elif f["type"] == "syncPointProgress":
+            block_id, rest = f["id"].split(":", 1)
+            assert rest not in seen[block_id]
+            seen[block_id].add(rest)
+    starts = [b["id"] for b in r.blocks if b["id"].endswith(":start")]
+    ends = [b["id"] for b in r.blocks if b["id"].endswith(":end")]
+    assert sorted(starts) == sorted(s.replace(":end", ":start") for s in ends)
+    for w in r.warnings:
+        assert w["description"]
