@@ -138,6 +138,7 @@ class PegBoard:
     def __init__(self) -> None:
         self.block_pegs: dict[str, TimePeg] = {}
         self.sync_pegs: dict[tuple[str, str, str], tuple[TimePeg, float]] = {}
+        self._behaviours: dict[tuple[str, str], tuple[list[str], Callable[[int], TimePeg]]] = {}
         self._listeners: list[Callable[[TimePeg], None]] = []
         self.muted = 0
 
@@ -153,13 +154,27 @@ class PegBoard:
         """Make ``block:behaviour:sync`` (time = ``peg.time + offset``) findable by other blocks."""
         self.sync_pegs[(block_id, behaviour_id, sync_id)] = (peg, offset)
 
+    def register_behaviour(self, block_id: str, behaviour_id: str, sync_ids: list[str],
+                           peg_for: Callable[[int], TimePeg]) -> None:
+        """Make every sync point of a behaviour findable; ``peg_for(i)`` makes the peg of sync ``i`` when
+        another block first asks for it."""
+        self._behaviours[(block_id, behaviour_id)] = (sync_ids, peg_for)
+
     def find_sync(self, block_id: str, behaviour_id: str, sync_id: str) -> tuple[TimePeg, float] | None:
-        return self.sync_pegs.get((block_id, behaviour_id, sync_id))
+        """Where ``block:behaviour:sync`` is: a peg and an offset (time = ``peg.time + offset``)."""
+        found = self.sync_pegs.get((block_id, behaviour_id, sync_id))
+        if found is None and (block_id, behaviour_id) in self._behaviours:
+            sync_ids, peg_for = self._behaviours[(block_id, behaviour_id)]
+            if sync_id in sync_ids:
+                found = self.sync_pegs[(block_id, behaviour_id, sync_id)] = (peg_for(sync_ids.index(sync_id)), 0.0)
+        return found
 
     def forget_block(self, block_id: str) -> None:
-        """Drop the named sync pegs of a block (its pegs stay valid for whoever holds them)."""
+        """Forget where the sync points of a block are (pegs already handed out stay valid)."""
         for key in [k for k in self.sync_pegs if k[0] == block_id]:
             del self.sync_pegs[key]
+        for key in [k for k in self._behaviours if k[0] == block_id]:
+            del self._behaviours[key]
 
     def on_move(self, listener: Callable[[TimePeg], None]) -> None:
         self._listeners.append(listener)

@@ -90,7 +90,19 @@ class TimedBehaviour:
         return t_lo + (self.preferred[i] - p_lo) / (p_hi - p_lo) * (t_hi - t_lo)
 
     def times(self) -> list[float | None]:
-        return [self.time(i) for i in range(len(self.sync_ids))]
+        """Global times of all sync points (one pass: tied keys, then warping between them)."""
+        times = [self._anchor(i) for i in range(len(self.keys))]
+        pref = self.preferred
+        lo = None
+        for hi, t_hi in enumerate(times):
+            if t_hi is None:
+                continue
+            if lo is not None and hi > lo + 1:
+                t_lo, p_lo, p_hi = times[lo], pref[lo], pref[hi]
+                for i in range(lo + 1, hi):
+                    times[i] = t_lo if p_hi <= p_lo else t_lo + (pref[i] - p_lo) / (p_hi - p_lo) * (t_hi - t_lo)
+            lo = hi
+        return times
 
     def sync_time(self, sync_id: str) -> float | None:
         return self.time(self.sync_ids.index(sync_id))
@@ -187,12 +199,14 @@ class Planner:
         """Preferred time of each sync point, seconds after the behaviour's start."""
         raise NotImplementedError
 
-    def resolve(self, behaviour: Behaviour, known: dict[str, float], start: float = 0.0) -> list[float]:
+    def resolve(self, behaviour: Behaviour, known: dict[str, float], start: float = 0.0,
+                preferred: list[float] | None = None) -> list[float]:
         """Times (seconds after block start) for all sync points, given the ``known`` ones.
 
-        Raises :class:`ScheduleError` if the behaviour cannot satisfy them.
+        Raises :class:`ScheduleError` if the behaviour cannot satisfy them. ``preferred`` saves asking
+        for the preferred timing again.
         """
-        pref = self.preferred(behaviour)
+        pref = preferred if preferred is not None else self.preferred(behaviour)
         index = {s: i for i, s in enumerate(behaviour.sync_ids)}
         times = stretch_times(pref, {index[s]: t for s, t in known.items()}, start)
         self.check_times(behaviour, pref, times)

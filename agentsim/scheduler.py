@@ -10,6 +10,8 @@ prediction is sent.
 
 from __future__ import annotations
 
+import functools
+
 import simpy
 
 from agentsim import feedback as fb
@@ -120,8 +122,7 @@ class Scheduler:
         self.board.forget_block(block.id)
         for timed in run.timed:
             timed.engine.planner.add(timed)
-            for i, sync_id in enumerate(timed.sync_ids):
-                self.board.register_sync(block.id, timed.id, sync_id, SyncPeg(timed, i), 0.0)
+            self.board.register_behaviour(block.id, timed.id, timed.sync_ids, functools.partial(SyncPeg, timed))
         self.runs.append(run)
         self.predict(run, force=True)
         if block.composition == "APPEND" and earlier:

@@ -112,6 +112,7 @@ class BlockSolver:
         self.group_peg: dict[int, OffsetPeg] = {}
         self.anchors: list[OffsetPeg] = []
         self.timed: dict[str, TimedBehaviour] = {}
+        self._anchor_cache: dict[int, int | None] = {}
 
     # ----------------------------------------------------------------- problems
     def drop(self, behaviour_id: str, reason: str, kind: str = "IMPOSSIBLE_TO_SCHEDULE") -> None:
@@ -289,10 +290,10 @@ class BlockSolver:
                 known[sync_id] = peg.time + d - base
         try:
             preferred = planner.preferred(beh)
-            times = planner.resolve(beh, known)
+            times = planner.resolve(beh, known, preferred=preferred)
             implied = self.self_ties(beh, groups, known, times)
             if implied:
-                times = planner.resolve(beh, {**known, **implied})
+                times = planner.resolve(beh, {**known, **implied}, preferred=preferred)
         except ScheduleError as exc:
             self.drop(beh.id, str(exc))
             return []
@@ -370,22 +371,41 @@ class BlockSolver:
         anchors: set[int] = set()
         fixed = False
         for key in timed.keys:
-            if key is None:
-                continue
-            peg = key.peg
-            while isinstance(peg, OffsetPeg) and not peg.anchor and peg.base is not None:
-                peg = peg.base
-            if isinstance(peg, OffsetPeg) and peg.anchor:
-                anchors.add(id(peg))
-            else:
-                fixed = True
+            if key is not None:
+                anchor = self.anchor_of(key.peg)
+                if anchor is None:
+                    fixed = True
+                else:
+                    anchors.add(anchor)
         return anchors, fixed
+
+    def anchor_of(self, peg) -> int | None:
+        """id of the free anchor a peg hangs from, or None if it hangs from a fixed time (memoised)."""
+        cache = self._anchor_cache
+        chain = []
+        while True:
+            key = id(peg)
+            if key in cache:
+                found = cache[key]
+                break
+            if isinstance(peg, OffsetPeg) and peg.anchor:
+                found = key
+                break
+            if not isinstance(peg, OffsetPeg) or peg.base is None:
+                found = None
+                break
+            chain.append(key)
+            peg = peg.base
+        for key in chain:
+            cache[key] = found
+        return found
 
     def movable(self, timed: TimedBehaviour) -> list[OffsetPeg] | None:
         anchors, fixed = self.anchors_of(timed)
         if fixed or not anchors:
             return None
-        return [a for a in self.anchors if id(a) in anchors]
+        by_id = {id(a): a for a in self.anchors}
+        return [by_id[a] for a in anchors]
 
     def honour_inequalities(self, inequalities) -> None:
         for _ in range(len(inequalities) + 1):

@@ -23,8 +23,6 @@ class SyncRef:
     sync: str | None = None
     anticipator: str | None = None
     text: str = ""
-    line: int | None = None
-    column: int | None = None
 
     def target(self) -> str:
         if self.kind == "absolute":
@@ -106,8 +104,10 @@ class Block:
     line: int | None = None
     column: int | None = None
 
+    _index: dict[str, Behaviour] = field(default_factory=dict, init=False, repr=False, compare=False)
+
     def behaviour(self, behaviour_id: str) -> Behaviour | None:
-        for b in self.behaviours:
-            if b.id == behaviour_id:
-                return b
-        return None
+        """The behaviour with this id, or None."""
+        if len(self._index) != len(self.behaviours):
+            self._index = {b.id: b for b in self.behaviours}
+        return self._index.get(behaviour_id)

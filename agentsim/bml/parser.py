@@ -9,13 +9,11 @@ rest of the block is kept.
 
 from __future__ import annotations
 
-import io
+import functools
 import math
 import re
-import xml.sax
+import xml.parsers.expat
 import xml.sax.handler
-from dataclasses import dataclass, field
-
 from defusedxml.common import DefusedXmlException
 from defusedxml.expatreader import create_parser
 
@@ -37,14 +35,18 @@ _ABSOLUTE = re.compile(rf"^[+-]?{_NUMBER}$")
 _BLOCK_ID = re.compile(r"<(?:\w+:)?bml\b[^>]*?\bid\s*=\s*[\"']([^\"']*)[\"']", re.S)
 
 
-@dataclass
 class _Node:
-    tag: str
-    attrs: dict[str, str]
-    line: int
-    column: int
-    children: list["_Node | str"] = field(default_factory=list)
-    namespaces: dict[str, str] = field(default_factory=dict)
+    """An element: tag as written, attributes, children (elements and text) and where it starts."""
+
+    __slots__ = ("tag", "attrs", "line", "column", "children", "namespaces")
+
+    def __init__(self, tag: str, attrs: dict[str, str], line: int, column: int, namespaces: dict[str, str]):
+        self.tag = tag
+        self.attrs = attrs
+        self.line = line
+        self.column = column
+        self.children: list[_Node | str] = []
+        self.namespaces = namespaces
 
     @property
     def local(self) -> str:
@@ -58,42 +60,39 @@ class _Node:
         return [c for c in self.children if isinstance(c, _Node)]
 
 
-class _TreeBuilder(xml.sax.handler.ContentHandler):
-    """Builds :class:`_Node` trees, recording where each element starts."""
+class _TreeBuilder:
+    """Builds :class:`_Node` trees from expat callbacks, recording where each element starts."""
 
-    def __init__(self) -> None:
-        super().__init__()
+    def __init__(self, expat) -> None:
+        self.expat = expat
         self.root: _Node | None = None
         self.stack: list[_Node] = []
-        self.locator = None
 
-    def setDocumentLocator(self, locator):  # noqa: N802 (SAX API)
-        self.locator = locator
-
-    def startElement(self, name, attrs):  # noqa: N802 (SAX API)
-        line = self.locator.getLineNumber() if self.locator else 0
-        column = self.locator.getColumnNumber() + 1 if self.locator else 0
+    def start(self, name: str, attrs: dict[str, str]) -> None:
         parent_ns = self.stack[-1].namespaces if self.stack else {}
-        namespaces = dict(parent_ns)
-        plain = {}
-        for key, value in attrs.items():
-            if key == "xmlns":
-                namespaces[""] = value
-            elif key.startswith("xmlns:"):
-                namespaces[key[6:]] = value
-            else:
-                plain[key] = value
-        node = _Node(name, plain, line, column, namespaces=namespaces)
+        namespaces = parent_ns
+        if any(key.startswith("xmlns") for key in attrs):
+            namespaces = dict(parent_ns)
+            plain = {}
+            for key, value in attrs.items():
+                if key == "xmlns":
+                    namespaces[""] = value
+                elif key.startswith("xmlns:"):
+                    namespaces[key[6:]] = value
+                else:
+                    plain[key] = value
+            attrs = plain
+        node = _Node(name, attrs, self.expat.CurrentLineNumber, self.expat.CurrentColumnNumber + 1, namespaces)
         if self.stack:
             self.stack[-1].children.append(node)
         else:
             self.root = node
         self.stack.append(node)
 
-    def endElement(self, name):  # noqa: N802 (SAX API)
+    def end(self, name: str) -> None:
         self.stack.pop()
 
-    def characters(self, content):
+    def text(self, content: str) -> None:
         if self.stack:
             children = self.stack[-1].children
             if children and isinstance(children[-1], str):
@@ -104,23 +103,25 @@ class _TreeBuilder(xml.sax.handler.ContentHandler):
 
 def _read_tree(text: str | bytes) -> _Node:
     data = text.encode("utf-8") if isinstance(text, str) else text
-    builder = _TreeBuilder()
-    parser = create_parser(forbid_dtd=False, forbid_entities=True, forbid_external=True)
-    parser.setContentHandler(builder)
-    parser.setFeature(xml.sax.handler.feature_namespaces, False)
-    parser.setFeature(xml.sax.handler.feature_external_ges, False)
-    source = xml.sax.xmlreader.InputSource()
-    source.setByteStream(io.BytesIO(data))
+    # defusedxml's reader installs the handlers that refuse entity declarations and external
+    # references on its expat parser; the tree is built straight from that parser's callbacks.
+    reader = create_parser(forbid_dtd=False, forbid_entities=True, forbid_external=True)
+    reader.setFeature(xml.sax.handler.feature_namespaces, False)
+    reader.reset()
+    expat = reader._parser
+    builder = _TreeBuilder(expat)
+    expat.StartElementHandler = builder.start
+    expat.EndElementHandler = builder.end
+    expat.CharacterDataHandler = builder.text
+    expat.buffer_text = True
     try:
-        parser.parse(source)
-    except xml.sax.SAXParseException as exc:
-        raise BMLError(f"malformed XML: {exc.getMessage()}", exc.getLineNumber(), exc.getColumnNumber() + 1) from None
+        expat.Parse(data, True)
+    except xml.parsers.expat.ExpatError as exc:
+        message = xml.parsers.expat.errors.messages.get(exc.code, str(exc))
+        raise BMLError(f"malformed XML: {message}", exc.lineno, exc.offset + 1) from None
     except DefusedXmlException as exc:
-        loc = builder.locator
-        line = loc.getLineNumber() if loc else None
-        column = loc.getColumnNumber() + 1 if loc else None
         raise BMLError(f"refused XML construct ({type(exc).__name__}): entity and external references "
-                       "are not allowed in BML", line, column) from None
+                       "are not allowed in BML", expat.CurrentLineNumber, expat.CurrentColumnNumber + 1) from None
     if builder.root is None:
         raise BMLError("empty document: expected a <bml> element", 1, 1)
     return builder.root
@@ -136,27 +137,32 @@ def guess_block_id(text: str | bytes) -> str:
 
 def parse_ref(text: str, line: int | None = None, column: int | None = None) -> SyncRef:
     """Parse a sync reference: ``2.5``, ``g1:stroke``, ``g1:end+0.5``, ``bml2:g1:start-2``,
-    ``anticipators:metronome:beat3+0.1``."""
-    raw = text.strip()
+    ``anticipators:metronome:beat3+0.1``. ``line`` and ``column`` locate it for error messages."""
+    try:
+        return _parse_ref(text.strip())
+    except BMLError as exc:
+        raise BMLError(exc.reason, line, column) from None
+
+
+@functools.lru_cache(maxsize=65536)
+def _parse_ref(raw: str) -> SyncRef:
     if _ABSOLUTE.match(raw):
         value = float(raw)
-        _check_magnitude(value, raw, line, column)
-        return SyncRef("absolute", offset=value, text=raw, line=line, column=column)
+        _check_magnitude(value, raw)
+        return SyncRef("absolute", offset=value, text=raw)
     match = _REF.match(raw)
     if not match:
-        raise BMLError(f"invalid sync reference {text!r}: expected a number, behaviour:sync[+-offset], "
-                       "block:behaviour:sync or anticipators:id:sync", line, column)
+        raise BMLError(f"invalid sync reference {raw!r}: expected a number, behaviour:sync[+-offset], "
+                       "block:behaviour:sync or anticipators:id:sync")
     parts = match.group("path").split(":")
     offset = 0.0
     if match.group("offset") is not None:
         offset = float(match.group("offset")) * (-1.0 if match.group("sign") == "-" else 1.0)
-        _check_magnitude(offset, raw, line, column)
+        _check_magnitude(offset, raw)
     if len(parts) == 3 and parts[0] == "anticipators":
-        return SyncRef("anticipator", offset=offset, anticipator=parts[1], sync=parts[2], text=raw,
-                       line=line, column=column)
+        return SyncRef("anticipator", offset=offset, anticipator=parts[1], sync=parts[2], text=raw)
     block = parts[0] if len(parts) == 3 else None
-    return SyncRef("sync", offset=offset, block=block, behaviour=parts[-2], sync=parts[-1], text=raw,
-                   line=line, column=column)
+    return SyncRef("sync", offset=offset, block=block, behaviour=parts[-2], sync=parts[-1], text=raw)
 
 
 def normalize_space(raw: str) -> tuple[str, list[int]]:
@@ -180,9 +186,9 @@ def normalize_space(raw: str) -> tuple[str, list[int]]:
     return "".join(out).rstrip(), positions
 
 
-def _check_magnitude(value: float, raw: str, line, column) -> None:
+def _check_magnitude(value: float, raw: str) -> None:
     if not math.isfinite(value) or abs(value) > MAX_TIME:
-        raise BMLError(f"time {raw!r} is out of range (at most {MAX_TIME:g} s)", line, column)
+        raise BMLError(f"time {raw!r} is out of range (at most {MAX_TIME:g} s)")
 
 
 def parse_bml(text: str | bytes) -> Block:
