@@ -35,11 +35,16 @@ def sync_point_progress(block_id: str, behaviour_id: str, sync_id: str, time: fl
 
 
 def warning(target_id: str, warning_type: str, description: str, global_time: float, character_id: str,
-            modified: Iterable[str] = ()) -> Feedback:
+            modified: Iterable[str] = (), line: int | None = None, column: int | None = None) -> Feedback:
+    """A warning about a block or behaviour; ``line`` and ``column`` locate it in the BML source if known."""
     if warning_type not in WARNING_TYPES:
         raise ValueError(f"unknown warning type {warning_type!r}")
-    return {"type": "warningFeedback", "id": target_id, "warningType": warning_type, "description": description,
-            "modifiedBehaviours": list(modified), "globalTime": global_time, "characterId": character_id}
+    feedback = {"type": "warningFeedback", "id": target_id, "warningType": warning_type,
+                "description": description, "modifiedBehaviours": list(modified), "globalTime": global_time,
+                "characterId": character_id}
+    if line is not None:
+        feedback["line"], feedback["column"] = line, column
+    return feedback
 
 
 def prediction(block_id: str, global_time: float, character_id: str, block_start: float, block_end: float,

@@ -75,8 +75,9 @@ class Scheduler:
         return peg
 
     # ------------------------------------------------------------------ submission
-    def warn(self, target: str, kind: str, description: str, character: str, modified=()) -> None:
-        self.log.send(fb.warning(target, kind, description, self.env.now, character, modified))
+    def warn(self, target: str, kind: str, description: str, character: str, modified=(),
+             line: int | None = None, column: int | None = None) -> None:
+        self.log.send(fb.warning(target, kind, description, self.env.now, character, modified, line, column))
 
     def submit(self, bml: str | bytes | Block, source: str = "") -> BlockRun | None:
         """Submit one BML block now. Returns its run, or None if it was refused."""
@@ -87,12 +88,13 @@ class Scheduler:
             try:
                 block = parse_bml(bml)
             except BMLError as exc:
-                self.warn(guess_block_id(bml), "PARSING_FAILURE", f"block refused{where}: {exc}", "agent")
+                self.warn(guess_block_id(bml), "PARSING_FAILURE", f"block refused{where}: {exc}", "agent",
+                          line=exc.line, column=exc.column)
                 return None
         character = block.character_id
         for w in block.warnings:
             target = f"{block.id}:{w.behaviours[0]}" if w.behaviours else block.id
-            self.warn(target, w.warning_type, w.description, character, w.behaviours)
+            self.warn(target, w.warning_type, w.description, character, w.behaviours, w.line, w.column)
         if any(r.id == block.id for r in self.runs):
             self.warn(block.id, "PARSING_FAILURE", f"block refused{where}: a block with id {block.id!r} is "
                       "already pending or running", character)
@@ -113,7 +115,9 @@ class Scheduler:
         for issue in solver.issues:
             ids = issue.behaviours if not solver.failed else []
             target = f"{block.id}:{ids[0]}" if len(ids) == 1 else block.id
-            self.warn(target, issue.warning_type, issue.description, character, issue.behaviours)
+            where = block.behaviour(ids[0]) if len(ids) == 1 else None
+            self.warn(target, issue.warning_type, issue.description, character, issue.behaviours,
+                      where.line if where else None, where.column if where else None)
         self.all_runs.append(run)
         if solver.failed:
             run.state = "refused"

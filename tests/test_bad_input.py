@@ -197,3 +197,11 @@ def test_mutated_examples_never_raise_or_hang(docs, gap):
     assert sorted(starts) == sorted(s.replace(":end", ":start") for s in ends)
     for w in r.warnings:
         assert w["description"]
+
+
+def test_warnings_carry_line_and_column():
+    doc = f'<bml {NS} id="bml1">\n  <head id="a" lexeme="NOD"/>\n    <head id="b" lexeme="NOD" start="zz:end"/>\n</bml>'
+    (w,) = realize(doc).warnings
+    assert (w["line"], w["column"]) == (3, 5) and w["id"] == "bml1:b"
+    (w,) = realize(f'<bml {NS} id="bml1">\n<head id="a">\n</bml>').warnings
+    assert (w["line"], w["column"]) == (3, 3) and w["warningType"] == "PARSING_FAILURE"

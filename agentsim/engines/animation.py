@@ -104,3 +104,33 @@ class AnimationEngine(Engine):
 
     def __init__(self, env, on_sync):
         super().__init__(env, AnimationPlanner(), on_sync)
+
+
+_PHASE_NAMES = {
+    ("start", "ready"): "preparation", ("ready", "strokeStart"): "pre-stroke hold",
+    ("strokeStart", "stroke"): "stroke", ("stroke", "strokeEnd"): "stroke",
+    ("strokeEnd", "relax"): "post-stroke hold", ("relax", "end"): "retraction",
+    ("ready", "relax"): "hold", ("start", "attackPeak"): "attack", ("attackPeak", "relax"): "sustain",
+    ("start", "end"): "transition",
+}
+
+
+def motion_state(timed, t: float) -> tuple[str, float] | None:
+    """Where a timed motion unit is at global time ``t``: its phase and canonical time alpha (0..1).
+
+    Alpha is found by linear time warping between the keys around ``t`` (Elckerlyc's f^-1(t)); None
+    before the start or after the end.
+    """
+    times = timed.times()
+    if t < times[0] or t > times[-1]:
+        return None
+    unit = motion_unit(timed.behaviour)
+    alphas = unit.canonical(repetition(timed.behaviour))
+    syncs = timed.sync_ids
+    for i in range(len(times) - 1):
+        t0, t1 = times[i], times[i + 1]
+        if t < t1 or i == len(times) - 2:
+            frac = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
+            alpha = alphas[i] + frac * (alphas[i + 1] - alphas[i])
+            return _PHASE_NAMES.get((syncs[i], syncs[i + 1]), f"{syncs[i]}-{syncs[i + 1]}"), alpha
+    return None
