@@ -38,7 +38,7 @@ def test_motion_state_gives_phase_and_canonical_time():
     assert motion_state(timed, 0.5) is None and motion_state(timed, 3.0) is None
     phase, alpha = motion_state(timed, r.t("g:stroke"))
     assert phase == "stroke" and alpha == pytest.approx(alphas[3])
-    phase, alpha = motion_state(timed, 1.0 + 0.5 * (r.t("g:ready")))
+    phase, alpha = motion_state(timed, 1.0 + 0.5 * (r.t("g:ready") - 1.0))
     assert phase == "preparation" and alpha == pytest.approx(alphas[1] / 2)
     assert motion_state(timed, 2.9) == ("retraction", pytest.approx(1.0))
 
