@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -50,6 +51,11 @@ def build_parser() -> argparse.ArgumentParser:
     realize.add_argument("--realtime", action="store_true", help="run in real time instead of simulated time")
     realize.add_argument("--metronome", type=_metronome, metavar="BPM[,START]",
                          help="provide a metronome anticipator (anticipators:metronome:beatN)")
+    realize.add_argument("--anticipator", action="append", default=[], metavar="NAME[:ID][,KEY=VALUE...]",
+                         help="provide an installed anticipator, e.g. tap:taps,taps=taps.txt or "
+                              "metronome:m2,bpm=90 (repeatable; see 'agentsim anticipators list')")
+    anticipators = commands.add_parser("anticipators", help="installed anticipators")
+    anticipators.add_argument("action", choices=["list"])
     return parser
 
 
@@ -76,6 +82,10 @@ def realize(args: argparse.Namespace) -> int:
         from anticipators.metronome import Metronome
         bpm, start = args.metronome
         realizer.add_anticipator(Metronome("metronome", bpm=bpm, start=start))
+    from anticipators import registry
+    for spec in args.anticipator:
+        name, anticipator_id, params = registry.parse_spec(spec)
+        realizer.add_anticipator(registry.create(name, anticipator_id, **params))
     out = sys.stdout
 
     def emit(feedback):
@@ -90,12 +100,22 @@ def realize(args: argparse.Namespace) -> int:
     return 0
 
 
+def list_anticipators() -> int:
+    from anticipators import registry
+
+    for name, target in sorted(registry.available().items()):
+        print(f"{name}\t{target}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         if args.command == "realize":
             return realize(args)
+        if args.command == "anticipators":
+            return list_anticipators()
     except UsageError as exc:
         print(f"agentsim: {exc}", file=sys.stderr)
         return 2
@@ -104,6 +124,12 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+    except Exception as exc:  # a bug: one line for the user, the traceback on request
+        if os.environ.get("AGENTSIM_DEBUG"):
+            raise
+        print(f"agentsim: internal error: {type(exc).__name__}: {exc} (set AGENTSIM_DEBUG=1 for the traceback; "
+              "please report it)", file=sys.stderr)
+        return 70
     return 0
 
 

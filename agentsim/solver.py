@@ -142,6 +142,8 @@ class BlockSolver:
             key = ("anticipator", ref.anticipator, ref.sync)
             if key not in self.nodes:
                 peg = self.anticipator_peg(ref.anticipator, ref.sync)
+                if peg.time is None:
+                    raise ScheduleError(f"anticipator {ref.anticipator!r} has no prediction for {ref.sync!r} yet")
                 self.nodes[key] = self.ties.add((peg, 0.0))
             return self.nodes[key], ref.offset
         if ref.block is not None and ref.block != self.block.id:

@@ -1,0 +1,94 @@
+"""Anticipators: tap tempo, the plugin interface and entry points, BML pegged to them."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from agentsim.errors import AgentsimError
+from agentsim.realizer import Realizer
+from anticipators import registry
+from anticipators.tap import TapTempo, read_taps
+
+NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
+PLUGIN = Path(__file__).parent / "plugins" / "agentsim-countin"
+
+
+def taps_run(taps, doc, **kwargs):
+    tap = TapTempo("tap", taps=taps, **kwargs)
+    realizer = Realizer(anticipators=[tap])
+    realizer.submit(doc)
+    realizer.run()
+    return realizer, tap
+
+
+def test_tap_tempo_predicts_from_intervals_and_ignores_doubled_and_missed_taps():
+    tap = TapTempo("tap", initial_bpm=100)
+    pegs = {n: tap.peg(f"beat{n}") for n in (1, 2, 5, 8)}
+    assert pegs[5].time == pytest.approx(4 * 0.6)  # before any tap: the initial tempo from 0
+    for t in (1.0, 1.5, 2.0, 2.02, 3.0):  # 2.02 doubles the tap at 2.0; 2.5 is missed
+        tap.tap(t)
+    assert tap.period == pytest.approx(0.5)
+    assert tap.beat_times == {1: 1.0, 2: 1.5, 3: 2.0, 5: 3.0}
+    assert (pegs[1].time, pegs[2].time, pegs[5].time, pegs[8].time) == pytest.approx((1.0, 1.5, 3.0, 4.5))
+    assert 0 < tap.confidence <= 1
+
+
+def test_bml_pegged_to_taps_is_retimed_as_taps_arrive():
+    doc = f'<bml {NS} id="b"><gesture id="g" lexeme="BEAT" stroke="anticipators:tap:beat6"/></bml>'
+    # Taps every 0.6 s from 1.0: beat6 is first predicted at 2.5 (120 BPM from 0), then at 1.0 + 5 * 0.6.
+    realizer, _ = taps_run([1.0, 1.6, 2.2, 2.8], doc)
+    times = realizer.feedback.sync_times()
+    assert times["b:g:stroke"] == pytest.approx(4.0, abs=1e-12)
+    predictions = [p["behaviours"][0]["syncs"]["stroke"] for p in realizer.feedback.of_type("predictionFeedback")]
+    assert predictions[0] == pytest.approx(2.5) and predictions[-1] == pytest.approx(4.0)
+
+
+def test_tap_file(tmp_path):
+    path = tmp_path / "taps.txt"
+    path.write_text("# taps\n0.5\n\n1.0 # second\n")
+    assert read_taps(path) == [0.5, 1.0]
+    path.write_text("0.5\nsoon\n")
+    with pytest.raises(ValueError, match="taps.txt:2"):
+        read_taps(path)
+
+
+def test_registry_lists_builtins_and_refuses_unknown_names():
+    assert {"metronome", "tap"} <= set(registry.available())
+    assert registry.parse_spec("metronome:m2,bpm=90") == ("metronome", "m2", {"bpm": 90.0})
+    with pytest.raises(AgentsimError, match="no anticipator named 'nope'"):
+        registry.create("nope")
+    with pytest.raises(AgentsimError, match="tempo must be positive"):
+        registry.create("metronome", bpm=-1)
+
+
+@pytest.fixture
+def countin_plugin():
+    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
+    subprocess.run(pip + ["install", "--no-deps", "--no-build-isolation", str(PLUGIN)], check=True, timeout=300)
+    try:
+        yield
+    finally:
+        subprocess.run(pip + ["uninstall", "-y", "agentsim-countin"], check=True, timeout=300)
+
+
+def test_third_party_plugin_installs_and_is_used_from_bml(countin_plugin, tmp_path):
+    listed = subprocess.run([sys.executable, "-m", "agentsim.cli", "anticipators", "list"], capture_output=True,
+                            text=True, timeout=60)
+    assert "countin\tagentsim_countin:CountIn" in listed.stdout
+    doc = tmp_path / "cue.xml"
+    doc.write_text(f'<bml {NS} id="b"><gesture id="g" lexeme="BEAT" stroke="anticipators:ci:cue"/>'
+                   f'<head id="n" lexeme="NOD" stroke="anticipators:ci:count2"/></bml>')
+    proc = subprocess.run([sys.executable, "-m", "agentsim.cli", "realize", str(doc), "--anticipator",
+                           "countin:ci,beats=4,period=0.5,start=1,delay=1.5,shift=0.25"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    feedback = [json.loads(line) for line in proc.stdout.splitlines()]
+    times = {f["id"]: f["globalTime"] for f in feedback if f["type"] == "syncPointProgress"}
+    assert times["b:n:stroke"] == 1.5
+    assert times["b:g:stroke"] == 3.25  # the cue at 3.0 moved by 0.25 s at t = 1.5
+    assert [f["globalTime"] for f in feedback if f["type"] == "predictionFeedback"] == [0.0, 1.5]
