@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -67,9 +68,11 @@ def test_registry_lists_builtins_and_refuses_unknown_names():
 
 
 @pytest.fixture
-def countin_plugin():
+def countin_plugin(tmp_path):
+    source = tmp_path / "agentsim-countin"  # build from a copy: no build artifacts in the checkout
+    shutil.copytree(PLUGIN, source)
     pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
-    subprocess.run(pip + ["install", "--no-deps", "--no-build-isolation", str(PLUGIN)], check=True, timeout=300)
+    subprocess.run(pip + ["install", "--no-deps", "--no-build-isolation", str(source)], check=True, timeout=300)
     try:
         yield
     finally:
