@@ -8,6 +8,8 @@ interface (Elckerlyc section 5.2): resolve unknown times, add, remove, list inva
 
 from __future__ import annotations
 
+import heapq
+import itertools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, Iterable, Sequence
 
@@ -40,6 +42,9 @@ class KeyRef:
         return None if t is None else t + self.offset
 
 
+_planned = itertools.count()
+
+
 class TimedBehaviour:
     """A behaviour placed in time: its sync points, preferred timing, keys and what has been played."""
 
@@ -52,6 +57,7 @@ class TimedBehaviour:
         self.keys = keys
         self.engine = engine
         self.passed: list[float | None] = [None] * len(self.sync_ids)
+        self.order = next(_planned)  # ties at one time are passed in planning order
         self.next_index = 0
         self.state = "planned"  # planned -> active -> finished | dropped
 
@@ -245,18 +251,26 @@ class Planner:
 
 
 class Plan:
-    """The timed behaviours an engine is playing, and a wake-up event for its player."""
+    """The timed behaviours an engine is playing, and how its player learns that times changed.
+
+    :meth:`kick` with no argument says "anything may have moved"; with behaviours, only those moved.
+    """
 
     def __init__(self, env: simpy.Environment):
         self.env = env
         self.behaviours: list[TimedBehaviour] = []
         self._changed = env.event()
+        self.moved: set[TimedBehaviour] | None = set()  # None: everything
 
     def changed(self) -> simpy.Event:
         return self._changed
 
-    def kick(self) -> None:
-        """Tell the player that times or behaviours changed."""
+    def kick(self, moved: Iterable[TimedBehaviour] | None = None) -> None:
+        """Tell the player that the times of ``moved`` behaviours (default: any) changed."""
+        if moved is None:
+            self.moved = None
+        elif self.moved is not None:
+            self.moved.update(moved)
         if not self._changed.triggered:
             self._changed.succeed()
 
@@ -268,26 +282,60 @@ class Plan:
 class Player:
     """Plays a plan: passes each sync point at the exact simulated time of its key.
 
-    ``on_sync`` is called for every sync point passed, in time order, with the global time.
+    The next key of every active behaviour waits in a heap; an entry is checked against the behaviour's
+    current timing before it is acted on, so moved pegs are honoured. ``on_sync`` is called for every sync
+    point passed, in time order (ties: in the order the behaviours were planned), with the global time.
     """
 
     def __init__(self, env: simpy.Environment, plan: Plan, on_sync: Callable[[TimedBehaviour, int, float], None]):
         self.env = env
         self.plan = plan
         self.on_sync = on_sync
+        self._heap: list[tuple[float, int, int, TimedBehaviour]] = []
         self.process = env.process(self.run())
 
+    def _push(self, timed: TimedBehaviour) -> None:
+        t = timed.next_time()
+        if t is not None:
+            heapq.heappush(self._heap, (t, timed.order, timed.next_index, timed))
+
+    def _refresh(self) -> None:
+        moved = self.plan.moved
+        self.plan.moved = set()
+        if moved is None:
+            self._heap = []
+            for timed in self.plan.behaviours:
+                self._push(timed)
+        else:
+            for timed in moved:
+                self._push(timed)
+
+    def _top(self) -> tuple[float, TimedBehaviour] | None:
+        """The earliest next key, after discarding entries that no longer match their behaviour."""
+        heap = self._heap
+        while heap:
+            t, _, index, timed = heap[0]
+            if timed.state != "active" or timed.next_index != index:
+                heapq.heappop(heap)
+                continue
+            current = timed.next_time()
+            if current is None:
+                heapq.heappop(heap)
+                continue
+            if abs(current - t) > EPSILON:  # moved since it was pushed
+                heapq.heapreplace(heap, (current, heap[0][1], index, timed))
+                continue
+            return t, timed
+        return None
+
     def next_time(self) -> float | None:
-        best = None
-        for timed in self.plan.behaviours:
-            t = timed.next_time()
-            if t is not None and (best is None or t < best):
-                best = t
-        return best
+        top = self._top()
+        return None if top is None else top[0]
 
     def run(self):
         while True:
             self.plan.renew()
+            self._refresh()
             t_next = self.next_time()
             changed = self.plan.changed()
             if t_next is None:
@@ -300,14 +348,11 @@ class Player:
         """Pass every sync point whose time has come, earliest first."""
         now = self.env.now
         while True:
-            due = None
-            for order, timed in enumerate(self.plan.behaviours):
-                t = timed.next_time()
-                if t is not None and t <= now + EPSILON and (due is None or (t, order) < due[:2]):
-                    due = (t, order, timed)
-            if due is None:
+            top = self._top()
+            if top is None or top[0] > now + EPSILON:
                 return
-            t, _, timed = due
+            t, timed = top
+            heapq.heappop(self._heap)
             i = timed.next_index
             # A key that moved into the past is passed now: that is when it really happens.
             actual = t if t >= now - EPSILON else now
@@ -317,6 +362,7 @@ class Player:
             timed.passed[i] = actual
             timed.next_index += 1
             self.on_sync(timed, i, actual)
+            self._push(timed)
 
 
 class Engine:
@@ -339,7 +385,7 @@ class Engine:
 
     def activate(self, timed: TimedBehaviour) -> None:
         timed.state = "active"
-        self.plan.kick()
+        self.plan.kick([timed])
 
     def remove(self, timed: TimedBehaviour) -> None:
         self.planner.remove(timed)
