@@ -1,0 +1,121 @@
+"""Benchmark of beat prediction on FluidSynth ensemble renders; prints JSON.
+
+Each render is an ensemble (drums, bass, piano, strings) at 100 to 140 BPM in 4/4 or 3/4, with a tempo
+ramp of +10 % over 16 bars (from bar 4) and +-2 % smooth rubato, about 60 s long. Every tracker
+hears it block by block; predictions made at least 200 ms before each true beat are scored after the
+first 8 seconds (:func:`anticipators.beat_eval.evaluate_predictions`). The real-time factor is
+processing time over audio time.
+
+Usage::
+
+    PYTHONPATH=. python benchmarks/bench_beats.py [--quick] [--block-size 512] [--sample-rate 22050]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from anticipators.beat_eval import evaluate_predictions, select_predictions, track_file  # noqa: E402
+from anticipators.beat_tracking import librosa_offline_beats  # noqa: E402
+from anticipators.ensemble_audio import beat_onset_offset, measure_onset_offsets, render_ensemble_full  # noqa: E402
+
+#: (bpm, meter, seed) of the renders (seeds not used while the tracker was developed).
+CONFIGS = [
+    (100, "4/4", 201),
+    (108, "3/4", 202),
+    (115, "4/4", 203),
+    (122, "3/4", 204),
+    (128, "4/4", 205),
+    (133, "3/4", 206),
+    (140, "4/4", 207),
+    (104, "3/4", 208),
+    (137, "4/4", 209),
+    (119, "3/4", 210),
+]
+
+TRACKERS = ("causal", "baseline", "librosa_offline")
+FIGURES = ("f_measure", "mae_ms", "mean_error_ms", "median_abs_error_ms", "mae_ms_lag_removed", "real_time_factor")
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="two 30 s renders instead of eight 60 s ones")
+    ap.add_argument("--block-size", type=int, default=512, help="samples per block (default 512)")
+    ap.add_argument("--sample-rate", type=int, default=22050)
+    ap.add_argument("--seconds", type=float, default=60.0, help="approximate length of each render")
+    ap.add_argument("--lookahead", type=float, default=0.2, help="prediction lead in seconds")
+    args = ap.parse_args(argv)
+
+    configs = CONFIGS[:2] if args.quick else CONFIGS
+    seconds = 30.0 if args.quick else args.seconds
+    sr = args.sample_rate
+    # warm up librosa's compiled beat tracker so that its timing excludes compilation
+    librosa_offline_beats(np.zeros(sr * 5, np.float32), sr)
+
+    renders = []
+    per_tracker: dict[str, list[dict]] = {name: [] for name in TRACKERS}
+    for bpm, meter, seed in configs:
+        bpb = int(meter.split("/")[0])
+        bars = int(np.ceil(seconds * bpm / 60.0 / bpb))
+        t0 = time.perf_counter()
+        r = render_ensemble_full(bpm, meter, bars, ramp=(4, 16, 0.10), rubato=0.02, seed=seed, sample_rate=sr)
+        render_wall = time.perf_counter() - t0
+        entry = {
+            "bpm": bpm,
+            "meter": meter,
+            "seed": seed,
+            "audio_seconds": round(r.audio.size / sr, 3),
+            "render_seconds": round(render_wall, 3),
+            "results": {},
+        }
+        for name in TRACKERS:
+            run = track_file(r.audio, name, args.block_size, sample_rate=sr)
+            res = evaluate_predictions(run["updates"], r.beat_times, lookahead=args.lookahead, skip=8.0)
+            res["real_time_factor"] = run["wall_seconds"] / run["audio_seconds"]
+            # timing error left once a tracker's constant lag (its median signed error) is removed
+            ref = r.beat_times[r.beat_times >= 8.0]
+            err = select_predictions(run["updates"], ref, args.lookahead) - ref
+            err = err[np.isfinite(err)]
+            res["mae_ms_lag_removed"] = float(np.mean(np.abs(err - np.median(err))) * 1000) if err.size else float("nan")
+            res["updates"] = len(run["updates"])
+            entry["results"][name] = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in res.items()}
+            per_tracker[name].append(res)
+        renders.append(entry)
+        print(f"{bpm} BPM {meter}: " + ", ".join(
+            f"{n} F={entry['results'][n]['f_measure']:.3f} MAE={entry['results'][n]['mae_ms']:.1f} ms"
+            for n in TRACKERS), file=sys.stderr)
+
+    summary = {}
+    for name, rows in per_tracker.items():
+        summary[name] = {f"mean_{k}": round(float(np.nanmean([row[k] for row in rows])), 4) for k in FIGURES}
+        summary[name]["min_f_measure"] = round(float(np.min([row["f_measure"] for row in rows])), 4)
+        summary[name]["max_mae_ms"] = round(float(np.nanmax([row["mae_ms"] for row in rows])), 4)
+        summary[name]["max_real_time_factor"] = round(float(np.max([row["real_time_factor"] for row in rows])), 5)
+    offsets = measure_onset_offsets(sr)
+    report = {
+        "sample_rate": sr,
+        "block_size": args.block_size,
+        "lookahead_s": args.lookahead,
+        "skip_s": 8.0,
+        "f_measure_window_s": 0.07,
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
+        "renderer_onset_offset_ms": {k: round(v * 1000, 3) for k, v in offsets.items()},
+        "beat_onset_offset_ms": round(beat_onset_offset(sr) * 1000, 3),
+        "summary": summary,
+        "renders": renders,
+    }
+    print(json.dumps(report, indent=2))
+    return report
+
+
+if __name__ == "__main__":
+    main()
