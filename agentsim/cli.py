@@ -56,6 +56,9 @@ def build_parser() -> argparse.ArgumentParser:
                               "metronome:m2,bpm=90 (repeatable; see 'agentsim anticipators list')")
     anticipators = commands.add_parser("anticipators", help="installed anticipators")
     anticipators.add_argument("action", choices=["list"])
+    from anticipators import commands as anticipate
+
+    anticipate.add_parser(commands)
     return parser
 
 
@@ -116,6 +119,10 @@ def main(argv: list[str] | None = None) -> int:
             return realize(args)
         if args.command == "anticipators":
             return list_anticipators()
+        if args.command == "anticipate":
+            from anticipators import commands as anticipate
+
+            return anticipate.beats(args)
     except UsageError as exc:
         print(f"agentsim: {exc}", file=sys.stderr)
         return 2
