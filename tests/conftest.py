@@ -45,3 +45,34 @@ def realize(*documents, at=None, until=None, **kwargs) -> Result:
 def examples() -> Path:
     assert EXAMPLES.is_dir(), f"the BML examples are expected in {EXAMPLES}"
     return EXAMPLES
+
+
+@pytest.fixture(scope="session")
+def pulse_null_sink():
+    """A PulseAudio null sink as a real loopback device: play to it, record its monitor.
+
+    Starts PulseAudio (as CI does, possibly as root) if it is not running. Yields the sink name.
+    """
+    import os
+    import shutil
+    import subprocess
+    import time
+
+    name = "agentsim_null"
+    if shutil.which("pulseaudio") is None:
+        pytest.fail("the loopback tests need PulseAudio: apt-get install pulseaudio libportaudio2")
+    if subprocess.run(["pulseaudio", "--check"]).returncode != 0:
+        subprocess.run(["pulseaudio", "--daemonize=yes", "--exit-idle-time=-1", "-n",
+                        f"--load=module-null-sink sink_name={name}", "--load=module-native-protocol-unix"],
+                       check=True, capture_output=True, timeout=30)
+        for _ in range(50):
+            if subprocess.run(["pulseaudio", "--check"]).returncode == 0:
+                break
+            time.sleep(0.1)
+    sinks = subprocess.run(["pactl", "list", "short", "sinks"], capture_output=True, text=True).stdout
+    if name not in sinks:
+        subprocess.run(["pactl", "load-module", "module-null-sink", f"sink_name={name}"], check=True,
+                       capture_output=True, timeout=30)
+    os.environ["PULSE_SINK"] = name
+    os.environ["PULSE_SOURCE"] = f"{name}.monitor"
+    yield name
