@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import queue
 import re
+import time
 from pathlib import Path
 
 import numpy as np
@@ -160,15 +161,23 @@ class AudioBeatAnticipator(Anticipator):
 
     def _hear_device(self):
         env = self.env
-        self.start = env.now
+        wall_start = getattr(env, "real_start", None)
+        factor = getattr(env, "factor", 1.0)
+        if wall_start is None:
+            raise AgentsimError("live audio input needs real-time mode (--realtime)")
+        first = True
         with self.source.open() as blocks:
             while True:
                 yield env.timeout(self.block / self.sample_rate)
                 while True:
                     try:
-                        block = blocks.get_nowait()
+                        stamp, block = blocks.get_nowait()
                     except queue.Empty:
                         break
+                    if first:
+                        # The audio clock starts when the first block was captured, not when asked.
+                        self.start = (stamp - wall_start) / factor - len(block) / self.sample_rate
+                        first = False
                     self.push(block)
 
 
@@ -212,8 +221,8 @@ class DeviceSource:
         sounddevice, info = self.check()
         blocks: queue.Queue = queue.Queue()
 
-        def callback(indata, frames, time, status):
-            blocks.put(indata.mean(axis=1).astype(np.float32).copy())
+        def callback(indata, frames, time_info, status):
+            blocks.put((time.monotonic(), indata.mean(axis=1).astype(np.float32).copy()))
 
         stream = sounddevice.InputStream(device=self.device, channels=1, samplerate=self.sample_rate,
                                          blocksize=self.block, dtype="float32", callback=callback)

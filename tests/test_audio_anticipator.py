@@ -124,8 +124,8 @@ def test_live_input_through_a_null_sink_loopback(pulse_null_sink, ensemble):
     realizer.env.run(until=seconds + 0.5)
     player.join()
     assert anticipator.confidence >= 0.4
-    # Predicted upcoming beats line up with the true beats shifted by the playback start and the
-    # loopback latency (a constant few tens of ms): the spread of the differences is small.
+    # Predicted upcoming beats line up with the true beats shifted by the playback start, up to a constant
+    # of the loopback (latencies and when the clocks were read: a few tens of ms) and a small spread.
     offsets = []
     for t, predicted in anticipator.updates:
         if t > started["sim"] + 8:
@@ -134,5 +134,5 @@ def test_live_input_through_a_null_sink_loopback(pulse_null_sink, ensemble):
                 offsets.append(b - (beats[k] + started["sim"]))
     offsets = np.asarray(offsets)
     assert offsets.size > 10
-    assert 0.0 <= np.median(offsets) < 0.15
+    assert abs(np.median(offsets)) < 0.15
     assert np.percentile(np.abs(offsets - np.median(offsets)), 95) < 0.015
