@@ -47,10 +47,12 @@ class TapTempo(Anticipator):
         Number of recent intervals the period is estimated from.
     start : float
         Before the first tap, beats are predicted at ``initial_bpm`` from this time (confidence 0).
+    keyboard : bool
+        In real-time mode, also take a tap from every line typed on standard input (press Enter).
     """
 
     def __init__(self, anticipator_id: str = "tap", taps: Iterable[float] | str | Path = (),
-                 initial_bpm: float = 120.0, window: int = 8, start: float = 0.0):
+                 initial_bpm: float = 120.0, window: int = 8, start: float = 0.0, keyboard: bool = False):
         super().__init__(anticipator_id)
         if isinstance(taps, (str, Path)):
             taps = read_taps(taps)
@@ -65,6 +67,8 @@ class TapTempo(Anticipator):
         self.last_beat = 0
         self.confidence = 0.0
         self._queue: queue.Queue[float] | None = None
+        if keyboard and str(keyboard).lower() not in ("0", "0.0", "false", "no"):
+            self.listen_keyboard()
 
     def predicted(self, n: int) -> float | None:
         """Time of beat ``n``: the tap that marked it, or a prediction from the last beat and the period."""
@@ -87,7 +91,8 @@ class TapTempo(Anticipator):
             self.last_beat = 1
         else:
             interval = t - self.beat_times[self.last_beat]
-            beats = round(interval / self.period)
+            # Until taps have given a period, any interval longer than a 400 BPM beat is one beat.
+            beats = round(interval / self.period) if self.intervals else int(interval >= 0.15)
             if beats < 1:  # a doubled tap: too soon to be the next beat
                 return
             self.intervals = (self.intervals + [interval / beats])[-self.window:]

@@ -95,3 +95,32 @@ def test_third_party_plugin_installs_and_is_used_from_bml(countin_plugin, tmp_pa
     assert times["b:n:stroke"] == 1.5
     assert times["b:g:stroke"] == 3.25  # the cue at 3.0 moved by 0.25 s at t = 1.5
     assert [f["globalTime"] for f in feedback if f["type"] == "predictionFeedback"] == [0.0, 1.5]
+
+
+def test_keyboard_taps_in_real_time():
+    import os
+    import threading
+    import time
+
+    from agentsim.clock import make_environment
+    from agentsim.pegboard import PegBoard
+
+    read_fd, write_fd = os.pipe()
+    tap = TapTempo("tap", initial_bpm=60)
+    tap.listen_keyboard(os.fdopen(read_fd))
+    env = make_environment(realtime=True)
+    tap.attach(env, PegBoard())
+
+    def typist():
+        with os.fdopen(write_fd, "w") as keys:
+            for _ in range(6):
+                time.sleep(0.25)
+                keys.write("\n")
+                keys.flush()
+
+    thread = threading.Thread(target=typist)
+    thread.start()
+    env.run(until=1.9)
+    thread.join()
+    assert tap.last_beat == 6
+    assert tap.period == pytest.approx(0.25, abs=0.03)

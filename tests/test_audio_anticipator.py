@@ -136,3 +136,24 @@ def test_live_input_through_a_null_sink_loopback(pulse_null_sink, ensemble):
     assert offsets.size > 10
     assert abs(np.median(offsets)) < 0.15
     assert np.percentile(np.abs(offsets - np.median(offsets)), 95) < 0.015
+
+
+def test_anticipate_beats_listens_to_a_live_device(pulse_null_sink, ensemble):
+    import os
+
+    import sounddevice
+
+    _, audio, sr, beats = ensemble
+    proc = subprocess.Popen([sys.executable, "-m", "agentsim.cli", "anticipate", "beats", "--input", "pulse",
+                             "--seconds", "9", "--sample-rate", str(sr), "--json"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    time.sleep(1.5)
+    sounddevice.play(audio[: 9 * sr], sr, device="pulse")
+    out, err = proc.communicate(timeout=60)
+    sounddevice.stop()
+    assert proc.returncode == 0, err
+    run = json.loads(out)
+    locked = [u for u in run["updates"] if u["beats"]]
+    assert len(locked) > 5
+    period = np.median(np.diff(locked[-1]["beats"]))
+    assert period == pytest.approx(0.5, rel=0.05)  # 120 BPM: the ramp starts at bar 5
