@@ -1154,10 +1154,7 @@ def render_ensemble_full(
     midi_path: "str | os.PathLike | None" = None,
     beats_path: "str | os.PathLike | None" = None,
 ) -> EnsembleRender:
-    """Compose and render an ensemble; like :func:`render_ensemble` but returns an :class:`EnsembleRender`.
-
-    See :func:`render_ensemble` for the parameters.
-    """
+    """Compose and render an ensemble, with its ground truth (see :func:`render_ensemble`)."""
     tm = make_tempo_map(bpm, meter, ramp=ramp, steps=steps, rubato=rubato, rubato_bars=rubato_bars, seed=seed)
     score = build_score(tm, bars, parts=parts, hihat=hihat, seed=seed)
     # parts -> MIDI file -> FluidSynth: the audio is the MIDI file's rendering
@@ -1181,27 +1178,8 @@ def render_ensemble_full(
     return EnsembleRender(audio, int(sample_rate), beats, downbeats, score, offset, float(lead_in))
 
 
-def render_ensemble(
-    bpm: float = 120.0,
-    meter: "Meter | str | int" = "4/4",
-    bars: int = 32,
-    *,
-    ramp: "TempoRamp | tuple[float, float, float] | None" = None,
-    steps: Sequence["TempoStep | tuple[float, float]"] = (),
-    rubato: float = 0.0,
-    rubato_bars: float = 2.0,
-    seed: int = 0,
-    sample_rate: int = 22050,
-    parts: Sequence[str] = ("drums", "bass", "piano", "strings"),
-    hihat: str = "eighths",
-    lead_in: float = 0.5,
-    tail: float = 1.0,
-    gain: float = 0.3,
-    normalize: bool = True,
-    soundfont: "str | os.PathLike" = DEFAULT_SOUNDFONT,
-    midi_path: "str | os.PathLike | None" = None,
-    beats_path: "str | os.PathLike | None" = None,
-) -> tuple[np.ndarray, int, np.ndarray]:
+def render_ensemble(*args, **kwargs) -> tuple[np.ndarray, int, np.ndarray]:
+    # Takes the parameters of render_ensemble_full.
     """Compose an ensemble on a tempo map, write it as MIDI and render that with FluidSynth.
 
     The parts (:func:`build_score`) become a MIDI file (:func:`score_to_midi`) whose events are
@@ -1263,11 +1241,7 @@ def render_ensemble(
     AnticipatorError
         When FluidSynth or the soundfont is missing.
     """
-    r = render_ensemble_full(
-        bpm, meter, bars, ramp=ramp, steps=steps, rubato=rubato, rubato_bars=rubato_bars, seed=seed,
-        sample_rate=sample_rate, parts=parts, hihat=hihat, lead_in=lead_in, tail=tail, gain=gain,
-        normalize=normalize, soundfont=soundfont, midi_path=midi_path, beats_path=beats_path,
-    )
+    r = render_ensemble_full(*args, **kwargs)
     return r.audio, r.sample_rate, r.beat_times
 
 
