@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, Iterable, Sequence
 
@@ -58,6 +59,8 @@ class TimedBehaviour:
         self.engine = engine
         self.passed: list[float | None] = [None] * len(self.sync_ids)
         self.order = next(_planned)  # ties at one time are passed in planning order
+        self.tied = [False] * len(self.sync_ids)  # which keys share a peg with other sync points
+        self.heap_version = 0  # which of the player's heap entries for this behaviour is current
         self.next_index = 0
         self.state = "planned"  # planned -> active -> finished | dropped
 
@@ -122,9 +125,11 @@ class TimedBehaviour:
         return self.time(len(self.sync_ids) - 1)
 
     def next_time(self) -> float | None:
+        """When the next sync point is due (None if not active, done, or not known to come)."""
         if self.state != "active" or self.next_index >= len(self.sync_ids):
             return None
-        return self.time(self.next_index)
+        t = self.time(self.next_index)
+        return t if t is not None and t < math.inf else None
 
     def own_pegs(self) -> Iterable[OffsetPeg]:
         for key in self.keys:
@@ -295,9 +300,11 @@ class Player:
         self.process = env.process(self.run())
 
     def _push(self, timed: TimedBehaviour) -> None:
+        """(Re)enter a behaviour's next key; an earlier entry of the same behaviour becomes stale."""
+        timed.heap_version += 1
         t = timed.next_time()
         if t is not None:
-            heapq.heappush(self._heap, (t, timed.order, timed.next_index, timed))
+            heapq.heappush(self._heap, (t, timed.order, timed.heap_version, timed))
 
     def _refresh(self) -> None:
         moved = self.plan.moved
@@ -314,8 +321,8 @@ class Player:
         """The earliest next key, after discarding entries that no longer match their behaviour."""
         heap = self._heap
         while heap:
-            t, _, index, timed = heap[0]
-            if timed.state != "active" or timed.next_index != index:
+            t, order, version, timed = heap[0]
+            if timed.state != "active" or timed.heap_version != version:
                 heapq.heappop(heap)
                 continue
             current = timed.next_time()
@@ -323,7 +330,7 @@ class Player:
                 heapq.heappop(heap)
                 continue
             if abs(current - t) > EPSILON:  # moved since it was pushed
-                heapq.heapreplace(heap, (current, heap[0][1], index, timed))
+                heapq.heapreplace(heap, (current, order, version, timed))
                 continue
             return t, timed
         return None

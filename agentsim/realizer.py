@@ -9,7 +9,7 @@ import simpy
 from agentsim.bml.model import Block
 from agentsim.clock import make_environment
 from agentsim.engines.animation import AnimationEngine
-from agentsim.engines.speech import SpeechEngine
+from agentsim.engines.speech import SpeechConfig, SpeechEngine
 from agentsim.engines.wait import WaitEngine
 from agentsim.feedback import FeedbackLog
 from agentsim.pegboard import PegBoard
@@ -30,10 +30,13 @@ class Realizer:
         Text-to-speech backend for speech timing; by default the deterministic built-in one.
     anticipators : iterable of Anticipator
         Anticipators whose pegs BML may refer to as ``anticipators:<id>:<sync>``.
+    speech : SpeechConfig, optional
+        How speech audio and its progress events meet the animation (animator-time strategy, event
+        delivery, what the planner knows); by default the audio plays exactly as planned.
     """
 
     def __init__(self, env: simpy.Environment | None = None, realtime: bool = False,
-                 tts: TTSBackend | None = None, anticipators: Iterable = ()):
+                 tts: TTSBackend | None = None, anticipators: Iterable = (), speech: SpeechConfig | None = None):
         self.env = env if env is not None else make_environment(realtime)
         self.board = PegBoard()
         self.feedback = FeedbackLog()
@@ -41,7 +44,7 @@ class Realizer:
             from speech_timing.builtin import BuiltinBackend
             tts = BuiltinBackend()
         self.engines = [
-            SpeechEngine(self.env, None, tts),
+            SpeechEngine(self.env, None, tts, speech),
             AnimationEngine(self.env, None),
             WaitEngine(self.env, None),
         ]

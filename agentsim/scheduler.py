@@ -18,9 +18,14 @@ from agentsim import feedback as fb
 from agentsim.bml.model import Block
 from agentsim.bml.parser import guess_block_id, parse_bml
 from agentsim.errors import BMLError
-from agentsim.pegboard import PegBoard, TimePeg
+from agentsim.pegboard import OffsetPeg, PegBoard, TimePeg
 from agentsim.plan import EPSILON, Engine, ScheduleError, SyncPeg, TimedBehaviour
 from agentsim.solver import BlockSolver
+
+
+def _start_time(timed: TimedBehaviour) -> float:
+    start = timed.start
+    return start if start is not None and start < float("inf") else float("-inf")
 
 
 class BlockRun:
@@ -58,6 +63,9 @@ class Scheduler:
         board.on_move(self.peg_moved)
         for engine in engines:
             engine._report = self.sync_passed
+            if hasattr(engine, "progress"):
+                engine.progress = self.speech_progress
+                engine.dependants_of = self.dependants_of
 
     # ------------------------------------------------------------------ anticipators
     def add_anticipator(self, anticipator) -> None:
@@ -226,6 +234,43 @@ class Scheduler:
             self.end_if_done(run, self.env.now)
         for engine in self.engine_list:
             engine.plan.kick()
+
+    #: Behaviours tied to a speech whose next sync point is further ahead than this (seconds) are not
+    #: woken at every progress event; they are checked when they come closer.
+    SPEECH_HORIZON = 2.0
+
+    def dependants_of(self, pegs: set[int]) -> list[TimedBehaviour]:
+        """Live behaviours with a key hanging from one of ``pegs`` (ids), by their next sync time."""
+        found = []
+        for timed in self.live_behaviours():
+            for key in timed.keys:
+                peg = key.peg if key is not None else None
+                while isinstance(peg, OffsetPeg) and id(peg) not in pegs:
+                    peg = peg.base
+                if peg is not None and id(peg) in pegs:
+                    found.append(timed)
+                    break
+        found.sort(key=_start_time)
+        return found
+
+    def speech_progress(self, playback) -> None:
+        """A speech's animator time changed: wake the players of the behaviours tied to it that are near."""
+        horizon = self.env.now + self.SPEECH_HORIZON
+        speech = playback.timed
+        if speech.state == "active":
+            speech.engine.plan.kick([speech])
+        dependants = playback.dependants  # in order of start, as planned when the speech began
+        starts = playback.dependant_starts
+        first = playback.first_live
+        while first < len(dependants) and dependants[first].state in ("finished", "dropped"):
+            first += 1
+        playback.first_live = first
+        for i in range(first, len(dependants)):
+            if starts[i] > horizon:
+                break
+            timed = dependants[i]
+            if timed.state == "active":
+                timed.engine.plan.kick([timed])
 
     def drop(self, timed: TimedBehaviour, reason: str) -> None:
         timed.state = "dropped"

@@ -333,6 +333,7 @@ class BlockSolver:
             else:
                 keys[i] = KeyRef(ref_key.peg, offset)
         timed = TimedBehaviour(self.run, beh, preferred, keys, engine)
+        timed.tied = [sync_id in groups for sync_id in beh.sync_ids]
         self.timed[beh.id] = timed
         return newly_known
 

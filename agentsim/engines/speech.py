@@ -1,32 +1,89 @@
 """The speech engine: speech behaviours timed by a text-to-speech backend, played rigidly.
 
-The planner asks the backend for the utterance's timeline (words, marks, duration); a speech behaviour's
-sync points are its start, the ``<sync>`` marks in its text and its end, at the backend's times. Speech is
-not stretched: constraints that would stretch it make it invalid. Once speech starts, its timing belongs
-to the audio: the pegs of its sync points are detached from whatever they were tied to, so behaviours
-tied to the speech follow the speech.
+The planner asks the backend for the utterance's timeline (words, marks, duration) or, with
+``timing="linear"``, only Chang's linear characters-to-time model; a speech behaviour's sync points are
+its start, the ``<sync>`` marks in its text and its end, at those times. Speech is not stretched:
+constraints that would stretch it make it invalid.
+
+Once speech starts, its timing belongs to the audio. Without a :class:`SpeechConfig` strategy the audio
+plays exactly as planned and the speech's pegs are detached from whatever they were tied to. With one,
+the audio really starts after a playback latency, its clock drifts, and its progress events reach the
+realizer late, scattered and in bursts (:mod:`speech_timing.delivery`); an animator-time strategy
+(:mod:`speech_timing.animator_time`) turns them into ``t_A``, and every sync point of the speech, with
+everything tied to it, is passed when ``t_A`` reaches its planned speech time.
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
 from agentsim.bml.model import Behaviour
-from agentsim.plan import Engine, Planner, ScheduleError, TimedBehaviour
+from agentsim.pegboard import OffsetPeg, TimePeg, _bump
+from agentsim.plan import Engine, KeyRef, Planner, ScheduleError, TimedBehaviour
 from speech_timing.backend import SpeechText, TTSBackend, Utterance
 
 #: Speech keys may be off their rigid spacing by this much (seconds) before the speech is invalid.
 RIGID_TOLERANCE = 1e-6
 
 
+@dataclass
+class SpeechConfig:
+    """How speech meets the animation: what the planner knows and how progress events arrive.
+
+    Parameters
+    ----------
+    strategy : str or None
+        Animator-time strategy (a key of ``speech_timing.animator_time.STRATEGIES``); None plays the
+        audio exactly as planned, with no latency and no events.
+    delivery : DeliveryModel
+        Playback latency, audio clock drift and the progress-event channel.
+    timing : {"tts", "linear"}
+        What the planner knows in advance: the backend's own timeline, or only the linear model.
+    linear_model : LinearModel, optional
+        Chang's linear model; calibrated on the bundled texts when needed and not given.
+    seed : int
+        Seed of the random generator of the first speech (later speeches use seed + 1, + 2, ...).
+    trace_frame : float or None
+        If set, ``t_A`` is sampled every this many seconds while speech plays (for snap and stall metrics).
+    """
+
+    strategy: str | None = None
+    delivery: object = None
+    timing: str = "tts"
+    linear_model: object = None
+    seed: int = 0
+    trace_frame: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.timing not in ("tts", "linear"):
+            raise ValueError(f"timing must be 'tts' or 'linear', not {self.timing!r}")
+        if self.strategy is not None:
+            from speech_timing.animator_time import STRATEGIES
+            from speech_timing.delivery import DeliveryModel
+
+            if self.strategy not in STRATEGIES:
+                raise ValueError(f"unknown strategy {self.strategy!r}; known: {', '.join(sorted(STRATEGIES))}")
+            if self.delivery is None:
+                self.delivery = DeliveryModel()
+
+
 class SpeechPlanner(Planner):
-    """Times speech with a :class:`~speech_timing.backend.TTSBackend`."""
+    """Times speech with a :class:`~speech_timing.backend.TTSBackend` (or the linear model)."""
 
     behaviour_types = ("speech",)
     rigid = True
 
-    def __init__(self, backend: TTSBackend):
+    def __init__(self, backend: TTSBackend, config: SpeechConfig | None = None):
         super().__init__()
         self.backend = backend
+        self.config = config or SpeechConfig()
         self._utterances: dict[int, Utterance] = {}
+        self._plans: dict[int, object] = {}
+        self.speaking: set[int] = set()  # behaviours timed by their audio now, not by the plan
 
     def utterance(self, behaviour: Behaviour) -> Utterance:
         key = id(behaviour)
@@ -36,31 +93,124 @@ class SpeechPlanner(Planner):
             self._utterances[key] = utt
         return utt
 
+    def linear_model(self):
+        if self.config.linear_model is None:
+            from speech_timing.harness import default_linear_model
+
+            self.config.linear_model = default_linear_model(self.backend)
+        return self.config.linear_model
+
+    def linear_plan(self, behaviour: Behaviour):
+        """The speech plan made from the linear model alone (``timing="linear"``)."""
+        key = id(behaviour)
+        if key not in self._plans:
+            from speech_timing.linear_model import plan_from_linear
+
+            self._plans[key] = plan_from_linear(behaviour.text, self.linear_model())
+        return self._plans[key]
+
     def preferred(self, behaviour: Behaviour) -> list[float]:
+        if self.config.timing == "linear":
+            plan = self.linear_plan(behaviour)
+            chars, onsets = list(plan.word_chars), list(plan.word_onsets)
+            marks = {}
+            for offset, name in behaviour.marks:
+                k = next((i for i, c in enumerate(chars) if c >= offset), None)
+                marks[name] = float(onsets[k]) if k is not None else float(plan.duration)
+            return [0.0] + [marks[s] for s in behaviour.sync_ids[1:-1]] + [float(plan.duration)]
         utt = self.utterance(behaviour)
         marks = {m.name: m.time for m in utt.marks}
         return [0.0] + [marks[s] for s in behaviour.sync_ids[1:-1]] + [utt.duration]
 
     def check_times(self, behaviour, preferred, times) -> None:
         super().check_times(behaviour, preferred, times)
+        if id(behaviour) in self.speaking:
+            return
         for p, t in zip(preferred, times):
             if abs((t - times[0]) - p) > RIGID_TOLERANCE:
                 raise ScheduleError("speech cannot be stretched or skewed to meet its constraints")
 
     def remove(self, timed: TimedBehaviour) -> None:
         super().remove(timed)
-        self._utterances.pop(id(timed.behaviour), None)
+        for store in (self._utterances, self._plans):
+            store.pop(id(timed.behaviour), None)
+        self.speaking.discard(id(timed.behaviour))
+
+
+class SpeechTimePeg(TimePeg):
+    """A peg at speech time ``s`` of an utterance being played: its time is when animator time reaches s."""
+
+    __slots__ = ("playback", "s")
+
+    def __init__(self, playback: "Playback", s: float, name: str = ""):
+        super().__init__(None, name=name)
+        self.playback = playback
+        self.s = s
+
+    @property
+    def time(self) -> float | None:
+        return self.playback.crossing(self.s)
+
+    def set(self, time: float | None) -> None:
+        raise ValueError(f"{self.name} follows the speech and cannot be moved directly")
+
+
+@dataclass
+class Playback:
+    """One utterance playing: the truth (start, drift), its delivered events, and the strategy's t_A."""
+
+    env: object
+    timed: TimedBehaviour
+    utterance: Utterance
+    plan: object
+    strategy: object
+    t_request: float
+    t0: float
+    drift_ppm: float
+    delivered: list
+    finished: bool = False
+    dependants: list = field(default_factory=list)  # behaviours tied to this speech, by start
+    dependant_starts: list = field(default_factory=list)
+    first_live: int = 0  # dependants before this index have finished
+    trace: list = field(default_factory=list)
+
+    @property
+    def scale(self) -> float:
+        return 1.0 + self.drift_ppm * 1e-6
+
+    def true_time(self, s_true: float) -> float:
+        """Clock time at which true speech time ``s_true`` is heard."""
+        return self.t0 + s_true * self.scale
+
+    @property
+    def t_end(self) -> float:
+        return self.true_time(self.utterance.duration)
+
+    def crossing(self, s: float) -> float:
+        now = self.env.now
+        t = self.strategy.crossing(s, now)
+        if math.isinf(t) and self.finished:
+            return now  # every event is in: what t_A has not reached by now, it never will
+        return t
 
 
 class SpeechEngine(Engine):
     name = "speech"
 
-    def __init__(self, env, on_sync, backend: TTSBackend):
-        super().__init__(env, SpeechPlanner(backend), on_sync)
+    def __init__(self, env, on_sync, backend: TTSBackend, config: SpeechConfig | None = None):
+        super().__init__(env, SpeechPlanner(backend, config), on_sync)
+        self.config = self.planner.config
+        self.playbacks: list[Playback] = []
+        #: set by the scheduler: ``progress(playback)`` wakes the behaviours tied to a speech
+        self.progress: Callable[[Playback], None] | None = None
+        self.dependants_of: Callable[[set[int]], list[TimedBehaviour]] | None = None
 
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
         if index == 0:
-            self.take_timing(timed, time)
+            if self.config.strategy is None:
+                self.take_timing(timed, time)
+            else:
+                self.play(timed, time)
         super().sync_passed(timed, index, time)
 
     def take_timing(self, timed: TimedBehaviour, start: float) -> None:
@@ -68,12 +218,99 @@ class SpeechEngine(Engine):
         they were tied to (an anticipator, another block), keeping their times. Behaviours sharing those
         pegs now follow the speech."""
         block_peg = timed.run.block_peg
-        board = block_peg.board
-        if board is not None:
-            board.muted += 1
-        try:
+        with _muted(block_peg):
             for peg in set(timed.own_pegs()):
                 peg.freeze(block_peg)
-        finally:
-            if board is not None:
-                board.muted -= 1
+
+    def play(self, timed: TimedBehaviour, t_request: float) -> None:
+        """Start the audio and hand the speech's timing to the animator-time strategy."""
+        from speech_timing.animator_time import make_strategy
+        from speech_timing.delivery import deliver, true_events
+        from speech_timing.linear_model import plan_from_utterance
+
+        config, planner = self.config, self.planner
+        delivery = config.delivery
+        utt = planner.utterance(timed.behaviour)
+        known = dict(delay=delivery.delay, latency=delivery.latency, t_request=t_request)
+        if config.timing == "linear":
+            from speech_timing.linear_model import plan_from_linear
+
+            plan = plan_from_linear(timed.behaviour.text, planner.linear_model(), **known)
+        else:
+            model = planner.linear_model() if config.strategy == "linear-model" else None
+            plan = plan_from_utterance(utt, linear_model=model, **known)
+        rng = np.random.default_rng(config.seed + len(self.playbacks))
+        t0 = delivery.draw_start(t_request, rng)
+        delivered = deliver(true_events(utt, t0, delivery.drift_ppm), delivery, rng)
+        strategy = make_strategy(config.strategy)
+        strategy.reset(plan, t_request)
+        playback = Playback(self.env, timed, utt, plan, strategy, t_request, t0, delivery.drift_ppm, delivered)
+        self.playbacks.append(playback)
+        planner.speaking.add(id(timed.behaviour))
+        # Tie the speech's sync points, and every peg shared with them, to animator time.
+        block_peg = timed.run.block_peg
+        speech_pegs = [SpeechTimePeg(playback, p, name=f"{timed.block_id}:{timed.id}:{s}")
+                       for p, s in zip(timed.preferred, timed.sync_ids)]
+        with _muted(block_peg):
+            for i, key in enumerate(timed.keys):
+                if key is not None and timed.tied[i] and isinstance(key.peg, OffsetPeg):
+                    key.peg.rebase(speech_pegs[i], -key.offset)
+            timed.keys = [KeyRef(peg, 0.0) for peg in speech_pegs]
+        if self.dependants_of is not None:
+            playback.dependants = [t for t in self.dependants_of({id(p) for p in speech_pegs}) if t is not timed]
+            # a margin covers how far t_A may move a behaviour earlier before it is next looked at
+            # (unknown starts are always looked at)
+            playback.dependant_starts = [t.start - 1.0 if t.start is not None and t.start < math.inf else -math.inf
+                                         for t in playback.dependants]
+        self.env.process(self._deliver(playback))
+        if config.trace_frame:
+            self.env.process(self._trace(playback, config.trace_frame))
+
+    def _deliver(self, playback: Playback):
+        env = self.env
+        for event in playback.delivered:
+            if event.arrival_time > env.now:
+                yield env.timeout(event.arrival_time - env.now)
+            playback.strategy.on_event(event, env.now)
+            self._moved(playback)
+        # After the last event and the longest it could have been held, t_A learns nothing more.
+        last = max([playback.t_end] + [e.arrival_time for e in playback.delivered])
+        if last > env.now:
+            yield env.timeout(last - env.now)
+        playback.finished = True
+        _bump()
+        for timed in [playback.timed] + playback.dependants:
+            if timed.state == "active":
+                timed.engine.plan.kick([timed])
+
+    def _moved(self, playback: Playback) -> None:
+        _bump()
+        if self.progress is not None:
+            self.progress(playback)
+        else:
+            self.plan.kick()
+
+    def _trace(self, playback: Playback, frame: float):
+        env = self.env
+        k = math.ceil((playback.t0 - env.now) / frame) if playback.t0 > env.now else 0
+        t = env.now + k * frame
+        while t <= playback.t_end:
+            if t > env.now:
+                yield env.timeout(t - env.now)
+            playback.trace.append((t, playback.strategy.position(t)))
+            t += frame
+
+
+class _muted:
+    """Peg moves made inside are not reported to the board (the engine reports them itself)."""
+
+    def __init__(self, block_peg: TimePeg):
+        self.board = block_peg.board
+
+    def __enter__(self):
+        if self.board is not None:
+            self.board.muted += 1
+
+    def __exit__(self, *exc):
+        if self.board is not None:
+            self.board.muted -= 1
