@@ -57,8 +57,10 @@ def build_parser() -> argparse.ArgumentParser:
     anticipators = commands.add_parser("anticipators", help="installed anticipators")
     anticipators.add_argument("action", choices=["list"])
     from anticipators import commands as anticipate
+    from speech_timing import commands as speech
 
     anticipate.add_parser(commands)
+    speech.add_parsers(commands)
     return parser
 
 
@@ -123,6 +125,11 @@ def main(argv: list[str] | None = None) -> int:
             from anticipators import commands as anticipate
 
             return anticipate.beats(args)
+        if args.command in ("eval", "speech"):
+            from speech_timing import commands as speech
+
+            handler = {"speech-sync": speech.speech_sync, "calibrate": speech.calibrate, "export": speech.export}
+            return handler[getattr(args, "kind", None) or args.tool](args)
     except UsageError as exc:
         print(f"agentsim: {exc}", file=sys.stderr)
         return 2

@@ -53,7 +53,8 @@ def speech_sync(text: str, backend, strategy: str, delivery: DeliveryModel, timi
     """Realise beats on every content word and measure their synchronisation with the speech.
 
     Returns ``{"strategy", "timing", "seed", "words", "gestures", "missed", "error_ms": {p50, p95, max,
-    mean, signed_mean, n}, "snaps", "stall_s", "rate": {"min", "max"}, "wall_seconds", "speech_seconds"}``.
+    mean, signed_mean, n}, "snaps", "stall_s", "rate": {"min", "max"}, "wall_seconds", "speech_seconds",
+    "errors_s"}`` (the last: signed errors in seconds, an array).
     """
     import time
 
@@ -87,5 +88,5 @@ def speech_sync(text: str, backend, strategy: str, delivery: DeliveryModel, timi
         strategy=strategy, timing=timing, seed=seed, words=len(utterance.words), gestures=len(targets),
         missed=len(targets) - len(passed), error_ms=error_summary(errors), snaps=snaps(t, t_a, FRAME),
         stall_s=stall_time(t, t_a), rate=OrderedDict(min=low, max=high), wall_seconds=wall,
-        speech_seconds=utterance.duration,
+        speech_seconds=utterance.duration, errors_s=errors,
     )
