@@ -54,6 +54,15 @@ def build_parser() -> argparse.ArgumentParser:
     realize.add_argument("--anticipator", action="append", default=[], metavar="NAME[:ID][,KEY=VALUE...]",
                          help="provide an installed anticipator, e.g. tap:taps,taps=taps.txt or "
                               "metronome:m2,bpm=90 (repeatable; see 'agentsim anticipators list')")
+    realize.add_argument("--bvh", metavar="OUT.bvh", help="write the motion as BVH (Blender imports it)")
+    realize.add_argument("--poses", metavar="OUT.npz", help="write joint angles per frame (numpy .npz)")
+    realize.add_argument("--fps", type=float, default=60.0, help="frame rate of --bvh/--poses (60)")
+    realize.add_argument("--seed", type=int, default=0, help="seed of the background motion (blinks, sway)")
+    plot = commands.add_parser("plot", help="pictures of a realisation")
+    plot.add_argument("what", choices=["timeline"])
+    plot.add_argument("file", metavar="FILE", help="a BML file")
+    plot.add_argument("--out", metavar="OUT.png", required=True)
+    plot.add_argument("--metronome", type=_metronome, metavar="BPM[,START]")
     anticipators = commands.add_parser("anticipators", help="installed anticipators")
     anticipators.add_argument("action", choices=["list"])
     from anticipators import commands as anticipate
@@ -82,6 +91,8 @@ def realize(args: argparse.Namespace) -> int:
         raise UsageError(f"--at gives {len(at)} times for {len(documents)} files")
     if args.until is not None and not args.until >= 0:
         raise UsageError("--until must be a non-negative number of seconds")
+    if not args.fps > 0:
+        raise UsageError("--fps must be positive")
     realizer = Realizer(realtime=args.realtime)
     if args.metronome:
         from anticipators.metronome import Metronome
@@ -102,6 +113,30 @@ def realize(args: argparse.Namespace) -> int:
     for i in order:
         realizer.submit_at(at[i], documents[i][1], source=documents[i][0])
     realizer.run(until=args.until)
+    if args.bvh or args.poses:
+        from agentsim.animation import evaluate_poses, write_bvh, write_npz
+
+        stream = evaluate_poses(realizer, fps=args.fps, seed=args.seed)
+        if args.bvh:
+            write_bvh(args.bvh, stream)
+        if args.poses:
+            write_npz(args.poses, stream)
+    return 0
+
+
+def plot_timeline(args: argparse.Namespace) -> int:
+    from agentsim.animation import evaluate_poses, plot_timeline as draw
+    from agentsim.realizer import Realizer
+
+    realizer = Realizer()
+    if args.metronome:
+        from anticipators.metronome import Metronome
+
+        bpm, start = args.metronome
+        realizer.add_anticipator(Metronome("metronome", bpm=bpm, start=start))
+    realizer.submit(_read(args.file), source=args.file)
+    realizer.run()
+    draw(realizer, args.out, stream=evaluate_poses(realizer), title=Path(args.file).name)
     return 0
 
 
@@ -119,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "realize":
             return realize(args)
+        if args.command == "plot":
+            return plot_timeline(args)
         if args.command == "anticipators":
             return list_anticipators()
         if args.command == "anticipate":

@@ -148,3 +148,18 @@ def test_cli_malformed_input_is_feedback_and_usage_errors_exit_nonzero(tmp_path,
 def test_cli_reads_standard_input():
     proc = cli("realize", "-", stdin=(BML / "speech.xml").read_bytes())
     assert proc.returncode == 0 and any(f["id"] == "bml1:end" for f in lines(proc))
+
+
+def test_cli_writes_bvh_poses_and_timeline(tmp_path):
+    import bvhio
+    import numpy as np
+
+    bvh, npz, png = tmp_path / "out.bvh", tmp_path / "out.npz", tmp_path / "timeline.png"
+    proc = cli("realize", str(BML / "point.xml"), "--bvh", str(bvh), "--poses", str(npz), "--fps", "30")
+    assert proc.returncode == 0, proc.stderr
+    end = next(f["globalTime"] for f in lines(proc) if f["id"] == "bml1:end")
+    root = bvhio.readAsHierarchy(str(bvh))
+    assert len(root.Keyframes) == len(np.load(npz)["times"]) >= int(end * 30)
+    assert cli("plot", "timeline", str(BML / "point.xml"), "--out", str(png)).returncode == 0
+    assert png.stat().st_size > 20_000
+    assert cli("realize", str(BML / "point.xml"), "--bvh", str(bvh), "--fps", "0").returncode == 2
