@@ -19,6 +19,7 @@ import numpy as np
 from agentsim.animation.body import Body
 from agentsim.animation.drivers import DriverManager, TimeSource
 from agentsim.animation.motion import build_drivers
+from agentsim.engines.animation import PHASE_NAMES
 
 #: Joints whose world positions a PoseStream carries for every frame.
 TRACKED_JOINTS = ("HumanoidRoot", "vt10", "skullbase", "l_eyeball", "r_eyeball", "l_shoulder", "r_shoulder",
@@ -207,15 +208,6 @@ _PHASE_COLOURS = {
     "retraction": "#c7e9c0", "hold": "#deebf7", "attack": "#9ecae1", "sustain": "#deebf7",
     "transition": "#bcbddc", "speech": "#d9d9d9",
 }
-_PHASE_NAMES = {
-    ("start", "ready"): "preparation", ("ready", "strokeStart"): "pre-stroke hold",
-    ("strokeStart", "stroke"): "stroke", ("stroke", "strokeEnd"): "stroke",
-    ("strokeEnd", "relax"): "post-stroke hold", ("relax", "end"): "retraction",
-    ("ready", "relax"): "hold", ("start", "attackPeak"): "attack", ("attackPeak", "relax"): "sustain",
-    ("start", "end"): "transition",
-}
-
-
 def plot_timeline(realizer, out_png: str | Path, stream: PoseStream | None = None, title: str | None = None,
                   width: float = 12.0) -> Path:
     """Draw what a realizer did on one time axis and save it as a PNG.
@@ -256,7 +248,7 @@ def plot_timeline(realizer, out_png: str | Path, stream: PoseStream | None = Non
             passed = [p for p in timed.passed if p is not None]
             stop = passed[-1] if passed else known[0][1]
         for (s0, t0), (s1, t1) in zip(known, known[1:]):
-            phase = _PHASE_NAMES.get((s0, s1), "speech" if timed.behaviour.type == "speech" else "hold")
+            phase = PHASE_NAMES.get((s0, s1), "speech" if timed.behaviour.type == "speech" else "hold")
             if timed.behaviour.type == "speech":
                 phase = "speech"
             dropped_part = stop is not None and t0 >= stop

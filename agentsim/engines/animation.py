@@ -106,7 +106,7 @@ class AnimationEngine(Engine):
         super().__init__(env, AnimationPlanner(), on_sync)
 
 
-_PHASE_NAMES = {
+PHASE_NAMES = {
     ("start", "ready"): "preparation", ("ready", "strokeStart"): "pre-stroke hold",
     ("strokeStart", "stroke"): "stroke", ("stroke", "strokeEnd"): "stroke",
     ("strokeEnd", "relax"): "post-stroke hold", ("relax", "end"): "retraction",
@@ -132,5 +132,5 @@ def motion_state(timed, t: float) -> tuple[str, float] | None:
         if t < t1 or i == len(times) - 2:
             frac = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
             alpha = alphas[i] + frac * (alphas[i + 1] - alphas[i])
-            return _PHASE_NAMES.get((syncs[i], syncs[i + 1]), f"{syncs[i]}-{syncs[i + 1]}"), alpha
+            return PHASE_NAMES.get((syncs[i], syncs[i + 1]), f"{syncs[i]}-{syncs[i + 1]}"), alpha
     return None
