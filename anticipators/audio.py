@@ -165,7 +165,11 @@ class AudioBeatAnticipator(Anticipator):
         factor = getattr(env, "factor", 1.0)
         if wall_start is None:
             raise AgentsimError("live audio input needs real-time mode (--realtime)")
-        first = True
+        # Where sample 0 lies on the simulated clock, from each block's capture stamp: a device may drop or
+        # hold samples, so the latest second of blocks decides, and the earliest stamp (the least delayed
+        # callback) is the best evidence.
+        recent: list[float] = []
+        heard = 0
         with self.source.open() as blocks:
             while True:
                 yield env.timeout(self.block / self.sample_rate)
@@ -174,10 +178,9 @@ class AudioBeatAnticipator(Anticipator):
                         stamp, block = blocks.get_nowait()
                     except queue.Empty:
                         break
-                    if first:
-                        # The audio clock starts when the first block was captured, not when asked.
-                        self.start = (stamp - wall_start) / factor - len(block) / self.sample_rate
-                        first = False
+                    heard += len(block)
+                    recent = (recent + [(stamp - wall_start) / factor - heard / self.sample_rate])[-50:]
+                    self.start = min(recent)
                     self.push(block)
 
 
