@@ -219,11 +219,10 @@ class Scheduler:
         """Pegs moved: drop behaviours that became invalid, update predictions, wake the players."""
         self.board.muted += 1
         try:
-            for run in self.runs:
+            for i, run in enumerate(self.runs):
                 if run.state == "pending" and run.block.composition == "APPEND":
-                    others = [self.predicted_end(r) for r in self.runs if r is not run and r in self.runs[
-                        :self.runs.index(run)]]
-                    run.block_peg.set(max([self.env.now] + others))
+                    earlier = [self.predicted_end(r) for r in self.runs[:i]]
+                    run.block_peg.set(max([self.env.now] + earlier))
         finally:
             self.board.muted -= 1
         for engine in self.engine_list:

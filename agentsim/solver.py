@@ -411,6 +411,7 @@ class BlockSolver:
         return [by_id[a] for a in anchors]
 
     def honour_inequalities(self, inequalities) -> None:
+        reported: set[tuple[int, str]] = set()
         for _ in range(len(inequalities) + 1):
             changed = False
             for constraint, refs, (a_node, a_offset, a_ref) in inequalities:
@@ -424,17 +425,19 @@ class BlockSolver:
                     gap = (t - t_anchor) if constraint.kind == "before" else (t_anchor - t)
                     if gap <= TOLERANCE:
                         continue
-                    # Move the constrained behaviour toward the anchor, else the anchor toward it.
+                    # Move the constrained behaviour toward the anchor, else the anchor toward it; moving
+                    # helps only if the two sides do not hang from the same anchors.
                     shift = -gap if constraint.kind == "before" else gap
-                    for target, delta in ((beh, shift), (anchor_beh, -shift)):
+                    moved = False
+                    for target, other, delta in ((beh, anchor_beh, shift), (anchor_beh, beh, -shift)):
                         pegs = self.movable(target) if target is not None else None
-                        if pegs and (target is not anchor_beh or anchor_beh is not beh):
+                        if pegs and (other is None or not {id(p) for p in pegs} & self.anchors_of(other)[0]):
                             for peg in pegs:
                                 peg.shift(delta)
-                            changed = True
+                            changed = moved = True
                             break
-                    else:
-                        who = ref.behaviour if beh is not None else (a_ref.behaviour or "")
+                    if not moved and (id(constraint), ref.text) not in reported:
+                        reported.add((id(constraint), ref.text))
                         self.constraint_issue(constraint, f"{ref.text} cannot be {constraint.kind} {a_ref.text}",
                                               ref if beh is not None else a_ref)
             if not changed:

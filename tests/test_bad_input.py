@@ -205,3 +205,12 @@ def test_warnings_carry_line_and_column():
     assert (w["line"], w["column"]) == (3, 5) and w["id"] == "bml1:b"
     (w,) = realize(f'<bml {NS} id="bml1">\n<head id="a">\n</bml>').warnings
     assert (w["line"], w["column"]) == (3, 3) and w["warningType"] == "PARSING_FAILURE"
+
+
+def test_impossible_ordering_within_one_tied_cluster_is_reported_once():
+    body = ('<speech id="s"><text>One <sync id="m"/>two three.</text></speech>'
+            '<gesture id="g" lexeme="BEAT" stroke="s:m"/>'
+            '<constraint><before ref="s:start"><sync ref="g:end"/></before></constraint>')
+    r = realize(block(body))
+    assert len(r.warnings) == 1 and r.dropped() == {"g"}
+    assert r.t("s:start") == 0.0 and "cannot be before" in r.warnings[0]["description"]
