@@ -128,3 +128,18 @@ def test_calibrate_and_export(tmp_path):
     info = soundfile.info(str(tmp_path / "s.wav"))
     assert info.duration == pytest.approx(grid.maxTimestamp, abs=0.001)
     assert grid.getTier("phones").entries
+
+
+@pytest.mark.parametrize("strategy", ["best", "chang-naive", "skip-70ms"])
+def test_a_stroke_tied_after_a_passed_speech_sync_keeps_its_offset(strategy):
+    """Once animator time has passed a sync point, its time stays put: pegs tied to it at an offset do not
+    keep moving with later events."""
+    bml, targets = beats_on_content_words(TEXT[:400])
+    first = targets[0]
+    bml = bml.replace(f'<gesture id="g{first}" lexeme="BEAT" mode="RIGHT_HAND" stroke="speech1:w{first}"/>',
+                      f'<gesture id="g{first}" lexeme="BEAT" mode="RIGHT_HAND" stroke="speech1:w{first}+0.6"/>')
+    realizer = Realizer(tts=BuiltinBackend(), speech=SpeechConfig(strategy, CONDITION_A, seed=2))
+    realizer.submit(bml)
+    realizer.run()
+    times = realizer.feedback.sync_times()
+    assert times[f"sync:g{first}:stroke"] == pytest.approx(times[f"sync:speech1:w{first}"] + 0.6, abs=1e-9)

@@ -15,6 +15,7 @@ everything tied to it, is passed when ``t_A`` reaches its planned speech time.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from typing import Callable
@@ -169,6 +170,8 @@ class Playback:
     drift_ppm: float
     delivered: list
     finished: bool = False
+    history: list = field(default_factory=list)  # (clock time, t_A) breakpoints of t_A up to the last event
+    history_max: list = field(default_factory=list)  # running maximum of t_A along the history
     dependants: list = field(default_factory=list)  # behaviours tied to this speech, by start
     dependant_starts: list = field(default_factory=list)
     first_live: int = 0  # dependants before this index have finished
@@ -186,9 +189,30 @@ class Playback:
     def t_end(self) -> float:
         return self.true_time(self.utterance.duration)
 
+    def record(self, now: float) -> None:
+        """Keep how t_A went since the last event, before the next event changes its future."""
+        last = self.history[-1][0] if self.history else None
+        path = getattr(self.strategy, "_path", None)
+        points = [t for t in path.times if last is not None and last < t < now] if path is not None else []
+        for t in points + [now]:
+            p = path.at(t) if path is not None else self.strategy.position(t)
+            self.history.append((t, p))
+            self.history_max.append(max(p, self.history_max[-1]) if self.history_max else p)
+
     def crossing(self, s: float) -> float:
+        """When t_A reached (or, as far as is known now, will reach) speech time ``s``.
+
+        A time already passed stays where it was passed; only the future moves with new events.
+        """
         now = self.env.now
-        t = self.strategy.crossing(s, now)
+        if self.history_max and s <= self.history_max[-1]:
+            k = bisect.bisect_left(self.history_max, s)
+            if k == 0:
+                return self.history[0][0]
+            (t0, p0), (t1, p1) = self.history[k - 1], self.history[k]
+            return t1 if p1 <= p0 else t0 + (s - p0) / (p1 - p0) * (t1 - t0)
+        since = self.history[-1][0] if self.history else now
+        t = self.strategy.crossing(s, since)
         if math.isinf(t) and self.finished:
             return now  # every event is in: what t_A has not reached by now, it never will
         return t
@@ -245,6 +269,7 @@ class SpeechEngine(Engine):
         strategy = make_strategy(config.strategy)
         strategy.reset(plan, t_request)
         playback = Playback(self.env, timed, utt, plan, strategy, t_request, t0, delivery.drift_ppm, delivered)
+        playback.record(t_request)
         self.playbacks.append(playback)
         planner.speaking.add(id(timed.behaviour))
         # Tie the speech's sync points, and every peg shared with them, to animator time.
@@ -271,12 +296,14 @@ class SpeechEngine(Engine):
         for event in playback.delivered:
             if event.arrival_time > env.now:
                 yield env.timeout(event.arrival_time - env.now)
+            playback.record(env.now)
             playback.strategy.on_event(event, env.now)
             self._moved(playback)
         # After the last event and the longest it could have been held, t_A learns nothing more.
         last = max([playback.t_end] + [e.arrival_time for e in playback.delivered])
         if last > env.now:
             yield env.timeout(last - env.now)
+        playback.record(env.now)
         playback.finished = True
         _bump()
         for timed in [playback.timed] + playback.dependants:
