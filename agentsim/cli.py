@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 from pathlib import Path
@@ -70,6 +71,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     anticipate.add_parser(commands)
     speech.add_parsers(commands)
+    run = commands.add_parser("run", help="run a scenario (conductor, storytelling)")
+    scenarios = run.add_subparsers(dest="scenario", required=True)
+    for module in ("scenarios.conductor.run", "scenarios.storytelling.run"):
+        try:
+            importlib.import_module(module).add_parser(scenarios)
+        except ModuleNotFoundError as exc:
+            if exc.name != module:
+                raise
     return parser
 
 
@@ -154,6 +163,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "realize":
             return realize(args)
+        if args.command == "run":
+            return args.handler(args)
         if args.command == "plot":
             return plot_timeline(args)
         if args.command == "anticipators":
