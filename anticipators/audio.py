@@ -108,24 +108,38 @@ class AudioBeatAnticipator(Anticipator):
         self.update()
 
     def update(self) -> None:
+        """Move the pegs to the tracker's latest predictions.
+
+        The first upcoming beat is numbered by how many periods it lies after the last beat passed: when
+        an observation moves the next beat's prediction into the past, the tracker no longer predicts it,
+        and that beat is passed at its re-estimated time rather than letting the numbering slip by one.
+        """
         now = self.now
         predicted = [self.start + float(t) for t in self.tracker.predict(self.horizon)]
         self.confidence = float(getattr(self.tracker, "confidence", 0.0))
         if not predicted:
             return
         period = (predicted[-1] - predicted[0]) / max(1, len(predicted) - 1) if len(predicted) > 1 else None
-        # Beats whose time has come are final.
         for n in sorted(k for k in self.beats if k > self.last_passed):
             if self.beats[n] <= now:
                 self.last_passed = n
-        if self.last_passed == 0 and period:
-            first = int(round((predicted[0] - self.origin) / period)) + 1
-            next_number = max(1, first)
+        last_time = self.beats.get(self.last_passed)
+        if self.last_passed == 0 or last_time is None or not period:
+            if self.last_passed == 0 and period:
+                next_number = max(1, int(round((predicted[0] - self.origin) / period)) + 1)
+            else:
+                next_number = self.last_passed + 1
         else:
-            next_number = self.last_passed + 1
-            last_time = self.beats.get(self.last_passed)
-            if last_time is not None and period and predicted[0] - last_time < 0.5 * period:
+            steps = int(round((predicted[0] - last_time) / period))
+            if steps <= 0:
                 predicted = predicted[1:]  # the beat just passed, re-estimated: not a new one
+                steps = 1
+            for k in range(1, steps):  # beats whose prediction moved into the past: passed now
+                self.beats[self.last_passed + 1] = min(now, predicted[0] - (steps - k) * period)
+                self.last_passed += 1
+            next_number = self.last_passed + 1
+        if not predicted:
+            return
         changed = predicted != self.upcoming
         for stale in [k for k in self.beats if k >= next_number]:
             del self.beats[stale]
@@ -138,6 +152,8 @@ class AudioBeatAnticipator(Anticipator):
                 time = self.make_peg(sync_id)
                 if time is not None and time is not False:
                     if _BEAT.match(sync_id) and int(sync_id[4:]) <= self.last_passed:
+                        if int(sync_id[4:]) in self.beats and peg.time is not None and peg.time > now:
+                            peg.set(self.beats[int(sync_id[4:])])
                         continue
                     peg.set(time)
 

@@ -64,58 +64,6 @@ class Ears(AudioBeatAnticipator):
         for listener in self._block_listeners:
             listener()
 
-    def update(self) -> None:
-        """Move the pegs to the tracker's latest predictions, numbering beats by elapsed periods.
-
-        As :meth:`AudioBeatAnticipator.update`, except for the numbering of the first upcoming beat: the
-        base class takes it to be the beat after the last one passed, but when a block's observation
-        moves the next beat's prediction into the past, the tracker no longer predicts that beat and the
-        numbering would slip by one. Here the first upcoming beat is numbered by how many periods it
-        lies after the last beat passed; beats skipped over are passed at their re-estimated times.
-        """
-        now = self.now
-        predicted = [self.start + float(t) for t in self.tracker.predict(self.horizon)]
-        self.confidence = float(getattr(self.tracker, "confidence", 0.0))
-        if not predicted:
-            return
-        period = (predicted[-1] - predicted[0]) / max(1, len(predicted) - 1) if len(predicted) > 1 else None
-        for n in sorted(k for k in self.beats if k > self.last_passed):
-            if self.beats[n] <= now:
-                self.last_passed = n
-        last_time = self.beats.get(self.last_passed)
-        if self.last_passed == 0 or last_time is None or not period:
-            if self.last_passed == 0 and period:
-                next_number = max(1, int(round((predicted[0] - self.origin) / period)) + 1)
-            else:
-                next_number = self.last_passed + 1
-        else:
-            steps = int(round((predicted[0] - last_time) / period))
-            if steps <= 0:
-                predicted = predicted[1:]  # the beat just passed, re-estimated: not a new one
-                steps = 1
-            for k in range(1, steps):  # beats whose prediction moved into the past: passed now
-                self.beats[self.last_passed + 1] = min(now, predicted[0] - (steps - k) * period)
-                self.last_passed += 1
-            next_number = self.last_passed + 1
-        if not predicted:
-            return
-        changed = predicted != self.upcoming
-        for stale in [k for k in self.beats if k >= next_number]:
-            del self.beats[stale]
-        for i, t in enumerate(predicted):
-            self.beats[next_number + i] = t
-        self.upcoming = predicted
-        if changed:
-            self.updates.append((now, list(predicted)))
-            for sync_id, peg in self.pegs.items():
-                time = self.make_peg(sync_id)
-                if time is not None and time is not False:
-                    if sync_id.startswith("beat") and int(sync_id[4:]) <= self.last_passed:
-                        if int(sync_id[4:]) in self.beats and peg.time is not None and peg.time > now:
-                            peg.set(self.beats[int(sync_id[4:])])
-                        continue
-                    peg.set(time)
-
     def _collect_beats(self) -> None:
         fresh = [self.start + z for z in self.tracker.beats_observed if self.start + z > self._last_observed + 1e-9]
         if not fresh or len(self.beats) < 2:
