@@ -71,6 +71,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     anticipate.add_parser(commands)
     speech.add_parsers(commands)
+    demo = commands.add_parser("demo", help="the conductor and the storyteller, end to end in simulated time")
+    demo.add_argument("--out", default="out/demo", help="where to write the results (out/demo)")
     run = commands.add_parser("run", help="run a scenario (conductor, storytelling)")
     scenarios = run.add_subparsers(dest="scenario", required=True)
     for module in ("scenarios.conductor.run", "scenarios.storytelling.run"):
@@ -165,6 +167,14 @@ def main(argv: list[str] | None = None) -> int:
             return realize(args)
         if args.command == "run":
             return args.handler(args)
+        if args.command == "demo":
+            for scenario in ("conductor", "storytelling"):
+                scenario_args = parser.parse_args(["run", scenario, "--out", str(Path(args.out) / scenario)])
+                print(f"== agentsim run {scenario} --out {Path(args.out) / scenario}", flush=True)
+                status = scenario_args.handler(scenario_args)
+                if status:
+                    return status
+            return 0
         if args.command == "plot":
             return plot_timeline(args)
         if args.command == "anticipators":
