@@ -8,7 +8,8 @@ their anticipator. Sync points that constraints tie together share one peg.
 
 from __future__ import annotations
 
-from typing import Callable, Iterable
+import contextlib
+from typing import Callable
 
 # Any change to any peg invalidates every cached time: cheap to bump, and evaluation stays O(1)
 # amortised for long chains of offset pegs.
@@ -49,11 +50,6 @@ class TimePeg:
     def root(self) -> "TimePeg":
         """The peg this one is ultimately tied to (itself for a plain peg)."""
         return self
-
-    def local(self, block_peg: "TimePeg") -> float | None:
-        """Time relative to ``block_peg`` (seconds after the block start)."""
-        t, b = self.time, block_peg.time
-        return None if t is None or b is None else t - b
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r}, {self.time!r})"
@@ -150,10 +146,6 @@ class PegBoard:
             self.block_pegs[block_id] = peg
         return peg
 
-    def register_sync(self, block_id: str, behaviour_id: str, sync_id: str, peg: TimePeg, offset: float) -> None:
-        """Make ``block:behaviour:sync`` (time = ``peg.time + offset``) findable by other blocks."""
-        self.sync_pegs[(block_id, behaviour_id, sync_id)] = (peg, offset)
-
     def register_behaviour(self, block_id: str, behaviour_id: str, sync_ids: list[str],
                            peg_for: Callable[[int], TimePeg]) -> None:
         """Make every sync point of a behaviour findable; ``peg_for(i)`` makes the peg of sync ``i`` when
@@ -179,13 +171,17 @@ class PegBoard:
     def on_move(self, listener: Callable[[TimePeg], None]) -> None:
         self._listeners.append(listener)
 
+    @contextlib.contextmanager
+    def quiet(self):
+        """Peg moves made inside are not reported (whoever moves them takes care of the consequences)."""
+        self.muted += 1
+        try:
+            yield
+        finally:
+            self.muted -= 1
+
     def moved(self, peg: TimePeg) -> None:
         if self.muted:
             return
         for listener in self._listeners:
             listener(peg)
-
-    def adopt(self, pegs: Iterable[TimePeg]) -> None:
-        """Attach pegs created while planning so that their later moves are reported."""
-        for peg in pegs:
-            peg.board = self

@@ -156,11 +156,8 @@ class Scheduler:
         if run.state != "pending":
             return
         if abs(run.block_peg.time - self.env.now) > EPSILON:
-            self.board.muted += 1
-            try:
+            with self.board.quiet():
                 run.block_peg.set(self.env.now)
-            finally:
-                self.board.muted -= 1
             self.retime()
         self.start(run)
 
@@ -217,14 +214,11 @@ class Scheduler:
 
     def retime(self) -> None:
         """Pegs moved: drop behaviours that became invalid, update predictions, wake the players."""
-        self.board.muted += 1
-        try:
+        with self.board.quiet():
             for i, run in enumerate(self.runs):
                 if run.state == "pending" and run.block.composition == "APPEND":
                     earlier = [self.predicted_end(r) for r in self.runs[:i]]
                     run.block_peg.set(max([self.env.now] + earlier))
-        finally:
-            self.board.muted -= 1
         for engine in self.engine_list:
             for timed, reason in engine.planner.invalid_behaviours():
                 self.drop(timed, f"after re-timing: {reason}")

@@ -442,11 +442,6 @@ class BlockSolver:
                                               ref if beh is not None else a_ref)
             if not changed:
                 break
-        self.inequality_links = [
-            (self.timed.get(ref.behaviour), self.timed.get(a_ref.behaviour))
-            for constraint, refs, (_, _, a_ref) in inequalities for (_, _, ref) in refs
-            if ref.kind == "sync" and a_ref.kind == "sync"
-        ]
 
     def shift_clusters(self, inequalities) -> None:
         """Shift every cluster of freely placed behaviours that starts before the block start."""
@@ -466,7 +461,10 @@ class BlockSolver:
             anchors = list(anchors)
             for other in anchors[1:]:
                 parent[find(other)] = find(anchors[0])
-        for a, b in getattr(self, "inequality_links", []):
+        links = [(self.timed.get(ref.behaviour), self.timed.get(a_ref.behaviour))
+                 for _, refs, (_, _, a_ref) in inequalities for (_, _, ref) in refs
+                 if ref.kind == "sync" and a_ref.kind == "sync"]
+        for a, b in links:
             if a is None or b is None:
                 continue
             aa, _ = self.anchors_of(a)

@@ -16,6 +16,7 @@ everything tied to it, is passed when ``t_A`` reaches its planned speech time.
 from __future__ import annotations
 
 import bisect
+import contextlib
 import math
 from dataclasses import dataclass, field
 from typing import Callable
@@ -242,7 +243,7 @@ class SpeechEngine(Engine):
         they were tied to (an anticipator, another block), keeping their times. Behaviours sharing those
         pegs now follow the speech."""
         block_peg = timed.run.block_peg
-        with _muted(block_peg):
+        with _quiet(block_peg):
             for peg in set(timed.own_pegs()):
                 peg.freeze(block_peg)
 
@@ -276,7 +277,7 @@ class SpeechEngine(Engine):
         block_peg = timed.run.block_peg
         speech_pegs = [SpeechTimePeg(playback, p, name=f"{timed.block_id}:{timed.id}:{s}")
                        for p, s in zip(timed.preferred, timed.sync_ids)]
-        with _muted(block_peg):
+        with _quiet(block_peg):
             for i, key in enumerate(timed.keys):
                 if key is not None and timed.tied[i] and isinstance(key.peg, OffsetPeg):
                     key.peg.rebase(speech_pegs[i], -key.offset)
@@ -328,16 +329,6 @@ class SpeechEngine(Engine):
             t += frame
 
 
-class _muted:
-    """Peg moves made inside are not reported to the board (the engine reports them itself)."""
-
-    def __init__(self, block_peg: TimePeg):
-        self.board = block_peg.board
-
-    def __enter__(self):
-        if self.board is not None:
-            self.board.muted += 1
-
-    def __exit__(self, *exc):
-        if self.board is not None:
-            self.board.muted -= 1
+def _quiet(block_peg: TimePeg):
+    """The board's quiet context (the engine reports its own peg moves), or nothing without a board."""
+    return block_peg.board.quiet() if block_peg.board is not None else contextlib.nullcontext()
