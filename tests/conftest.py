@@ -47,32 +47,53 @@ def examples() -> Path:
     return EXAMPLES
 
 
-@pytest.fixture(scope="session")
-def pulse_null_sink():
-    """A PulseAudio null sink as a real loopback device: play to it, record its monitor.
+NULL_SINK = "agentsim_null"
 
-    Starts PulseAudio (as CI does, possibly as root) if it is not running. Yields the sink name.
-    """
-    import os
+
+def start_null_sink() -> str | None:
+    """Start PulseAudio (possibly as root, as in CI) with a null sink if needed; None if it worked, else why."""
     import shutil
     import subprocess
     import time
 
-    name = "agentsim_null"
-    if shutil.which("pulseaudio") is None:
-        pytest.fail("the loopback tests need PulseAudio: apt-get install pulseaudio libportaudio2")
+    if shutil.which("pulseaudio") is None or shutil.which("pactl") is None:
+        return "the loopback tests need PulseAudio: apt-get install pulseaudio libportaudio2"
     if subprocess.run(["pulseaudio", "--check"]).returncode != 0:
-        subprocess.run(["pulseaudio", "--daemonize=yes", "--exit-idle-time=-1", "-n",
-                        f"--load=module-null-sink sink_name={name}", "--load=module-native-protocol-unix"],
-                       check=True, capture_output=True, timeout=30)
+        started = subprocess.run(["pulseaudio", "--daemonize=yes", "--exit-idle-time=-1", "-n",
+                                  f"--load=module-null-sink sink_name={NULL_SINK}",
+                                  "--load=module-native-protocol-unix"], capture_output=True, timeout=30)
+        if started.returncode != 0:
+            return f"PulseAudio did not start: {started.stderr.decode(errors='replace').strip()}"
         for _ in range(50):
             if subprocess.run(["pulseaudio", "--check"]).returncode == 0:
                 break
             time.sleep(0.1)
     sinks = subprocess.run(["pactl", "list", "short", "sinks"], capture_output=True, text=True).stdout
-    if name not in sinks:
-        subprocess.run(["pactl", "load-module", "module-null-sink", f"sink_name={name}"], check=True,
-                       capture_output=True, timeout=30)
-    os.environ["PULSE_SINK"] = name
-    os.environ["PULSE_SOURCE"] = f"{name}.monitor"
-    yield name
+    if NULL_SINK not in sinks:
+        loaded = subprocess.run(["pactl", "load-module", "module-null-sink", f"sink_name={NULL_SINK}"],
+                                capture_output=True, timeout=30)
+        if loaded.returncode != 0:
+            return f"cannot load the null sink: {loaded.stderr.decode(errors='replace').strip()}"
+    return None
+
+
+_SINK_PROBLEM: list[str | None] = []
+
+
+def pytest_configure(config):
+    # PortAudio lists its devices once, when sounddevice is first imported (at collection): PulseAudio
+    # must be running before that for the 'pulse' device to exist.
+    _SINK_PROBLEM.append(start_null_sink())
+
+
+@pytest.fixture(scope="session")
+def pulse_null_sink():
+    """A PulseAudio null sink as a real loopback device: play to it, record its monitor. Yields its name."""
+    import os
+
+    problem = _SINK_PROBLEM[0] if _SINK_PROBLEM else start_null_sink()
+    if problem:
+        pytest.fail(problem)
+    os.environ["PULSE_SINK"] = NULL_SINK
+    os.environ["PULSE_SOURCE"] = f"{NULL_SINK}.monitor"
+    yield NULL_SINK
