@@ -384,6 +384,8 @@ class BestTime(AnimatorTime):
     mapping from plan to clock is estimated locally (:class:`WordWarp`): the true onsets of the words
     heard so far from their earliest evidence, and the onsets of the next words from the last one
     plus word durations learned online from the events. ``t_A`` passes through the predicted onsets.
+    When the plan also carries predicted phoneme durations (:attr:`SpeechPlan.phoneme_durations`), the
+    onsets come from those instead (:class:`PhoneticWarp`).
 
     *Animation.* ``t_A`` never jumps: it follows a path through the predicted (time, plan position)
     milestones whose segment rates are clipped to [``min_rate``, ``max_rate``] (below 2, so no frame
@@ -416,7 +418,12 @@ class BestTime(AnimatorTime):
         self._slope = 1.0
         self._slope_at = -math.inf
         self._intercept = self.t0_pred
-        self._warp = WordWarp(plan, self.t0_pred) if plan.source == "linear" else None
+        if plan.source != "linear":
+            self._warp = None
+        elif plan.phoneme_durations is not None:
+            self._warp = PhoneticWarp(plan, self.t0_pred)
+        else:
+            self._warp = WordWarp(plan, self.t0_pred)
 
     @property
     def clock_estimate(self) -> tuple[float, float]:
@@ -722,6 +729,81 @@ class WordWarp:
                 t += self.gap(j)
         ratio = float(np.clip(self.beta[0], 0.5, 2.0))
         return out, 1.0 / ratio
+
+
+class PhoneticWarp:
+    """Local plan-to-clock mapping for linear plans that carry predicted phoneme durations.
+
+    The predicted durations (:attr:`SpeechPlan.phoneme_durations`) lay out a predicted speech timeline
+    ``Q``: the predicted onset of every phoneme and word from the start of the utterance. Truth is
+    ``T = Q + o`` on the clock, where the offset ``o`` wanders as the duration errors add up. Every
+    word or phoneme event gives ``y - Q`` (``y = arrival - delay``), which is ``o`` plus a non-negative
+    jitter; the offset is the lowest of these over the last ``window`` seconds of ``Q``, less a
+    small-sample correction, as in the lower envelope of :class:`BestTime` for timelines from the
+    engine, but over a window short enough for the wandering to stay small. The coming words are
+    predicted at ``Q + o``, and no word whose events have not arrived is put long before
+    ``now - delay``.
+
+    Parameters
+    ----------
+    plan : SpeechPlan
+        A plan with :attr:`~SpeechPlan.phoneme_durations`.
+    t0_pred : float
+        Nominal playback start.
+    """
+
+    #: Seconds of predicted speech whose earliest evidence gives the offset.
+    window = 0.4
+    #: Words predicted beyond the current one (and beyond the animation's position).
+    horizon_words = 4
+    #: How far (s) before ``now - delay`` a word none of whose events has arrived may be predicted.
+    absence_margin = 0.01
+
+    def __init__(self, plan: SpeechPlan, t0_pred: float) -> None:
+        self.plan = plan
+        self.t0_pred = t0_pred
+        durations = plan.phoneme_durations
+        self.word_q = np.concatenate([[0.0], np.cumsum([float(d.sum()) for d in durations])])
+        self.phoneme_q = [self.word_q[k] + np.concatenate([[0.0], np.cumsum(d)[:-1]])
+                          for k, d in enumerate(durations)]
+        self.q: list[float] = []
+        self.r: list[float] = []
+        self.current = -1
+        self.offset = t0_pred
+
+    def observe(self, event: ProgressEvent, y: float, now: float) -> None:
+        """Take in a word or phoneme event (``y = arrival - delay``)."""
+        if event.kind not in ("word", "phoneme"):
+            return
+        k = self.plan.word_of(event)
+        if k is None:
+            return
+        if event.kind == "word":
+            q = float(self.word_q[k])
+        else:
+            m = int(event.payload.get("in_word", 0))
+            onsets = self.phoneme_q[k]
+            q = float(onsets[m]) if m < len(onsets) else float(self.word_q[k + 1])
+        self.current = max(self.current, k)
+        self.q.append(q)
+        self.r.append(y - q)
+        latest = max(self.q[-64:])
+        keep = [r for q_, r in zip(self.q[-64:], self.r[-64:]) if q_ >= latest - self.window]
+        low = min(keep)
+        self.offset = low - (float(np.median(keep)) - low) / len(keep)
+
+    def milestones(self, now: float, a: float) -> tuple[list[tuple[float, float]], float]:
+        """Predicted ``(clock time, plan position)`` of the coming word onsets, and the rate after them."""
+        plan = self.plan
+        k = self.current
+        if k < 0:
+            return [(self.t0_pred + q, p) for q, p in zip(self.word_q, plan.word_onsets[:self.horizon_words])], 1.0
+        out = [(self.offset + float(self.word_q[k]), float(plan.word_onsets[k]))]
+        floor = now - plan.delay - self.absence_margin
+        last = int(np.searchsorted(plan.word_onsets, a, side="right")) + self.horizon_words
+        for j in range(k + 1, min(max(k + 1 + self.horizon_words, last), plan.n_words)):
+            out.append((max(self.offset + float(self.word_q[j]), floor), float(plan.word_onsets[j])))
+        return out, 1.0
 
 
 def estimate_units(word: str) -> int:

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from dataclasses import asdict
-from typing import Any
+from dataclasses import asdict, replace
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import simpy
@@ -20,6 +20,7 @@ import simpy
 from speech_timing.animator_time import STRATEGIES, make_strategy
 from speech_timing.backend import SpeechText, TTSBackend, Utterance
 from speech_timing.builtin import FUNCTION_WORDS
+from speech_timing.duration_model import for_plan
 from speech_timing.delivery import DeliveryModel, deliver, delivery_process, true_events
 from speech_timing.linear_model import LinearModel, calibrate, plan_from_linear, plan_from_utterance
 from speech_timing.metrics import DEFAULT_FRAME, error_summary, rate_range, snaps, stall_time, sync_errors
@@ -111,7 +112,9 @@ def stroke_targets(utterance: Utterance, plan: SpeechPlan, stress: bool = False
 def run_sync_eval(text: str, backend: TTSBackend, strategy_name: str, delivery: DeliveryModel,
                   timing: str = "tts", seed: int = 0, linear_model: LinearModel | None = None, *,
                   stress: bool = False, t_request: float = 1.0, frame: float = DEFAULT_FRAME,
-                  traces: bool = False) -> dict[str, Any]:
+                  traces: bool = False,
+                  durations: Callable[[Utterance, np.random.Generator], Sequence[np.ndarray]] | None = None
+                  ) -> dict[str, Any]:
     """Score one strategy on one text under one delivery condition.
 
     Parameters
@@ -141,6 +144,12 @@ def run_sync_eval(text: str, backend: TTSBackend, strategy_name: str, delivery: 
         Animation frame period (s) at which ``t_A`` is sampled for the snap and stall metrics.
     traces : bool
         Also return the signed errors (s), the sampled clock and ``t_A``, and the stroke times.
+    durations : callable, optional
+        ``durations(utterance, rng)`` gives per-word phoneme durations (:mod:`speech_timing.duration_model`)
+        that the plan carries to the strategies as :attr:`~speech_timing.plan.SpeechPlan.phoneme_durations`;
+        ``rng`` is a generator of its own, seeded with ``seed``. The plan axis is unchanged. With
+        :func:`~speech_timing.duration_model.noisy_durations` it measures what a text-to-duration model
+        of a given accuracy would be worth.
 
     Returns
     -------
@@ -164,6 +173,9 @@ def run_sync_eval(text: str, backend: TTSBackend, strategy_name: str, delivery: 
         plan = plan_from_utterance(utterance, linear_model=linear_model, **known)
     else:
         plan = plan_from_linear(text, linear_model, **known)
+    if durations is not None:
+        per_word = durations(utterance, np.random.default_rng([seed, 1]))
+        plan = replace(plan, phoneme_durations=for_plan(utterance, plan, per_word))
 
     rng = np.random.default_rng(seed)
     t0 = delivery.draw_start(t_request, rng)

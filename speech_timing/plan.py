@@ -91,6 +91,11 @@ class SpeechPlan:
         Where the timeline comes from: the text-to-speech engine's own timeline, or the linear model.
     linear_model : LinearModel, optional
         A calibrated linear characters-to-time model, for strategies that schedule by it.
+    phoneme_durations : sequence of array_like, optional
+        Extra knowledge for strategies, beside the plan axis: for each word, the predicted duration (s)
+        of each of its phonemes as it will really be spoken, from its onset to the next phoneme's (the
+        last one to the next word's onset, so it includes the pause after the word). The plan axis is
+        unchanged; :class:`~speech_timing.animator_time.BestTime` uses these to predict word onsets.
     """
 
     word_onsets: np.ndarray
@@ -107,6 +112,7 @@ class SpeechPlan:
     stress_onsets: np.ndarray | None = None
     source: str = "tts"
     linear_model: Any = None
+    phoneme_durations: tuple[np.ndarray, ...] | None = None
     _first_phoneme: np.ndarray = field(init=False, repr=False)
     _units: np.ndarray = field(init=False, repr=False)
 
@@ -147,6 +153,13 @@ class SpeechPlan:
             raise ValueError("stress_onsets must have one entry per word")
         if self.word_texts is not None and len(self.word_texts) != n:
             raise ValueError("word_texts must have one entry per word")
+        if self.phoneme_durations is not None:
+            durations = tuple(np.asarray(d, dtype=float).reshape(-1) for d in self.phoneme_durations)
+            if len(durations) != n or any(len(d) == 0 or not np.all(np.isfinite(d)) or np.any(d < 0)
+                                           for d in durations):
+                raise ValueError("phoneme_durations needs, for every word, one or more finite non-negative "
+                                 "durations")
+            self.phoneme_durations = durations
         if self.source not in ("tts", "linear"):
             raise ValueError('source must be "tts" or "linear"')
         self._first_phoneme = np.concatenate([[0], np.cumsum(self.phonemes_per_word)[:-1]]).astype(int)
