@@ -8,8 +8,9 @@ import pytest
 
 from agentsim.realizer import Realizer
 
-# The shared examples live beside the checkout: <checkout>/../shared/bml-examples
-EXAMPLES = Path(__file__).resolve().parents[2] / "shared" / "bml-examples"
+# The BML 1.0 examples of the OpenBMLParser/AsapRealizer test suite (MIT licence, LICENSE-OpenBMLParser.txt),
+# with their "Required timing" headers
+EXAMPLES = Path(__file__).resolve().parent / "bml-examples"
 
 
 class Result:

@@ -12,8 +12,8 @@ from agentsim.animation import DriverManager, evaluate_poses, write_bvh, write_n
 from agentsim.animation.analysis import head_orientation, measure_strokes
 from agentsim.animation.drivers import ArbitrationError, Arbitrator, Driver
 from agentsim.realizer import Realizer
+from conftest import EXAMPLES
 
-EXAMPLES = Path(__file__).resolve().parents[2] / "shared" / "bml-examples"
 BML_NS = "http://www.bml-initiative.org/bml/bml-1.0"
 
 LONG_BLOCK = f"""<bml xmlns="{BML_NS}" id="long" characterId="agent">
@@ -47,7 +47,7 @@ def realise(*documents, at=None) -> Realizer:
 
 def example_files() -> list[Path]:
     files = sorted(EXAMPLES.glob("*.xml"))
-    assert files, f"the shared BML examples are expected in {EXAMPLES}"
+    assert files, f"the BML examples are expected in {EXAMPLES}"
     return files
 
 

@@ -1,4 +1,4 @@
-"""Every shared BML 1.0 example parses (or is refused) and meets the "Required timing" of its header.
+"""Every bundled BML 1.0 example parses (or is refused) and meets the "Required timing" of its header.
 
 Where a header comment is stale and contradicts its own document, the document wins; the table says so.
 """
