@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections import deque
 from typing import Sequence
 
 import numpy as np
@@ -365,6 +366,21 @@ def lower_envelope_line(p: np.ndarray, y: np.ndarray, p_ref: float) -> tuple[flo
     return float(y[j] - slope * p[j]), float(slope)
 
 
+def envelope_intercept(residuals) -> float:
+    """Lowest of ``residuals`` less a small-sample correction: the median excess over the lowest, divided by
+    their number. With one-sided jitter, it estimates the offset of the fastest delivery."""
+    r = np.asarray(residuals, dtype=float)
+    low = float(r.min())
+    return low - (float(np.median(r)) - low) / len(r)
+
+
+def coming_words(plan: SpeechPlan, k: int, a: float, horizon: int) -> range:
+    """Words after the current word ``k`` to predict: ``horizon`` words beyond ``k`` and beyond the word
+    at the animation's position ``a``, within the plan."""
+    last = int(np.searchsorted(plan.word_onsets, a, side="right")) + horizon
+    return range(k + 1, min(max(k + 1 + horizon, last), plan.n_words))
+
+
 class BestTime(AnimatorTime):
     """Clock synchronisation from the lower envelope of delayed events, with bounded rates.
 
@@ -444,9 +460,7 @@ class BestTime(AnimatorTime):
             self._slope = float(np.clip(slope, 1.0 - self.max_drift, 1.0 + self.max_drift))
             self._slope_at = latest
         keep = p >= latest - self.offset_window
-        r = y[keep] - self._slope * p[keep]
-        low = float(r.min())
-        self._intercept = low - (float(np.median(r)) - low) / len(r)
+        self._intercept = envelope_intercept(y[keep] - self._slope * p[keep])
 
     def on_event(self, event: ProgressEvent, now: float) -> None:
         plan = self._require_plan()
@@ -722,8 +736,7 @@ class WordWarp:
         # no event of the next word has arrived yet: it has hardly started long before now - delay
         t_next = max(t_next, now - plan.delay - self.absence_margin * self.jitter)
         t = t_next
-        last = int(np.searchsorted(plan.word_onsets, a, side="right")) + self.horizon_words
-        for j in range(k + 1, min(max(k + 1 + self.horizon_words, last), plan.n_words)):
+        for j in coming_words(plan, k, a, self.horizon_words):
             out.append((t, float(plan.word_onsets[j])))
             if j + 1 < plan.n_words:
                 t += self.gap(j)
@@ -766,8 +779,7 @@ class PhoneticWarp:
         self.word_q = np.concatenate([[0.0], np.cumsum([float(d.sum()) for d in durations])])
         self.phoneme_q = [self.word_q[k] + np.concatenate([[0.0], np.cumsum(d)[:-1]])
                           for k, d in enumerate(durations)]
-        self.q: list[float] = []
-        self.r: list[float] = []
+        self.evidence: deque[tuple[float, float]] = deque(maxlen=64)  # latest (Q, y - Q)
         self.current = -1
         self.offset = t0_pred
 
@@ -785,12 +797,9 @@ class PhoneticWarp:
             onsets = self.phoneme_q[k]
             q = float(onsets[m]) if m < len(onsets) else float(self.word_q[k + 1])
         self.current = max(self.current, k)
-        self.q.append(q)
-        self.r.append(y - q)
-        latest = max(self.q[-64:])
-        keep = [r for q_, r in zip(self.q[-64:], self.r[-64:]) if q_ >= latest - self.window]
-        low = min(keep)
-        self.offset = low - (float(np.median(keep)) - low) / len(keep)
+        self.evidence.append((q, y - q))
+        latest = max(q_ for q_, _ in self.evidence)
+        self.offset = envelope_intercept([r for q_, r in self.evidence if q_ >= latest - self.window])
 
     def milestones(self, now: float, a: float) -> tuple[list[tuple[float, float]], float]:
         """Predicted ``(clock time, plan position)`` of the coming word onsets, and the rate after them."""
@@ -800,8 +809,7 @@ class PhoneticWarp:
             return [(self.t0_pred + q, p) for q, p in zip(self.word_q, plan.word_onsets[:self.horizon_words])], 1.0
         out = [(self.offset + float(self.word_q[k]), float(plan.word_onsets[k]))]
         floor = now - plan.delay - self.absence_margin
-        last = int(np.searchsorted(plan.word_onsets, a, side="right")) + self.horizon_words
-        for j in range(k + 1, min(max(k + 1 + self.horizon_words, last), plan.n_words)):
+        for j in coming_words(plan, k, a, self.horizon_words):
             out.append((max(self.offset + float(self.word_q[j]), floor), float(plan.word_onsets[j])))
         return out, 1.0
 

@@ -65,6 +65,14 @@ class Utterance:
     audio: np.ndarray | None = None
     backend: str = ""
 
+    def phonemes_by_word(self) -> list[list[Phoneme]]:
+        """The phonemes of each word, in order (phonemes of no word are left out)."""
+        groups: list[list[Phoneme]] = [[] for _ in self.words]
+        for ph in self.phonemes:
+            if 0 <= ph.word_index < len(groups):
+                groups[ph.word_index].append(ph)
+        return groups
+
     def mark_time(self, name: str) -> float:
         """Time of the named mark, in seconds from utterance start (KeyError if absent)."""
         for mark in self.marks:

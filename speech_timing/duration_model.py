@@ -27,27 +27,18 @@ import numpy as np
 
 from speech_timing.backend import Utterance
 from speech_timing.builtin import FUNCTION_WORDS
-from speech_timing.plan import SpeechPlan, break_after
+from speech_timing.plan import BREAK_SENTENCE, SpeechPlan, word_breaks
 
 __all__ = ["true_durations", "noisy_durations", "for_plan", "PhonemeDurationModel", "calibration_corpus"]
 
 _VOWEL_LETTERS = frozenset("aeiouyɪʊəɛɒʌæɑɔɜɐ")
 
 
-def _groups(utterance: Utterance) -> list[list]:
-    """The utterance's phonemes, word by word."""
-    groups: list[list] = [[] for _ in utterance.words]
-    for ph in utterance.phonemes:
-        if 0 <= ph.word_index < len(groups):
-            groups[ph.word_index].append(ph)
-    return groups
-
-
 def true_durations(utterance: Utterance) -> list[np.ndarray]:
     """Each word's phoneme durations (s) as the engine spoke them (a word with no phoneme: one, its gap)."""
     words = utterance.words
     out = []
-    for i, phonemes in enumerate(_groups(utterance)):
+    for i, phonemes in enumerate(utterance.phonemes_by_word()):
         following = words[i + 1].start if i + 1 < len(words) else utterance.duration
         onsets = [p.start for p in phonemes] or [words[i].start]
         out.append(np.diff(np.append(onsets, following)))
@@ -83,11 +74,11 @@ def _is_vowel(symbol: str) -> bool:
 def _contexts(utterance: Utterance) -> list[list[tuple]]:
     """For every phoneme, its context keys from the finest to the coarsest."""
     words = utterance.words
-    groups = _groups(utterance)
+    breaks = word_breaks(utterance.text, [(w.char_start, w.char_end) for w in words])
+    if breaks:
+        breaks[-1] = BREAK_SENTENCE  # the end of an utterance counts as the end of a sentence
     flat = []  # (phoneme, word index, position in word, word length, break after word)
-    for i, phonemes in enumerate(groups):
-        between = utterance.text[words[i].char_end:words[i + 1].char_start] if i + 1 < len(words) else "."
-        brk = break_after(between)
+    for i, (phonemes, brk) in enumerate(zip(utterance.phonemes_by_word(), breaks)):
         for m, ph in enumerate(phonemes):
             flat.append((ph, i, m, len(phonemes), brk))
     # vowels and stressed vowels from each phoneme to the end of its clause (the next written break)

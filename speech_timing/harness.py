@@ -20,8 +20,8 @@ import simpy
 from speech_timing.animator_time import STRATEGIES, make_strategy
 from speech_timing.backend import SpeechText, TTSBackend, Utterance
 from speech_timing.builtin import FUNCTION_WORDS
-from speech_timing.duration_model import for_plan
 from speech_timing.delivery import DeliveryModel, deliver, delivery_process, true_events
+from speech_timing.duration_model import for_plan
 from speech_timing.linear_model import LinearModel, calibrate, plan_from_linear, plan_from_utterance
 from speech_timing.metrics import DEFAULT_FRAME, error_summary, rate_range, snaps, stall_time, sync_errors
 from speech_timing.plan import SpeechPlan

@@ -21,7 +21,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from speech_timing.backend import SpeechText, TTSBackend, Utterance
-from speech_timing.plan import SpeechPlan, break_after
+from speech_timing.plan import SpeechPlan, word_breaks
 
 __all__ = ["LinearModel", "fit_linear", "calibrate", "plan_from_linear", "plan_from_utterance",
            "written_words", "estimate_phonemes", "calibration_texts", "TEXTS_DIR"]
@@ -226,8 +226,7 @@ def plan_from_linear(text: str, model: LinearModel, *, delay: float = 0.0, laten
     phoneme_onsets = np.concatenate([on + (off - on) * np.arange(n) / n
                                      for on, off, n in zip(onsets, offsets, counts)])
     stress = onsets + (offsets - onsets) * np.array([_stress_fraction(w) for w in words])
-    breaks = [break_after(text[spans[k][1]:spans[k + 1][0]]) for k in range(len(spans) - 1)]
-    breaks.append(break_after(text[spans[-1][1]:]))
+    breaks = word_breaks(text, spans)
     duration = max(float(model.onset(len(text))), float(offsets[-1]))
     return SpeechPlan(onsets, offsets, phoneme_onsets, counts, delay=delay, latency=latency,
                       t_request=t_request, duration=duration, word_chars=starts.astype(int), word_texts=words,
@@ -257,19 +256,14 @@ def plan_from_utterance(utterance: Utterance, *, delay: float = 0.0, latency: fl
     words: Sequence = utterance.words
     if not words:
         raise ValueError("the utterance has no words")
-    by_word: list[list] = [[] for _ in words]
-    for ph in utterance.phonemes:
-        if 0 <= ph.word_index < len(words):
-            by_word[ph.word_index].append(ph)
     phoneme_onsets, counts, stress = [], [], []
-    for word, phs in zip(words, by_word):
+    for word, phs in zip(words, utterance.phonemes_by_word()):
         times = [p.start for p in phs] or [word.start]
         phoneme_onsets.extend(times)
         counts.append(len(times))
         stress.append(next((p.start for p in phs if p.stressed), word.start))
     text = utterance.text
-    breaks = [break_after(text[words[k].char_end:words[k + 1].char_start]) for k in range(len(words) - 1)]
-    breaks.append(break_after(text[words[-1].char_end:]))
+    breaks = word_breaks(text, [(w.char_start, w.char_end) for w in words])
     return SpeechPlan(np.array([w.start for w in words]), np.array([w.end for w in words]),
                       np.array(phoneme_onsets), np.array(counts), delay=delay, latency=latency,
                       t_request=t_request, duration=utterance.duration,

@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SpeechPlan", "BREAK_NONE", "BREAK_CLAUSE", "BREAK_SENTENCE", "BREAK_PARAGRAPH", "break_after"]
+__all__ = ["SpeechPlan", "BREAK_NONE", "BREAK_CLAUSE", "BREAK_SENTENCE", "BREAK_PARAGRAPH", "break_after",
+           "word_breaks"]
 
 #: Classes of the written break after a word (:attr:`SpeechPlan.breaks`).
 BREAK_NONE, BREAK_CLAUSE, BREAK_SENTENCE, BREAK_PARAGRAPH = 0, 1, 2, 3
@@ -45,6 +46,24 @@ def break_after(between: str) -> int:
     if any(ch in ",;:()\u2013\u2014" for ch in between) or " - " in between:
         return BREAK_CLAUSE
     return BREAK_NONE
+
+
+def word_breaks(text: str, spans) -> list[int]:
+    """Class of the written break after each word (:func:`break_after`); the last word's is that of the
+    text after it.
+
+    Parameters
+    ----------
+    text : str
+        The text.
+    spans : sequence of (int, int)
+        Character ``(start, end)`` of each word, in order.
+    """
+    spans = list(spans)
+    breaks = [break_after(text[spans[k][1]:spans[k + 1][0]]) for k in range(len(spans) - 1)]
+    if spans:
+        breaks.append(break_after(text[spans[-1][1]:]))
+    return breaks
 
 
 def _float_array(name: str, values: Any) -> np.ndarray:
