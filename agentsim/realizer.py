@@ -6,15 +6,15 @@ from typing import Iterable
 
 import simpy
 
-from agentsim.bml.model import Block
-from agentsim.clock import make_environment
+from agentsim.core.block import Block
+from agentsim.core.clock import make_environment
 from agentsim.engines.animation import AnimationEngine
 from agentsim.engines.speech import SpeechConfig, SpeechEngine
 from agentsim.engines.wait import WaitEngine
-from agentsim.feedback import FeedbackLog
-from agentsim.pegboard import PegBoard
-from agentsim.scheduler import BlockRun, Scheduler
-from speech_timing.backend import TTSBackend
+from agentsim.core.feedback import FeedbackLog
+from agentsim.core.pegboard import PegBoard
+from agentsim.core.scheduler import BlockRun, Scheduler
+from agentsim.speech.backend import TTSBackend
 
 
 class Realizer:
@@ -41,7 +41,7 @@ class Realizer:
         self.board = PegBoard()
         self.feedback = FeedbackLog()
         if tts is None:
-            from speech_timing.builtin import BuiltinBackend
+            from agentsim.speech.builtin import BuiltinBackend
             tts = BuiltinBackend()
         self.engines = [
             SpeechEngine(self.env, None, tts, speech),

@@ -3,7 +3,7 @@
 Each render is an ensemble (drums, bass, piano, strings) at 100 to 140 BPM in 4/4 or 3/4, with a tempo
 ramp of +10 % over 16 bars (from bar 4) and +-2 % smooth rubato, about 60 s long. Every tracker
 hears it block by block; predictions made at least 200 ms before each true beat are scored after the
-first 8 seconds (:func:`anticipators.beat_eval.evaluate_predictions`). The real-time factor is
+first 8 seconds (:func:`agentsim.beats.evaluation.evaluate_predictions`). The real-time factor is
 processing time over audio time.
 
 Usage::
@@ -24,9 +24,9 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from anticipators.beat_eval import evaluate_predictions, select_predictions, track_file  # noqa: E402
-from anticipators.beat_tracking import librosa_offline_beats  # noqa: E402
-from anticipators.ensemble_audio import beat_onset_offset, measure_onset_offsets, render_ensemble_full  # noqa: E402
+from agentsim.beats.evaluation import evaluate_predictions, select_predictions, track_file  # noqa: E402
+from agentsim.beats.tracking import librosa_offline_beats  # noqa: E402
+from agentsim.music.ensemble import beat_onset_offset, measure_onset_offsets, render_ensemble_full  # noqa: E402
 
 #: (bpm, meter, seed) of the renders (seeds not used while the tracker was developed).
 CONFIGS = [

@@ -10,11 +10,11 @@ import json
 import time
 
 from agentsim.bml.parser import normalize_space
-from speech_timing.backend import SpeechText
-from speech_timing.delivery import DeliveryModel
-from speech_timing.espeak import EspeakBackend
-from speech_timing.evaluation import PLAYBACK, speech_sync
-from speech_timing.linear_model import TEXTS_DIR
+from agentsim.speech.backend import SpeechText
+from agentsim.speech.delivery import DeliveryModel
+from agentsim.speech.espeak import EspeakBackend
+from agentsim.scenarios.speech_sync import PLAYBACK, speech_sync
+from agentsim.speech.linear_model import TEXTS_DIR
 
 
 def main() -> None:

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from speech_timing.animator_time import (
+from agentsim.speech.animator_time import (
     STRATEGIES,
     AnimatorTime,
     BestTime,
@@ -25,11 +25,11 @@ from speech_timing.animator_time import (
     lower_envelope_line,
     make_strategy,
 )
-from speech_timing.backend import SpeechText
-from speech_timing.builtin import BuiltinBackend
-from speech_timing.delivery import DeliveryModel, ProgressEvent, deliver, true_events
-from speech_timing.harness import run_sync_eval, stroke_targets
-from speech_timing.linear_model import (
+from agentsim.speech.backend import SpeechText
+from agentsim.speech.builtin import BuiltinBackend
+from agentsim.speech.delivery import DeliveryModel, ProgressEvent, deliver, true_events
+from agentsim.speech.harness import run_sync_eval, stroke_targets
+from agentsim.speech.linear_model import (
     LinearModel,
     calibrate,
     estimate_phonemes,

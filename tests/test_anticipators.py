@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from agentsim.errors import AgentsimError
+from agentsim.core.errors import AgentsimError
 from agentsim.realizer import Realizer
-from anticipators import registry
-from anticipators.tap import TapTempo, read_taps
+from agentsim.anticipators import registry
+from agentsim.anticipators.tap import TapTempo, read_taps
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 PLUGIN = Path(__file__).parent / "plugins" / "agentsim-countin"
@@ -102,8 +102,8 @@ def test_keyboard_taps_in_real_time():
     import threading
     import time
 
-    from agentsim.clock import make_environment
-    from agentsim.pegboard import PegBoard
+    from agentsim.core.clock import make_environment
+    from agentsim.core.pegboard import PegBoard
 
     read_fd, write_fd = os.pipe()
     tap = TapTempo("tap", initial_bpm=60)

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 import soundfile
 
-from agentsim.clock import make_environment
-from agentsim.errors import AgentsimError
+from agentsim.core.clock import make_environment
+from agentsim.core.errors import AgentsimError
 from agentsim.realizer import Realizer
-from anticipators.audio import AudioBeatAnticipator, DeviceSource
-from anticipators.ensemble_audio import render_ensemble, write_beats
+from agentsim.anticipators.audio import AudioBeatAnticipator, DeviceSource
+from agentsim.music.ensemble import render_ensemble, write_beats
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.signal import resample_poly
 
-from anticipators.beat_eval import evaluate_predictions, select_predictions, track_and_evaluate, track_file
-from anticipators.beat_tracking import CausalBeatTracker, IOIBaselineTracker, SpectralFluxEnvelope, make_tracker
-from anticipators.ensemble_audio import SynthEvent, render_ensemble_full, render_events
+from agentsim.beats.evaluation import evaluate_predictions, select_predictions, track_and_evaluate, track_file
+from agentsim.beats.tracking import CausalBeatTracker, IOIBaselineTracker, SpectralFluxEnvelope, make_tracker
+from agentsim.music.ensemble import SynthEvent, render_ensemble_full, render_events
 
 SR = 22050
 

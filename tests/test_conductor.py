@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 import soundfile
 
-from agentsim.errors import AgentsimError
-from scenarios.conductor import run as conductor_cli
-from scenarios.conductor.config import ModelParams, config_from_dict, load_config, parse_meter
-from scenarios.conductor.ensemble import Timekeeper
-from scenarios.conductor.metrics import beats_to_recover, local_tempo
-from scenarios.conductor.planning import ResponseEstimator
-from scenarios.conductor.scenario import collect_metrics, simulate
+from agentsim.core.errors import AgentsimError
+from agentsim.scenarios.conductor import run as conductor_cli
+from agentsim.scenarios.conductor.config import ModelParams, config_from_dict, load_config, parse_meter
+from agentsim.scenarios.conductor.ensemble import Timekeeper
+from agentsim.scenarios.conductor.metrics import beats_to_recover, local_tempo
+from agentsim.scenarios.conductor.planning import ResponseEstimator
+from agentsim.scenarios.conductor.scenario import collect_metrics, simulate
 
 QUIET = dict(timekeeper_sd=0.0, motor_sd=0.0, ictus_sd=0.0, drag=0.0)
 
@@ -242,7 +242,7 @@ def test_live_conducting_through_a_null_sink_loopback(pulse_null_sink, tmp_path)
     """Conduct a rendered ensemble played into a PulseAudio null sink and heard from its monitor."""
     import sounddevice
 
-    from anticipators.ensemble_audio import render_ensemble
+    from agentsim.music.ensemble import render_ensemble
 
     audio, sr, _ = render_ensemble(bpm=112, meter="4/4", bars=6, seed=2, sample_rate=22050)
     config = tmp_path / "live.toml"

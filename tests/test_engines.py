@@ -6,9 +6,9 @@ import time
 
 import pytest
 
-from agentsim.clock import make_environment
+from agentsim.core.clock import make_environment
 from agentsim.engines.animation import BEAT, NOD, motion_state
-from agentsim.plan import ScheduleError, stretch_times
+from agentsim.core.plan import ScheduleError, stretch_times
 from agentsim.realizer import Realizer
 from conftest import Result, realize
 

@@ -7,9 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from anticipators.errors import AnticipatorError
-from anticipators import ensemble_audio as ea
-from anticipators.ensemble_audio import (
+from agentsim.core.errors import AgentsimError, AnticipatorError
+from agentsim.music import ensemble as ea
+from agentsim.music.ensemble import (
     FluidSynthRenderer,
     Meter,
     TempoMap,
@@ -244,4 +244,4 @@ def test_missing_fluidsynth_program_says_how_to_install(monkeypatch, tmp_path):
     monkeypatch.setattr(ea.shutil, "which", lambda name: None)
     with pytest.raises(AnticipatorError, match="apt-get install fluidsynth fluid-soundfont-gm"):
         render_midi_file(tmp_path / "x.mid")
-    assert issubclass(AnticipatorError, RuntimeError)
+    assert issubclass(AnticipatorError, AgentsimError)  # the one root the command line reports

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from speech_timing.backend import SpeechText, TTSBackend, Utterance
-from speech_timing.errors import SpeechBackendUnavailable
-from speech_timing.espeak import INSTALL_HINT, EspeakBackend, _load_library
+from agentsim.speech.backend import SpeechText, TTSBackend, Utterance
+from agentsim.core.errors import SpeechBackendUnavailable
+from agentsim.speech.espeak import INSTALL_HINT, EspeakBackend, _load_library
 
 # Capitalised words after full stops: espeak makes a pause of about 300 ms before each.
 ISOLATED_WORDS = ("Apple Banana Cherry Dog Egg Fish Garden Hello Island Jump Kite Lemon Mango Nose Orange "
@@ -271,8 +271,8 @@ def test_repeated_synthesis_gives_the_same_timeline(backend):
 
 FRESH_PROCESS_SCRIPT = """
 import hashlib, sys
-from speech_timing.backend import SpeechText
-from speech_timing.espeak import EspeakBackend
+from agentsim.speech.backend import SpeechText
+from agentsim.speech.espeak import EspeakBackend
 u = EspeakBackend().synthesize(SpeechText(sys.argv[1], ((0, "m"),)))
 print(hashlib.sha256(u.audio.tobytes()).hexdigest(), repr((u.words, u.phonemes, u.marks, u.sentences)))
 """

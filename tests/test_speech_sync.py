@@ -13,11 +13,11 @@ import pytest
 from agentsim.bml.parser import normalize_space
 from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer
-from speech_timing.animator_time import make_strategy
-from speech_timing.builtin import BuiltinBackend
-from speech_timing.delivery import DeliveryModel
-from speech_timing.evaluation import PLAYBACK, beats_on_content_words, speech_sync
-from speech_timing.linear_model import TEXTS_DIR
+from agentsim.speech.animator_time import make_strategy
+from agentsim.speech.builtin import BuiltinBackend
+from agentsim.speech.delivery import DeliveryModel
+from agentsim.scenarios.speech_sync import PLAYBACK, beats_on_content_words, speech_sync
+from agentsim.speech.linear_model import TEXTS_DIR
 
 TEXT = normalize_space((TEXTS_DIR / "orchard.txt").read_text())[0]
 CONDITION_A = DeliveryModel(**PLAYBACK, delay=0.05, jitter=0.03, burst_probability=0.03, burst_hold=0.25)
@@ -80,7 +80,7 @@ def test_linear_timing_plans_from_the_model_and_still_syncs_without_snaps():
 
 
 def test_espeak_speech_through_the_realizer():
-    from speech_timing.espeak import EspeakBackend
+    from agentsim.speech.espeak import EspeakBackend
 
     result = speech_sync(TEXT[:1200], EspeakBackend(), "best", CONDITION_A, seed=1)
     assert result["gestures"] > 50 and result["missed"] == 0

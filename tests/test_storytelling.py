@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 
 from agentsim.bml.parser import parse_bml
-from agentsim.errors import AgentsimError
+from agentsim.core.errors import AgentsimError
 from agentsim.realizer import Realizer
-from scenarios.storytelling import run as story_run
-from scenarios.storytelling.markup import StoryError, compile_bml, parse_story, read_story
-from scenarios.storytelling.praat import export_textgrid, import_textgrid
-from scenarios.storytelling.telling import DEFAULT_DELIVERY, make_voice, stress_offsets, syllable_times, tell
-from scenarios.storytelling.voice import CachedBackend, PhonemeMarks, mark_event, place_mark
-from speech_timing.backend import Phoneme, SpeechText, Utterance, Word
+from agentsim.scenarios.storytelling import run as story_run
+from agentsim.scenarios.storytelling.markup import StoryError, compile_bml, parse_story, read_story
+from agentsim.scenarios.storytelling.praat import export_textgrid, import_textgrid
+from agentsim.scenarios.storytelling.telling import DEFAULT_DELIVERY, make_voice, stress_offsets, syllable_times, tell
+from agentsim.scenarios.storytelling.voice import CachedBackend, PhonemeMarks, mark_event, place_mark
+from agentsim.speech.backend import Phoneme, SpeechText, Utterance, Word
 
 NS = "http://www.bml-initiative.org/bml/bml-1.0"
 SHORT = "the_north_wind_and_the_sun"
@@ -202,7 +202,7 @@ def test_phoneme_marks_and_the_cache(tmp_path):
     assert place_mark(timeline, 12, "w3.ph2") == 1.00
     assert place_mark(timeline, 11, "w3.stress.d250") == pytest.approx(1.07)
     assert place_mark(timeline, 18, "x.stress") == 1.30  # no stressed vowel: the word's onset
-    from speech_timing.builtin import BuiltinBackend
+    from agentsim.speech.builtin import BuiltinBackend
 
     first = CachedBackend(BuiltinBackend(), cache_dir=tmp_path)
     speech = SpeechText("Tell me a story.", ((8, "m1"),))
@@ -303,7 +303,7 @@ def test_the_command_writes_every_output_and_repeats_itself(tmp_path, cache_dir,
     # Again with --compare on the same seed: the same figures for best, and a table of every strategy.
     assert story_run.main(_args(second, cache_dir, compare=True)) == 0
     out = capsys.readouterr().out
-    from speech_timing.animator_time import STRATEGIES
+    from agentsim.speech.animator_time import STRATEGIES
 
     assert all(f"\n{name} " in out for name in STRATEGIES)
     again = json.loads((second / "metrics.json").read_text())

@@ -1,9 +1,9 @@
-"""BML 1.0 parser: XML text in, a :class:`~agentsim.bml.model.Block` out, every problem with line and column.
+"""BML 1.0 parser: XML text in, a :class:`~agentsim.core.block.Block` out, every problem with line and column.
 
 The XML is read by a hardened expat reader (defusedxml: no entity declarations, no external references),
 without namespace processing, so that attributes with undeclared prefixes are extensions to warn about
-rather than fatal errors. Problems that spoil the whole block raise :class:`~agentsim.errors.BMLError`;
-problems with one behaviour or constraint become :class:`~agentsim.bml.model.ParseWarning` entries and the
+rather than fatal errors. Problems that spoil the whole block raise :class:`~agentsim.core.errors.BMLError`;
+problems with one behaviour or constraint become :class:`~agentsim.core.block.ParseWarning` entries and the
 rest of the block is kept.
 """
 
@@ -17,9 +17,10 @@ import xml.sax.handler
 from defusedxml.common import DefusedXmlException
 from defusedxml.expatreader import create_parser
 
-from agentsim.bml.model import Behaviour, Block, Constraint, ParseWarning, SyncRef
-from agentsim.bml.vocabulary import BEHAVIOUR_TYPES, BML_NAMESPACE, PARAMETER_CHILDREN
-from agentsim.errors import BMLError
+from agentsim.core.block import Behaviour, Block, Constraint, ParseWarning, SyncRef
+from agentsim.bml.vocabulary import BML_NAMESPACE, PARAMETER_CHILDREN
+from agentsim.core.block import BEHAVIOUR_TYPES
+from agentsim.core.errors import BMLError
 
 #: Largest time or offset (seconds) accepted in a reference; beyond it a behaviour is refused.
 MAX_TIME = 1.0e6

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from agentsim.bml.model import Behaviour
-from agentsim.plan import Engine, Planner, ScheduleError
+from agentsim.core.block import Behaviour
+from agentsim.core.plan import Engine, Planner, ScheduleError
 
 
 @dataclass(frozen=True)

@@ -8,8 +8,8 @@ constraints that would stretch it make it invalid.
 Once speech starts, its timing belongs to the audio. Without a :class:`SpeechConfig` strategy the audio
 plays exactly as planned and the speech's pegs are detached from whatever they were tied to. With one,
 the audio really starts after a playback latency, its clock drifts, and its progress events reach the
-realizer late, scattered and in bursts (:mod:`speech_timing.delivery`); an animator-time strategy
-(:mod:`speech_timing.animator_time`) turns them into ``t_A``, and every sync point of the speech, with
+realizer late, scattered and in bursts (:mod:`agentsim.speech.delivery`); an animator-time strategy
+(:mod:`agentsim.speech.animator_time`) turns them into ``t_A``, and every sync point of the speech, with
 everything tied to it, is passed when ``t_A`` reaches its planned speech time.
 """
 
@@ -23,10 +23,10 @@ from typing import Callable
 
 import numpy as np
 
-from agentsim.bml.model import Behaviour
-from agentsim.pegboard import OffsetPeg, TimePeg, _bump
-from agentsim.plan import Engine, KeyRef, Planner, ScheduleError, TimedBehaviour
-from speech_timing.backend import SpeechText, TTSBackend, Utterance
+from agentsim.core.block import Behaviour
+from agentsim.core.pegboard import OffsetPeg, TimePeg, _bump
+from agentsim.core.plan import Engine, KeyRef, Planner, ScheduleError, TimedBehaviour
+from agentsim.speech.backend import SpeechText, TTSBackend, Utterance
 
 #: Speech keys may be off their rigid spacing by this much (seconds) before the speech is invalid.
 RIGID_TOLERANCE = 1e-6
@@ -39,7 +39,7 @@ class SpeechConfig:
     Parameters
     ----------
     strategy : str or None
-        Animator-time strategy (a key of ``speech_timing.animator_time.STRATEGIES``); None plays the
+        Animator-time strategy (a key of ``agentsim.speech.animator_time.STRATEGIES``); None plays the
         audio exactly as planned, with no latency and no events.
     delivery : DeliveryModel
         Playback latency, audio clock drift and the progress-event channel.
@@ -64,8 +64,8 @@ class SpeechConfig:
         if self.timing not in ("tts", "linear"):
             raise ValueError(f"timing must be 'tts' or 'linear', not {self.timing!r}")
         if self.strategy is not None:
-            from speech_timing.animator_time import STRATEGIES
-            from speech_timing.delivery import DeliveryModel
+            from agentsim.speech.animator_time import STRATEGIES
+            from agentsim.speech.delivery import DeliveryModel
 
             if self.strategy not in STRATEGIES:
                 raise ValueError(f"unknown strategy {self.strategy!r}; known: {', '.join(sorted(STRATEGIES))}")
@@ -74,7 +74,7 @@ class SpeechConfig:
 
 
 class SpeechPlanner(Planner):
-    """Times speech with a :class:`~speech_timing.backend.TTSBackend` (or the linear model)."""
+    """Times speech with a :class:`~agentsim.speech.backend.TTSBackend` (or the linear model)."""
 
     behaviour_types = ("speech",)
     rigid = True
@@ -97,7 +97,7 @@ class SpeechPlanner(Planner):
 
     def linear_model(self):
         if self.config.linear_model is None:
-            from speech_timing.harness import default_linear_model
+            from agentsim.speech.harness import default_linear_model
 
             self.config.linear_model = default_linear_model(self.backend)
         return self.config.linear_model
@@ -106,7 +106,7 @@ class SpeechPlanner(Planner):
         """The speech plan made from the linear model alone (``timing="linear"``)."""
         key = id(behaviour)
         if key not in self._plans:
-            from speech_timing.linear_model import plan_from_linear
+            from agentsim.speech.linear_model import plan_from_linear
 
             self._plans[key] = plan_from_linear(behaviour.text, self.linear_model())
         return self._plans[key]
@@ -249,16 +249,16 @@ class SpeechEngine(Engine):
 
     def play(self, timed: TimedBehaviour, t_request: float) -> None:
         """Start the audio and hand the speech's timing to the animator-time strategy."""
-        from speech_timing.animator_time import make_strategy
-        from speech_timing.delivery import deliver, true_events
-        from speech_timing.linear_model import plan_from_utterance
+        from agentsim.speech.animator_time import make_strategy
+        from agentsim.speech.delivery import deliver, true_events
+        from agentsim.speech.linear_model import plan_from_utterance
 
         config, planner = self.config, self.planner
         delivery = config.delivery
         utt = planner.utterance(timed.behaviour)
         known = dict(delay=delivery.delay, latency=delivery.latency, t_request=t_request)
         if config.timing == "linear":
-            from speech_timing.linear_model import plan_from_linear
+            from agentsim.speech.linear_model import plan_from_linear
 
             plan = plan_from_linear(timed.behaviour.text, planner.linear_model(), **known)
         else:

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from agentsim.bml.model import Behaviour
-from agentsim.plan import Engine, Planner, ScheduleError
+from agentsim.core.block import Behaviour
+from agentsim.core.plan import Engine, Planner, ScheduleError
 
 
 class WaitPlanner(Planner):

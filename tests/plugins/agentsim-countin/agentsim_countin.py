@@ -6,7 +6,7 @@ tied to the cue is re-timed.
 
 import re
 
-from anticipators.base import Anticipator
+from agentsim.core.anticipator import Anticipator
 
 
 class CountIn(Anticipator):

@@ -1,0 +1,175 @@
+"""The ``agentsim eval speech-sync`` and ``agentsim speech`` commands."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from agentsim.core.errors import AgentsimError
+
+DEFAULT_MODEL = Path("linear_model.json")
+
+
+def add_parsers(commands) -> None:
+    evaluate = commands.add_parser("eval", help="measure synchronisation")
+    kinds = evaluate.add_subparsers(dest="kind", required=True)
+    sync = kinds.add_parser(
+        "speech-sync", help="beats on every content word: how far from their words do the strokes land?",
+        description="Peg a beat gesture's stroke to every content word of the text, realise it with an "
+                    "animator-time strategy while progress events arrive late, scattered and in bursts, and "
+                    "report the sync error (stroke minus word onset as heard), snaps, stalls and rates.")
+    sync.add_argument("--text", metavar="FILE", help="text to speak (default: a bundled text)")
+    sync.add_argument("--tts", choices=["espeak", "builtin"], default="espeak", help="speech backend (espeak)")
+    sync.add_argument("--strategy", default="best", help="strategy name, or 'all' (default: best)")
+    sync.add_argument("--list-strategies", action="store_true", help="name the strategies and exit")
+    sync.add_argument("--timing", choices=["tts", "linear"], default="tts",
+                      help="what the planner knows: the backend's timeline (tts) or Chang's linear model")
+    sync.add_argument("--delay", type=float, default=0.05, help="base event delay, s (0.05)")
+    sync.add_argument("--jitter", type=float, default=0.03, help="mean extra event delay, s (0.03)")
+    sync.add_argument("--burst", type=float, default=0.03, help="probability an event stalls the channel (0.03)")
+    sync.add_argument("--burst-hold", type=float, default=0.25, help="longest stall, s (0.25)")
+    sync.add_argument("--loss", type=float, default=0.0, help="probability an event is lost (0)")
+    sync.add_argument("--latency", type=float, default=0.08, help="nominal playback latency, s (0.08)")
+    sync.add_argument("--start-jitter", type=float, default=0.04, help="unknown extra latency, s (0.04)")
+    sync.add_argument("--drift", type=float, default=500.0, help="audio clock drift, ppm (500)")
+    sync.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    sync.add_argument("--model", metavar="FILE", help="linear model from 'agentsim speech calibrate'")
+    sync.add_argument("--json", action="store_true", help="print JSON")
+    sync.add_argument("--plot", metavar="FILE.png", help="draw the error distribution of each strategy")
+
+    speech = commands.add_parser("speech", help="speech tools")
+    tools = speech.add_subparsers(dest="tool", required=True)
+    calibrate = tools.add_parser("calibrate", help="fit Chang's linear characters-to-time model",
+                                 description="Speak calibration texts and fit seconds = multiplier * characters "
+                                             "+ offset by least squares over every word's onset.")
+    calibrate.add_argument("--tts", choices=["espeak", "builtin"], default="espeak")
+    calibrate.add_argument("--texts", metavar="FILE", help="calibration texts, one per line (default: bundled)")
+    calibrate.add_argument("--out", metavar="FILE", default=str(DEFAULT_MODEL), help="where to save the model")
+    export = tools.add_parser("export", help="speak a text; write its audio (WAV) and timeline (Praat TextGrid)")
+    export.add_argument("text", metavar="FILE")
+    export.add_argument("--tts", choices=["espeak", "builtin"], default="espeak")
+    export.add_argument("--wav", metavar="FILE.wav")
+    export.add_argument("--textgrid", metavar="FILE.TextGrid")
+
+
+def backend(name: str):
+    if name == "espeak":
+        from agentsim.speech.espeak import EspeakBackend
+        from agentsim.core.errors import SpeechBackendUnavailable
+
+        try:
+            return EspeakBackend()
+        except SpeechBackendUnavailable as exc:
+            raise AgentsimError(str(exc)) from None
+    from agentsim.speech.builtin import BuiltinBackend
+
+    return BuiltinBackend()
+
+
+def read_text(path: str | None) -> str:
+    if path is None:
+        from agentsim.speech.linear_model import TEXTS_DIR
+
+        return (TEXTS_DIR / "clocks.txt").read_text(encoding="utf-8")
+    p = Path(path)
+    if not p.is_file():
+        raise AgentsimError(f"no text file {path!r}")
+    text = p.read_text(encoding="utf-8")
+    if not text.strip():
+        raise AgentsimError(f"{path!r} has no text")
+    return text
+
+
+def speech_sync(args: argparse.Namespace) -> int:
+    from agentsim.speech.animator_time import STRATEGIES
+    from agentsim.speech.delivery import DeliveryModel
+    from agentsim.scenarios.speech_sync import speech_sync as run
+    from agentsim.speech.linear_model import LinearModel
+
+    if args.list_strategies:
+        for name in STRATEGIES:
+            print(name)
+        return 0
+    names = list(STRATEGIES) if args.strategy == "all" else [args.strategy]
+    unknown = [n for n in names if n not in STRATEGIES]
+    if unknown:
+        raise AgentsimError(f"unknown strategy {unknown[0]!r}: choose from {', '.join(STRATEGIES)} or all")
+    try:
+        delivery = DeliveryModel(latency=args.latency, start_jitter=args.start_jitter, drift_ppm=args.drift,
+                                 delay=args.delay, jitter=args.jitter, burst_probability=args.burst,
+                                 burst_hold=args.burst_hold, loss=args.loss)
+    except ValueError as exc:
+        raise AgentsimError(str(exc)) from None
+    model = None
+    if args.model:
+        if not Path(args.model).is_file():
+            raise AgentsimError(f"no linear model {args.model!r}: make one with 'agentsim speech calibrate'")
+        model = LinearModel.load(args.model)
+    text, tts = read_text(args.text), backend(args.tts)
+    results = []
+    for name in names:
+        result = run(text, tts, name, delivery, timing=args.timing, seed=args.seed, linear_model=model)
+        results.append(result)
+    report = [{k: v for k, v in r.items() if k not in ("errors_s",)} for r in results]
+    if args.plot:
+        plot_errors(results, args.plot)
+    if args.json:
+        print(json.dumps(report[0] if args.strategy != "all" else report))
+    else:
+        print(f"{'strategy':14} {'p50':>7} {'p95':>7} {'max':>7} {'snaps':>6} {'stall_s':>8} {'rate':>11}")
+        for r in report:
+            e = r["error_ms"]
+            print(f"{r['strategy']:14} {e['p50']:7.1f} {e['p95']:7.1f} {e['max']:7.1f} {r['snaps']:6d} "
+                  f"{r['stall_s']:8.2f} {r['rate']['min']:5.2f}-{r['rate']['max']:<5.2f}")
+        print(f"{report[0]['gestures']} strokes on {report[0]['words']} words, errors in ms", file=sys.stderr)
+    return 0
+
+
+def plot_errors(results: list[dict], path: str) -> None:
+    """Box plots of absolute sync error per strategy (ms)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = [abs(r["errors_s"]) * 1000 for r in results]
+    fig, ax = plt.subplots(figsize=(1.4 * len(results) + 2, 4))
+    ax.boxplot(data, showfliers=True)
+    ax.set_xticks(range(1, len(results) + 1), [r["strategy"] for r in results], rotation=20)
+    ax.set_yscale("symlog", linthresh=10)
+    ax.set_ylim(bottom=0)
+    ax.set_ylabel("|stroke - word onset| (ms)")
+    ax.set_title(f"speech-gesture sync, timing={results[0]['timing']}, seed={results[0]['seed']}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def calibrate(args: argparse.Namespace) -> int:
+    from agentsim.speech.linear_model import calibrate as fit
+
+    texts = None
+    if args.texts:
+        texts = [line.strip() for line in read_text(args.texts).splitlines() if line.strip()]
+    model = fit(backend(args.tts), texts)
+    model.save(args.out)
+    print(json.dumps({"multiplier": model.multiplier, "offset": model.offset, "points": model.n_points,
+                      "rms_s": model.rms, "saved": args.out}))
+    return 0
+
+
+def export(args: argparse.Namespace) -> int:
+    from agentsim.speech.backend import SpeechText
+    from agentsim.speech.exports import write_textgrid, write_wav
+
+    if not (args.wav or args.textgrid):
+        raise AgentsimError("say what to write: --wav FILE.wav and/or --textgrid FILE.TextGrid")
+    text = " ".join(read_text(args.text).split())
+    utterance = backend(args.tts).synthesize(SpeechText(text))
+    if args.wav:
+        write_wav(args.wav, utterance)
+    if args.textgrid:
+        write_textgrid(args.textgrid, utterance)
+    return 0

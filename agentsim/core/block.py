@@ -1,0 +1,154 @@
+"""What a BML block is: behaviours, sync references and constraints with source positions, and the BML 1.0
+core behaviour types (their default sync points, in order, and the body resource each holds)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+RefKind = Literal["absolute", "sync", "anticipator"]
+
+
+@dataclass(frozen=True)
+class SyncRef:
+    """A reference to a time: a number (seconds after block start), ``[block:]behaviour:sync[+-offset]``
+    or ``anticipators:id:sync[+-offset]``.
+
+    The time referred to is ``time(target) + offset``.
+    """
+
+    kind: RefKind
+    offset: float = 0.0
+    block: str | None = None
+    behaviour: str | None = None
+    sync: str | None = None
+    anticipator: str | None = None
+    text: str = ""
+
+    def target(self) -> str:
+        if self.kind == "absolute":
+            return f"{self.offset:g}"
+        if self.kind == "anticipator":
+            return f"anticipators:{self.anticipator}:{self.sync}"
+        prefix = f"{self.block}:" if self.block else ""
+        return f"{prefix}{self.behaviour}:{self.sync}"
+
+
+@dataclass
+class Behaviour:
+    """One behaviour element of a block."""
+
+    id: str
+    type: str
+    sync_ids: list[str]
+    attributes: dict[str, str] = field(default_factory=dict)
+    refs: dict[str, SyncRef] = field(default_factory=dict)
+    text: str = ""
+    marks: list[tuple[int, str]] = field(default_factory=list)
+    required: bool = False
+    index: int = 0
+    line: int | None = None
+    column: int | None = None
+
+    def where(self) -> str:
+        return f"line {self.line}, column {self.column}" if self.line is not None else "unknown position"
+
+
+@dataclass
+class SyncAt:
+    """A sync point of this block at which a constraint grabs: ``behaviour:sync`` plus an offset."""
+
+    behaviour: str
+    sync: str
+    offset: float
+
+
+@dataclass
+class Constraint:
+    """A ``synchronize``, ``before`` or ``after`` constraint.
+
+    ``synchronize``: all ``refs`` happen at one time. ``before``: every ref in ``refs`` happens at or
+    before ``anchor``. ``after``: at or after ``anchor``.
+    """
+
+    kind: Literal["synchronize", "before", "after"]
+    refs: list[SyncRef]
+    anchor: SyncRef | None = None
+    id: str = ""
+    required: bool = False
+    owner: str = ""
+    line: int | None = None
+    column: int | None = None
+
+
+@dataclass
+class ParseWarning:
+    """A problem found while parsing that does not stop the block."""
+
+    warning_type: str
+    description: str
+    behaviours: list[str] = field(default_factory=list)
+    line: int | None = None
+    column: int | None = None
+
+
+@dataclass
+class Block:
+    """A parsed BML block."""
+
+    id: str
+    character_id: str = "agent"
+    composition: Literal["MERGE", "APPEND", "REPLACE"] = "MERGE"
+    behaviours: list[Behaviour] = field(default_factory=list)
+    constraints: list[Constraint] = field(default_factory=list)
+    warnings: list[ParseWarning] = field(default_factory=list)
+    line: int | None = None
+    column: int | None = None
+
+    _index: dict[str, Behaviour] = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def behaviour(self, behaviour_id: str) -> Behaviour | None:
+        """The behaviour with this id, or None."""
+        if len(self._index) != len(self.behaviours):
+            self._index = {b.id: b for b in self.behaviours}
+        return self._index.get(behaviour_id)
+
+
+GESTURE_SYNCS = ("start", "ready", "strokeStart", "stroke", "strokeEnd", "relax", "end")
+GAZE_SYNCS = ("start", "ready", "relax", "end")
+FACE_SYNCS = ("start", "attackPeak", "relax", "end")
+SHIFT_SYNCS = ("start", "end")
+
+
+@dataclass(frozen=True)
+class BehaviourType:
+    """A behaviour element: its default sync points and, if it is exclusive, the resource it holds.
+
+    Two behaviours holding the same ``resource`` cannot run at the same time (two gazes at once).
+    """
+
+    name: str
+    syncs: tuple[str, ...]
+    resource: str | None = None
+
+
+BEHAVIOUR_TYPES: dict[str, BehaviourType] = {
+    t.name: t
+    for t in (
+        BehaviourType("speech", ("start", "end")),
+        BehaviourType("gesture", GESTURE_SYNCS),
+        BehaviourType("pointing", GESTURE_SYNCS),
+        BehaviourType("head", GESTURE_SYNCS),
+        BehaviourType("gaze", GAZE_SYNCS, resource="gaze"),
+        BehaviourType("gazeShift", SHIFT_SYNCS, resource="gazeShift"),
+        BehaviourType("headDirectionShift", SHIFT_SYNCS, resource="headDirectionShift"),
+        BehaviourType("faceLexeme", FACE_SYNCS),
+        BehaviourType("faceFacs", FACE_SYNCS),
+        BehaviourType("face", FACE_SYNCS),
+        BehaviourType("faceShift", SHIFT_SYNCS),
+        BehaviourType("posture", GAZE_SYNCS, resource="posture"),
+        BehaviourType("postureShift", SHIFT_SYNCS, resource="postureShift"),
+        BehaviourType("locomotion", SHIFT_SYNCS, resource="locomotion"),
+        BehaviourType("wait", SHIFT_SYNCS),
+    )
+}

@@ -1,0 +1,54 @@
+"""The one root of every error a user can cause and fix, and its kinds.
+
+Everything user-facing raises an :class:`AgentsimError` (or a subclass) whose message says what went
+wrong and what to do about it; the command line turns it into one line on stderr and an exit status, in
+one place (:func:`agentsim.cli.main`).
+"""
+
+from __future__ import annotations
+
+
+class AgentsimError(Exception):
+    """An error the user can cause (bad BML, bad config, missing device or library).
+
+    The message says what went wrong and what to do about it.
+    """
+
+    #: Exit status of the command line for this kind of error.
+    exit_status = 1
+
+
+class UsageError(AgentsimError):
+    """The command line itself is wrong: a missing file, contradictory options."""
+
+    exit_status = 2
+
+
+class BMLError(AgentsimError):
+    """A BML document or reference that cannot be used, with its position in the source."""
+
+    def __init__(self, message: str, line: int | None = None, column: int | None = None):
+        self.line = line
+        self.column = column
+        where = f" (line {line}, column {column})" if line is not None else ""
+        super().__init__(f"{message}{where}")
+        self.reason = message
+
+
+class ScheduleError(AgentsimError):
+    """A behaviour cannot be given the timing asked of it."""
+
+
+class SpeechBackendUnavailable(AgentsimError):
+    """A text-to-speech backend cannot run here, for instance because its system library is not installed.
+
+    The message says what to install.
+    """
+
+
+class AnticipatorError(AgentsimError):
+    """An anticipator cannot do its work because of its environment or its input.
+
+    Raised, for example, when the FluidSynth library or the General MIDI soundfont is missing, with a
+    message that says how to install them.
+    """

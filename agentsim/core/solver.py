@@ -1,0 +1,522 @@
+"""Timing one BML block: constraints become shared time pegs, behaviours get keys tied to them.
+
+The algorithm follows the SmartBody/Elckerlyc scheduler. Sync points that constraints tie together share
+one peg (a weighted union-find keeps their offsets). Behaviours are placed one at a time in document
+order, except that a behaviour tied to a time already known (a number, an anticipator, another block, a
+behaviour placed before) goes before behaviours that know nothing yet. Each planner resolves the unknown
+times of its behaviour from the known ones (preferred durations, linear stretch, rigid speech). Then
+``before``/``after`` constraints are honoured by moving behaviours that are free to move, a tied cluster
+that would start before the block start is shifted later, invalid behaviours and conflicts on one body
+resource are dropped with a warning, and a block whose ``<required>`` part fails is refused.
+"""
+
+from __future__ import annotations
+
+import heapq
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Callable, Protocol
+
+from agentsim.core.block import Behaviour, Block, Constraint, SyncRef
+from agentsim.core.block import BEHAVIOUR_TYPES
+from agentsim.core.pegboard import OffsetPeg, PegBoard, TimePeg
+from agentsim.core.plan import EPSILON, Engine, KeyRef, ScheduleError, TimedBehaviour
+
+if TYPE_CHECKING:  # pragma: no cover
+    from agentsim.core.scheduler import BlockRun
+
+TOLERANCE = 1e-6
+
+
+class AnticipatorLookup(Protocol):
+    """Finds ``anticipators:<id>:<sync>``; raises ScheduleError if there is no such peg."""
+
+    def __call__(self, anticipator_id: str, sync_id: str) -> TimePeg: ...
+
+
+@dataclass
+class Issue:
+    """Something the solver could not do, to be reported as warning feedback."""
+
+    warning_type: str
+    description: str
+    behaviours: list[str] = field(default_factory=list)
+
+
+class _Ties:
+    """Weighted union-find over sync points: ``T(x) = T(parent) + delta``."""
+
+    def __init__(self) -> None:
+        self.parent: list[int] = []
+        self.delta: list[float] = []
+        self.fixed: list[tuple[TimePeg, float] | None] = []  # T(node) = peg.time + offset, for fixed nodes
+        self.fixed_node: dict[int, int] = {}  # root -> a fixed node in its group
+
+    def add(self, fixed: tuple[TimePeg, float] | None = None) -> int:
+        n = len(self.parent)
+        self.parent.append(n)
+        self.delta.append(0.0)
+        self.fixed.append(fixed)
+        if fixed is not None:
+            self.fixed_node[n] = n
+        return n
+
+    def find(self, x: int) -> tuple[int, float]:
+        path = []
+        while self.parent[x] != x:
+            path.append(x)
+            x = self.parent[x]
+        root, total = x, 0.0
+        for node in reversed(path):
+            total += self.delta[node]
+            self.delta[node] = total
+            self.parent[node] = root
+        return (root, self.delta[path[0]]) if path else (root, 0.0)
+
+    def union(self, a: int, b: int, d: float) -> str | None:
+        """Tie ``T(a) = T(b) + d``; returns a reason if that contradicts the ties so far."""
+        ra, da = self.find(a)
+        rb, db = self.find(b)
+        if ra == rb:
+            if abs(da - (db + d)) > TOLERANCE:
+                return "contradictory constraints: they put it at two different times"
+            return None
+        fa, fb = self.fixed_node.get(ra), self.fixed_node.get(rb)
+        if fa is not None and fb is not None:
+            return "it ties together two times that are fixed independently"
+        self.parent[ra] = rb
+        self.delta[ra] = db + d - da
+        if fa is not None:
+            self.fixed_node[rb] = fa
+        self.fixed_node.pop(ra, None)
+        return None
+
+
+class BlockSolver:
+    """Resolves the timing of one block into timed behaviours tied to pegs."""
+
+    def __init__(self, block: Block, run: "BlockRun", board: PegBoard, engines: dict[str, Engine],
+                 anticipator_peg: AnticipatorLookup, existing: Callable[[], list[TimedBehaviour]]):
+        self.block = block
+        self.run = run
+        self.block_peg = run.block_peg
+        self.board = board
+        self.engines = engines
+        self.anticipator_peg = anticipator_peg
+        self.existing = existing
+        self.issues: list[Issue] = []
+        self.failed = False
+        self.ties = _Ties()
+        self.block_node = self.ties.add((self.block_peg, 0.0))
+        self.nodes: dict[tuple, int] = {}
+        self.dropped: dict[str, str] = {}
+        self.group_peg: dict[int, OffsetPeg] = {}
+        self.anchors: list[OffsetPeg] = []
+        self.timed: dict[str, TimedBehaviour] = {}
+        self._anchor_cache: dict[int, int | None] = {}
+
+    # ----------------------------------------------------------------- problems
+    def drop(self, behaviour_id: str, reason: str, kind: str = "IMPOSSIBLE_TO_SCHEDULE") -> None:
+        if behaviour_id in self.dropped:
+            return
+        self.dropped[behaviour_id] = reason
+        self.issues.append(Issue(kind, f"{behaviour_id}: {reason}; behaviour dropped", [behaviour_id]))
+        beh = self.block.behaviour(behaviour_id)
+        if beh is not None and beh.required:
+            self.fail(f"required behaviour {behaviour_id} cannot be realised ({reason})")
+        timed = self.timed.pop(behaviour_id, None)
+        if timed is not None:
+            timed.state = "dropped"
+
+    def fail(self, reason: str) -> None:
+        if not self.failed:
+            self.failed = True
+            self.issues.append(Issue("IMPOSSIBLE_TO_SCHEDULE", f"block refused: {reason}",
+                                     [b.id for b in self.block.behaviours]))
+
+    # ----------------------------------------------------------------- references
+    def node(self, ref: SyncRef) -> tuple[int, float]:
+        """The tie node a reference stands for, and its offset. Raises ScheduleError if it is dangling."""
+        if ref.kind == "absolute":
+            return self.block_node, ref.offset
+        if ref.kind == "anticipator":
+            key = ("anticipator", ref.anticipator, ref.sync)
+            if key not in self.nodes:
+                peg = self.anticipator_peg(ref.anticipator, ref.sync)
+                if peg.time is None:
+                    raise ScheduleError(f"anticipator {ref.anticipator!r} has no prediction for {ref.sync!r} yet")
+                self.nodes[key] = self.ties.add((peg, 0.0))
+            return self.nodes[key], ref.offset
+        if ref.block is not None and ref.block != self.block.id:
+            key = ("block", ref.block, ref.behaviour, ref.sync)
+            if key not in self.nodes:
+                found = self.board.find_sync(ref.block, ref.behaviour, ref.sync)
+                if found is None:
+                    raise ScheduleError(f"no sync point {ref.target()} in a planned block")
+                self.nodes[key] = self.ties.add(found)
+            return self.nodes[key], ref.offset
+        beh = self.block.behaviour(ref.behaviour)
+        if beh is None:
+            raise ScheduleError(f"no behaviour {ref.behaviour!r} in block {self.block.id}")
+        if ref.sync not in beh.sync_ids:
+            raise ScheduleError(f"behaviour {ref.behaviour!r} has no sync point {ref.sync!r}")
+        return self.local_node(beh.id, ref.sync), ref.offset
+
+    def local_node(self, behaviour_id: str, sync_id: str) -> int:
+        key = ("sync", behaviour_id, sync_id)
+        node = self.nodes.get(key)
+        if node is None:
+            node = self.nodes[key] = self.ties.add()
+        return node
+
+    # ----------------------------------------------------------------- ties
+    def tie_all(self) -> list[tuple[Constraint, list[tuple[int, float, SyncRef]], tuple[int, float, SyncRef]]]:
+        """Apply synchronisations; return the before/after constraints with their resolved nodes."""
+        for beh in self.block.behaviours:
+            if BEHAVIOUR_TYPES[beh.type].name not in self.engines:
+                self.drop(beh.id, f"no engine realises <{beh.type}>", "BEHAVIOR_TYPE_NOT_SUPPORTED")
+        for beh in self.block.behaviours:
+            for sync_id, ref in beh.refs.items():
+                if beh.id in self.dropped:
+                    break
+                try:
+                    target, offset = self.node(ref)
+                except ScheduleError as exc:
+                    self.drop(beh.id, f"{sync_id}={ref.text!r}: {exc}")
+                    continue
+                reason = self.ties.union(self.local_node(beh.id, sync_id), target, offset)
+                if reason:
+                    self.drop(beh.id, f"{sync_id}={ref.text!r}: {reason}")
+        inequalities = []
+        for constraint in self.block.constraints:
+            resolved = []
+            for ref in constraint.refs:
+                try:
+                    node, offset = self.node(ref)
+                except ScheduleError as exc:
+                    self.constraint_issue(constraint, f"reference {ref.text!r} ignored: {exc}")
+                    continue
+                resolved.append((node, offset, ref))
+            if constraint.kind == "synchronize":
+                for node, offset, ref in resolved[1:]:
+                    n0, o0, first = resolved[0]
+                    reason = self.ties.union(n0, node, offset - o0)
+                    if reason:
+                        blame = ref if ref.kind == "sync" else first
+                        self.constraint_issue(constraint, f"cannot synchronise {ref.text!r}: {reason}", blame)
+            else:
+                try:
+                    anchor = self.node(constraint.anchor)
+                except ScheduleError as exc:
+                    self.constraint_issue(constraint, f"constraint ignored: {exc}")
+                    continue
+                inequalities.append((constraint, resolved, (*anchor, constraint.anchor)))
+        return inequalities
+
+    def constraint_issue(self, constraint: Constraint, reason: str, ref: SyncRef | None = None) -> None:
+        where = f" (line {constraint.line}, column {constraint.column})" if constraint.line else ""
+        if ref is not None and ref.kind == "sync" and (ref.block in (None, self.block.id)):
+            self.drop(ref.behaviour, f"<{constraint.kind}>{where}: {reason}")
+        else:
+            self.issues.append(Issue("IMPOSSIBLE_TO_SCHEDULE", f"<{constraint.kind}>{where}: {reason}"))
+        if constraint.required:
+            self.fail(f"required constraint{where} cannot be met: {reason}")
+
+    # ----------------------------------------------------------------- placing
+    def solve(self) -> list[TimedBehaviour]:
+        inequalities = self.tie_all()
+        if self.failed:
+            return []
+        members: dict[int, list[int]] = {}
+        behaviours = self.block.behaviours
+        for index, beh in enumerate(behaviours):
+            for sync_id in beh.sync_ids:
+                node = self.nodes.get(("sync", beh.id, sync_id))
+                if node is not None:
+                    members.setdefault(self.ties.find(node)[0], []).append(index)
+        # Among behaviours tied to known times, rigid ones (speech) go first: the others can stretch.
+        priority = [(0 if self.engines[b.type].planner.rigid else 1, i) if b.type in self.engines else (1, i)
+                    for i, b in enumerate(behaviours)]
+        ready: list[tuple[int, int]] = []
+        for root, fixed in list(self.ties.fixed_node.items()):
+            peg, offset = self.ties.fixed[fixed]
+            _, d = self.ties.find(fixed)
+            self.group_peg[root] = OffsetPeg(peg, offset - d, name=f"{self.block.id}:group")
+            ready.extend(priority[i] for i in members.get(root, ()))
+        heapq.heapify(ready)
+        placed = [False] * len(behaviours)
+        next_free = 0
+        while True:
+            index = None
+            while ready:
+                _, candidate = heapq.heappop(ready)
+                if not placed[candidate]:
+                    index = candidate
+                    break
+            if index is None:
+                while next_free < len(behaviours) and placed[next_free]:
+                    next_free += 1
+                if next_free == len(behaviours):
+                    break
+                index = next_free
+            placed[index] = True
+            beh = behaviours[index]
+            if beh.id in self.dropped:
+                continue
+            for root in self.place(beh):
+                for other in members.get(root, ()):
+                    if not placed[other]:
+                        heapq.heappush(ready, priority[other])
+        self.honour_inequalities(inequalities)
+        self.shift_clusters(inequalities)
+        self.check_validity()
+        self.check_resources()
+        if self.failed:
+            return []
+        return [self.timed[b.id] for b in behaviours if b.id in self.timed]
+
+    def place(self, beh: Behaviour) -> list[int]:
+        """Resolve and tie one behaviour; returns the groups whose time became known."""
+        engine = self.engines[beh.type]
+        planner = engine.planner
+        base = self.block_peg.time
+        known: dict[str, float] = {}
+        groups: dict[str, tuple[int, float]] = {}
+        for sync_id in beh.sync_ids:
+            node = self.nodes.get(("sync", beh.id, sync_id))
+            if node is None:
+                continue
+            root, d = self.ties.find(node)
+            groups[sync_id] = (root, d)
+            peg = self.group_peg.get(root)
+            if peg is not None:
+                known[sync_id] = peg.time + d - base
+        try:
+            preferred = planner.preferred(beh)
+            times = planner.resolve(beh, known, preferred=preferred)
+            implied = self.self_ties(beh, groups, known, times)
+            if implied:
+                times = planner.resolve(beh, {**known, **implied}, preferred=preferred)
+        except ScheduleError as exc:
+            self.drop(beh.id, str(exc))
+            return []
+        except Exception as exc:  # a planner or backend failed on this behaviour: report, keep going
+            self.drop(beh.id, f"{type(exc).__name__}: {exc}")
+            return []
+        n = len(beh.sync_ids)
+        keys: list[KeyRef | None] = [None] * n
+        refs: dict[int, KeyRef] = {}
+        for i, sync_id in enumerate(beh.sync_ids):
+            if sync_id in known:
+                root, d = groups[sync_id]
+                keys[i] = refs[i] = KeyRef(self.group_peg[root], d)
+        if not refs:
+            anchor = OffsetPeg(self.block_peg, times[0], name=f"{self.block.id}:{beh.id}:anchor", anchor=True)
+            self.anchors.append(anchor)
+            refs[0] = KeyRef(anchor, 0.0)
+        newly_known: list[int] = []
+        for i, sync_id in enumerate(beh.sync_ids):
+            if keys[i] is not None:
+                continue
+            tied = sync_id in groups
+            if not (tied or i == 0 or i == n - 1 or planner.rigid):
+                continue
+            j = min(refs, key=lambda r: (abs(preferred[r] - preferred[i]), r))
+            ref_key = refs[j]
+            offset = ref_key.offset + times[i] - times[j]
+            if tied:
+                root, d = groups[sync_id]
+                peg = self.group_peg.get(root)
+                if peg is None:
+                    peg = self.group_peg[root] = OffsetPeg(ref_key.peg, offset - d, name=f"{self.block.id}:group")
+                    newly_known.append(root)
+                keys[i] = KeyRef(peg, d)
+            else:
+                keys[i] = KeyRef(ref_key.peg, offset)
+        timed = TimedBehaviour(self.run, beh, preferred, keys, engine)
+        timed.tied = [sync_id in groups for sync_id in beh.sync_ids]
+        self.timed[beh.id] = timed
+        return newly_known
+
+    def self_ties(self, beh: Behaviour, groups, known, times) -> dict[str, float]:
+        """Times implied by constraints between sync points of the same behaviour (``end="b:start+1"``)."""
+        by_root: dict[int, list[str]] = {}
+        for sync_id, (root, _) in groups.items():
+            if sync_id not in known:
+                by_root.setdefault(root, []).append(sync_id)
+        implied = {}
+        index = {s: i for i, s in enumerate(beh.sync_ids)}
+        for syncs in by_root.values():
+            if len(syncs) > 1:
+                first = min(syncs, key=index.__getitem__)
+                t_root = times[index[first]] - groups[first][1]
+                for sync_id in syncs:
+                    implied[sync_id] = t_root + groups[sync_id][1]
+        return implied
+
+    # ----------------------------------------------------------------- after placing
+    def local(self, timed: TimedBehaviour, sync_id: str) -> float | None:
+        t = timed.sync_time(sync_id)
+        return None if t is None else t - self.block_peg.time
+
+    def ref_time(self, node: int, offset: float, ref: SyncRef) -> tuple[float | None, TimedBehaviour | None]:
+        """Current time of a resolved reference, and the behaviour of this block it belongs to."""
+        if ref.kind == "sync" and ref.block in (None, self.block.id):
+            timed = self.timed.get(ref.behaviour)
+            if timed is None:
+                return None, None
+            return timed.sync_time(ref.sync) + offset, timed
+        root, d = self.ties.find(node)
+        peg = self.group_peg.get(root)
+        return (None if peg is None or peg.time is None else peg.time + d + offset), None
+
+    def anchors_of(self, timed: TimedBehaviour) -> tuple[set[int], bool]:
+        """The free anchors a behaviour's keys hang from, and whether it also hangs from a fixed time."""
+        anchors: set[int] = set()
+        fixed = False
+        for key in timed.keys:
+            if key is not None:
+                anchor = self.anchor_of(key.peg)
+                if anchor is None:
+                    fixed = True
+                else:
+                    anchors.add(anchor)
+        return anchors, fixed
+
+    def anchor_of(self, peg) -> int | None:
+        """id of the free anchor a peg hangs from, or None if it hangs from a fixed time (memoised)."""
+        cache = self._anchor_cache
+        chain = []
+        while True:
+            key = id(peg)
+            if key in cache:
+                found = cache[key]
+                break
+            if isinstance(peg, OffsetPeg) and peg.anchor:
+                found = key
+                break
+            if not isinstance(peg, OffsetPeg) or peg.base is None:
+                found = None
+                break
+            chain.append(key)
+            peg = peg.base
+        for key in chain:
+            cache[key] = found
+        return found
+
+    def movable(self, timed: TimedBehaviour) -> list[OffsetPeg] | None:
+        anchors, fixed = self.anchors_of(timed)
+        if fixed or not anchors:
+            return None
+        by_id = {id(a): a for a in self.anchors}
+        return [by_id[a] for a in anchors]
+
+    def honour_inequalities(self, inequalities) -> None:
+        reported: set[tuple[int, str]] = set()
+        for _ in range(len(inequalities) + 1):
+            changed = False
+            for constraint, refs, (a_node, a_offset, a_ref) in inequalities:
+                t_anchor, anchor_beh = self.ref_time(a_node, a_offset, a_ref)
+                if t_anchor is None:
+                    continue
+                for node, offset, ref in refs:
+                    t, beh = self.ref_time(node, offset, ref)
+                    if t is None:
+                        continue
+                    gap = (t - t_anchor) if constraint.kind == "before" else (t_anchor - t)
+                    if gap <= TOLERANCE:
+                        continue
+                    # Move the constrained behaviour toward the anchor, else the anchor toward it; moving
+                    # helps only if the two sides do not hang from the same anchors.
+                    shift = -gap if constraint.kind == "before" else gap
+                    moved = False
+                    for target, other, delta in ((beh, anchor_beh, shift), (anchor_beh, beh, -shift)):
+                        pegs = self.movable(target) if target is not None else None
+                        if pegs and (other is None or not {id(p) for p in pegs} & self.anchors_of(other)[0]):
+                            for peg in pegs:
+                                peg.shift(delta)
+                            changed = moved = True
+                            break
+                    if not moved and (id(constraint), ref.text) not in reported:
+                        reported.add((id(constraint), ref.text))
+                        self.constraint_issue(constraint, f"{ref.text} cannot be {constraint.kind} {a_ref.text}",
+                                              ref if beh is not None else a_ref)
+            if not changed:
+                break
+
+    def shift_clusters(self, inequalities) -> None:
+        """Shift every cluster of freely placed behaviours that starts before the block start."""
+        parent: dict[int, int] = {}
+
+        def find(x: int) -> int:
+            while parent.setdefault(x, x) != x:
+                parent[x] = parent[parent[x]]
+                x = parent[x]
+            return x
+
+        fixed_clusters: set[int] = set()
+        info = []
+        for timed in self.timed.values():
+            anchors, fixed = self.anchors_of(timed)
+            info.append((timed, anchors, fixed))
+            anchors = list(anchors)
+            for other in anchors[1:]:
+                parent[find(other)] = find(anchors[0])
+        links = [(self.timed.get(ref.behaviour), self.timed.get(a_ref.behaviour))
+                 for _, refs, (_, _, a_ref) in inequalities for (_, _, ref) in refs
+                 if ref.kind == "sync" and a_ref.kind == "sync"]
+        for a, b in links:
+            if a is None or b is None:
+                continue
+            aa, _ = self.anchors_of(a)
+            bb, _ = self.anchors_of(b)
+            if aa and bb:
+                parent[find(next(iter(bb)))] = find(next(iter(aa)))
+        earliest: dict[int, float] = {}
+        for timed, anchors, fixed in info:
+            if not anchors:
+                continue
+            root = find(next(iter(anchors)))
+            if fixed:
+                fixed_clusters.add(root)
+            start = self.local(timed, timed.sync_ids[0])
+            if start is not None:
+                earliest[root] = min(earliest.get(root, start), start)
+        for anchor in self.anchors:
+            root = find(id(anchor))
+            if root in fixed_clusters:
+                continue
+            deficit = -earliest.get(root, 0.0)
+            if deficit > EPSILON:
+                anchor.shift(deficit)
+
+    def check_validity(self) -> None:
+        for beh_id, timed in list(self.timed.items()):
+            times = timed.times()
+            start = times[0] - self.block_peg.time
+            if start < -TOLERANCE:
+                self.drop(beh_id, f"it would start {-start:.3f} s before the block start")
+                continue
+            try:
+                timed.engine.planner.check_times(timed.behaviour, timed.preferred, times)
+            except ScheduleError as exc:
+                self.drop(beh_id, str(exc))
+
+    def check_resources(self) -> None:
+        """Two behaviours on one exclusive body resource (two gazes) may not overlap: drop the later one."""
+        holders: dict[str, list[tuple[float, float, str]]] = {}
+        for timed in self.existing():
+            resource = BEHAVIOUR_TYPES[timed.behaviour.type].resource
+            if resource and timed.state in ("planned", "active"):
+                holders.setdefault(resource, []).append((timed.start, timed.end, f"{timed.block_id}:{timed.id}"))
+        for beh in self.block.behaviours:
+            timed = self.timed.get(beh.id)
+            resource = BEHAVIOUR_TYPES[beh.type].resource
+            if timed is None or resource is None:
+                continue
+            start, end = timed.start, timed.end
+            clash = next((name for s, e, name in holders.get(resource, ())
+                          if start < e - EPSILON and s < end - EPSILON), None)
+            if clash is not None:
+                self.drop(beh.id, f"{resource} is already used by {clash} at that time")
+            else:
+                holders.setdefault(resource, []).append((start, end, f"{self.block.id}:{beh.id}"))

@@ -1,0 +1,155 @@
+"""The ``agentsim run conductor`` command.
+
+``agentsim run conductor [--config FILE] [--strategy S | --compare] [--seed N] [--out DIR] [--live]``
+runs the conductor scenario (the default configuration: a 4/4 piece with a 120 BPM target and an
+ensemble that starts and drags 10 % below it) and writes ``metrics.json``, ``tempo.png``,
+``timeline.png``, ``ensemble.wav``, ``conductor.bvh`` and ``feedback.jsonl`` to ``--out``. Without
+``--strategy`` the configuration's strategy runs (``best`` unless it says otherwise). ``--compare`` runs
+every strategy on the same seed, writes each into ``--out/<strategy>/`` (all files but the timeline) and
+prints a table. ``--live`` conducts what an input device plays, in real time, instead of the simulated
+ensemble.
+
+:func:`add_parser` adds the command to the ``run`` command's subparsers; :func:`main` runs it.
+Shipped configurations: ``configs/default.toml``, ``configs/waltz_3_4.toml``, ``configs/march_2_4.toml``
+and ``configs/falls_apart.toml`` (the conductor stops the piece). The module
+also runs on its own: ``python -m agentsim.scenarios.conductor.run --strategy best --seed 1``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from agentsim.core.errors import AgentsimError
+
+STRATEGY_NAMES = ("follow", "target", "lead", "best")
+DEFAULT_OUT = "out/conductor"
+
+
+def configure(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add the conductor command's arguments to ``parser``."""
+    parser.add_argument("--config", metavar="FILE",
+                        help="scenario configuration (TOML); default: scenarios/conductor/configs/default.toml")
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("--strategy", choices=STRATEGY_NAMES,
+                       help="where the strokes go: follow, target, lead or best (default: the configuration's, "
+                            "best)")
+    which.add_argument("--compare", action="store_true", help="run every strategy on the same seed and print a table")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the musicians' noise (default 0)")
+    parser.add_argument("--out", metavar="DIR", default=DEFAULT_OUT, help=f"output folder (default {DEFAULT_OUT})")
+    parser.add_argument("--live", action="store_true",
+                        help="conduct a live input device in real time instead of the simulated ensemble")
+    parser.add_argument("--device", metavar="DEVICE", help="--live: the input device (name or number; default: "
+                                                          "the system's default input)")
+    parser.add_argument("--seconds", type=float, metavar="S",
+                        help="--live: how long to listen (default: the piece's length at its tempo)")
+    return parser
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add ``conductor`` to the subparsers of the ``run`` command; returns its parser."""
+    parser = subparsers.add_parser(
+        "conductor", help="the virtual orchestra conductor leads a simulated ensemble back to tempo",
+        description="A virtual conductor beats time with BML conducting gestures pegged to anticipator beats, "
+                    "hears a simulated ensemble (FluidSynth audio through a causal beat tracker) and re-times "
+                    "its beats to lead the ensemble to the score's tempo. Writes metrics.json, tempo.png, "
+                    "timeline.png, ensemble.wav, conductor.bvh and feedback.jsonl to --out.")
+    parser.set_defaults(handler=main)
+    return configure(parser)
+
+
+def _summary_row(m: dict) -> str:
+    asy = m.get("ensemble_asynchrony_ms") or {}
+    ant = m.get("anticipator") or {}
+
+    def f(v, fmt):
+        return "-" if v is None else format(v, fmt)
+
+    recovered = "never" if m.get("beats_to_recover") is None else str(m["beats_to_recover"])
+    return (f"{m['strategy']:<8} {recovered:>9} {f(m.get('final_tempo_error_pct'), '+.2f'):>10} "
+            f"{f(asy.get('mean'), '.1f'):>8} {f(asy.get('sd'), '.1f'):>7} "
+            f"{f(ant.get('f_measure'), '.3f'):>6} {f(ant.get('mae_ms'), '.1f'):>7} "
+            f"{f(m.get('stopped_at_s'), '.1f') + ' s' if m.get('stopped') else '-':>8}")
+
+
+TABLE_HEADER = (f"{'strategy':<8} {'recovered':>9} {'final err%':>10} {'asy mean':>8} {'asy sd':>7} {'F':>6} "
+                f"{'MAE ms':>7} {'stopped':>8}")
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run ``agentsim run conductor`` with parsed ``args``; returns the exit status."""
+    from agentsim.scenarios.conductor.config import load_config
+    from agentsim.scenarios.conductor.scenario import collect_metrics, listen_live, simulate, write_outputs
+
+    config = load_config(args.config)  # a bad configuration fails here, before anything runs
+    out = Path(args.out)
+    if args.seconds is not None and not args.live:
+        raise AgentsimError("--seconds only applies to --live")
+    if args.live:
+        if args.compare:
+            raise AgentsimError("--compare cannot be used with --live (a live ensemble plays once)")
+        device = args.device
+        if device is not None and str(device).isdigit():
+            device = int(device)
+        started = time.perf_counter()
+        run = listen_live(config, args.strategy, args.seconds, device)
+        metrics = collect_metrics(run)
+        write_outputs(run, metrics, out)
+        _report(metrics, out, time.perf_counter() - started)
+        return 0
+    if args.device is not None:
+        raise AgentsimError("--device only applies to --live")
+    strategies = STRATEGY_NAMES if args.compare else (args.strategy or config.conductor.strategy,)
+    rows = []
+    for name in strategies:
+        started = time.perf_counter()
+        run = simulate(config, name, args.seed)
+        metrics = collect_metrics(run)
+        folder = out / name if args.compare else out
+        write_outputs(run, metrics, folder, pictures=not args.compare)
+        rows.append(metrics)
+        if not args.compare:
+            _report(metrics, folder, time.perf_counter() - started)
+        else:
+            print(f"{name}: {time.perf_counter() - started:.1f} s", file=sys.stderr)
+    if args.compare:
+        print(f"{config.piece.title}: target {config.piece.tempo:g} BPM, ensemble starts at "
+              f"{config.ensemble.start_bpm:g} BPM, seed {args.seed}")
+        print(TABLE_HEADER)
+        for m in rows:
+            print(_summary_row(m))
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "compare.json").write_text(json.dumps(rows, indent=2) + "\n")
+        print(f"written to {out}/<strategy>/ and {out / 'compare.json'}")
+    return 0
+
+
+def _report(metrics: dict, folder: Path, seconds: float) -> None:
+    print(TABLE_HEADER)
+    print(_summary_row(metrics))
+    extra = []
+    if metrics.get("louder_gestures"):
+        extra.append(f"{len(metrics['louder_gestures'])} 'play louder' gesture(s)")
+    if metrics.get("stopped"):
+        extra.append(f"stopped the piece at {metrics['stopped_at_s']:.2f} s (the tracker lost the beat)")
+    if extra:
+        print("; ".join(extra))
+    print(f"written to {folder} in {seconds:.1f} s")
+
+
+def _standalone(argv=None) -> int:
+    parser = configure(argparse.ArgumentParser(
+        prog="python -m agentsim.scenarios.conductor.run", description="The virtual orchestra conductor scenario."))
+    args = parser.parse_args(argv)
+    try:
+        return main(args)
+    except AgentsimError as exc:
+        print(f"agentsim: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(_standalone())

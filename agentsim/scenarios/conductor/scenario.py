@@ -1,0 +1,317 @@
+"""One run of the conductor scenario, simulated or live, and the files it writes.
+
+Simulated (:func:`simulate`): one SimPy clock drives the realizer (the conductor's BML), the ensemble's
+musicians and the audio. Every ``block_seconds`` the notes played so far are rendered by FluidSynth and
+pushed into the conductor's ears (the beat tracker); the conductor knows nothing else of the ensemble.
+Live (:func:`listen_live`): the ears listen to an input device in real time and the conductor conducts
+whatever it hears; there is no simulated ensemble and no ground truth.
+
+:func:`write_outputs` writes ``metrics.json``, ``tempo.png``, ``timeline.png``, ``ensemble.wav``,
+``conductor.bvh`` and ``feedback.jsonl``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import simpy
+
+from agentsim.core.errors import AgentsimError
+from agentsim.scenarios.conductor.config import DYNAMICS_DB, Piece, ScenarioConfig
+from agentsim.scenarios.conductor.conductor import Conductor
+from agentsim.scenarios.conductor.hearing import Ears
+from agentsim.scenarios.conductor.strategies import make_strategy
+
+#: Seconds rendered after the ensemble's last beat.
+TAIL_SECONDS = 1.0
+
+
+@dataclass
+class Run:
+    """Everything a finished run holds: its parts and what they recorded."""
+
+    config: ScenarioConfig
+    strategy_name: str
+    seed: int
+    realizer: object
+    ears: Ears
+    conductor: Conductor
+    strategy: object
+    ensemble: object = None
+    live: bool = False
+    wall_seconds: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+def _soundfont(config: ScenarioConfig) -> str:
+    from agentsim.music.ensemble import DEFAULT_SOUNDFONT
+
+    return config.audio.soundfont or DEFAULT_SOUNDFONT
+
+
+def _renderer(config: ScenarioConfig):
+    from agentsim.music.ensemble import FluidSynthRenderer
+    from agentsim.core.errors import AnticipatorError
+
+    programs = {m.channel: m.program for m in config.ensemble.musicians if m.program >= 0}
+    try:
+        return FluidSynthRenderer(config.audio.sample_rate, _soundfont(config), config.audio.gain,
+                                  reverb=config.audio.reverb, programs=programs)
+    except AnticipatorError as exc:
+        raise AgentsimError(str(exc)) from None
+
+
+def sound_check(config: ScenarioConfig) -> dict[str, float]:
+    """Expected RMS level (dBFS) of the ensemble at each marking of the piece.
+
+    Renders the first two bars of the score at its tempo and at each marking's nominal velocities (as a
+    recording of the piece played as marked would sound) and measures them as the conductor's ears do.
+    """
+    from agentsim.scenarios.conductor.ensemble import part_notes
+
+    piece = config.piece
+    markings = sorted({m for _, m in piece.dynamics} | {"mf"})
+    notes = part_notes(piece, [m.part for m in config.ensemble.musicians])
+    bars = min(2, piece.bars)
+    period = 60.0 / piece.tempo
+    seg = bars * piece.beats_per_bar * period
+    gap = 1.5
+    renderer = _renderer(config)
+    out = {}
+    try:
+        for k, marking in enumerate(markings):
+            t0 = 0.2 + k * (seg + gap)
+            scale = 10.0 ** (DYNAMICS_DB[marking] / 40.0)
+            for m in config.ensemble.musicians:
+                for beat in range(bars * piece.beats_per_bar):
+                    for note in notes[m.part][beat]:
+                        v = int(np.clip(round(note.velocity * scale), 1, 127))
+                        renderer.note(t0 + (beat + note.offset) * period, m.channel, note.key, v,
+                                      note.duration * period)
+        audio = renderer.render_until(0.2 + len(markings) * (seg + gap))
+    finally:
+        renderer.close()
+    sr = config.audio.sample_rate
+    for k, marking in enumerate(markings):
+        a = int((0.2 + k * (seg + gap)) * sr)
+        x = audio[a:a + int(seg * sr)].astype(np.float64)
+        ms = float(np.mean(x * x)) if x.size else 0.0
+        out[marking] = 10.0 * np.log10(ms) if ms > 0 else -120.0
+    return out
+
+
+def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int = 0) -> Run:
+    """Run the closed loop once, as fast as the computer allows; returns the finished :class:`Run`."""
+    from agentsim.core.clock import make_environment
+    from agentsim.realizer import Realizer
+    from agentsim.scenarios.conductor.ensemble import Ensemble
+
+    started = time.perf_counter()
+    name = strategy_name or config.conductor.strategy
+    reference = sound_check(config)
+    env = make_environment(False)
+    ens_cfg = config.ensemble
+    ears = Ears("band", sample_rate=config.audio.sample_rate, origin=ens_cfg.start_time - 0.1,
+                block_seconds=config.audio.block_seconds, **config.conductor.tracker_options())
+    strategy = make_strategy(name, config.piece, config.conductor, ears)
+    realizer = Realizer(env=env, anticipators=[ears, *strategy.anticipators])
+    renderer = _renderer(config)
+    ensemble = Ensemble(env, config, renderer, seed)
+    realizer.feedback.listen(ensemble.see)
+    conductor = Conductor(realizer, ears, strategy, config.piece, config.conductor, reference)
+    realizer.feedback.listen(conductor.see)
+    block = config.audio.block_seconds
+
+    def hear():
+        k = 0
+        end = None
+        while True:
+            k += 1
+            t = k * block
+            if t > env.now:
+                yield env.timeout(t - env.now)
+            ears.push(renderer.render_until(t))
+            if end is None and ensemble.finished.triggered:
+                end = env.now + TAIL_SECONDS
+            if end is not None and t >= end:
+                return
+
+    def finish():
+        yield env.process(hear())
+        pending = [r.ended for r in realizer.scheduler.all_runs if not r.ended.triggered]
+        if pending:
+            yield simpy.AllOf(env, pending) | env.timeout(5.0)
+
+    try:
+        env.run(until=env.process(finish()))
+    finally:
+        renderer.close()
+    run = Run(config, name, seed, realizer, ears, conductor, strategy, ensemble=ensemble)
+    run.wall_seconds = time.perf_counter() - started
+    run.extra["reference_db"] = reference
+    return run
+
+
+def live_piece(piece: Piece, seconds: float) -> Piece:
+    """The piece as conducted live: the score's first tempo and meter for as many bars as ``seconds`` allow."""
+    import dataclasses
+
+    bars = int(seconds * piece.tempo / 60.0 / piece.beats_per_bar) + 8
+    return dataclasses.replace(piece, bars=bars, tempo_changes=(), dynamics=((1, "mf"),))
+
+
+def listen_live(config: ScenarioConfig, strategy_name: str | None = None, seconds: float | None = None,
+                device=None) -> Run:
+    """Conduct what an input device plays, in real time, for ``seconds`` (default: the piece's length)."""
+    from agentsim.core.clock import make_environment
+    from agentsim.realizer import Realizer
+    from agentsim.anticipators.audio import DeviceSource
+
+    started = time.perf_counter()
+    name = strategy_name or config.conductor.strategy
+    piece = config.piece
+    if seconds is None:
+        seconds = float(piece.score_offsets()[-1]) + 4.0
+    if not seconds > 0:
+        raise AgentsimError("--seconds must be positive")
+    piece = live_piece(piece, seconds)
+    source = DeviceSource(device, config.audio.sample_rate, config.audio.block_seconds)
+    source.check()
+    env = make_environment(True)
+    ears = Ears("band", source=source, block_seconds=config.audio.block_seconds,
+                **config.conductor.tracker_options())
+    strategy = make_strategy(name, piece, config.conductor, ears)
+    realizer = Realizer(env=env, anticipators=[ears, *strategy.anticipators])
+    conductor = Conductor(realizer, ears, strategy, piece, config.conductor, None, downbeats_known=False)
+    realizer.feedback.listen(conductor.see)
+    env.run(until=seconds)
+    ears.stop()  # close the input stream: the interrupt ends the listening process
+    try:
+        env.run(until=seconds + 0.05)
+    except simpy.Interrupt:
+        pass
+    run = Run(config, name, 0, realizer, ears, conductor, strategy, live=True)
+    run.config = ScenarioConfig(piece, config.ensemble, config.audio, config.conductor, config.source)
+    run.wall_seconds = time.perf_counter() - started
+    return run
+
+
+# ---------------------------------------------------------------------------------------------- metrics
+def collect_metrics(run: Run) -> dict:
+    """The figures of a finished run (deterministic: no wall-clock times)."""
+    from agentsim.music.ensemble import beat_onset_offset
+    from agentsim.scenarios.conductor import metrics as M
+
+    config = run.config
+    piece = config.piece
+    conductor = run.conductor
+    ictus = dict(sorted(conductor.ictus.items()))
+    target = piece.target_bpm()
+    first = conductor.first_beat
+    out: dict = {
+        "strategy": run.strategy_name,
+        "seed": run.seed,
+        "live": run.live,
+        "config": config.source,
+        "piece": piece.title,
+        "meter": f"{piece.meter[0]}/{piece.meter[1]}",
+        "bars": piece.bars,
+        "target_bpm": piece.tempo,
+        "start_bpm": None if run.live else config.ensemble.start_bpm,
+    }
+    if run.live:
+        heard = run.ears.observed
+        n = max(heard) if heard else 0
+        beats = np.full(n, np.nan)
+        for b, t in heard.items():
+            beats[b - 1] = t
+        reference = beats
+        onsets = beats[None, :]
+        out["reference_beats"] = "heard onsets (live: no ground truth)"
+    else:
+        onsets = run.ensemble.onset_matrix()
+        beats = run.ensemble.beat_times()
+        reference = beats + beat_onset_offset(config.audio.sample_rate, _soundfont(config))
+        out["reference_beats"] = "mean onset of the musicians plus the renderer's beat onset offset"
+    target = np.resize(target, beats.size) if beats.size else target
+    if run.live and beats.size:
+        target = np.full(beats.size, piece.tempo)
+    summary = M.tempo_summary(beats, target, (first - 1) if first else beats.size)
+    early = M.local_tempo(beats)
+    measured_start = None
+    if first and np.isfinite(early[: max(first - 1, 0)]).any():
+        measured_start = round(float(np.nanmean(early[: max(first - 1, 0)])), 2)
+    out.update({
+        "ensemble_start_bpm_measured": measured_start,
+        "beats_to_recover": summary["beats_to_recover"],
+        "final_tempo_error_pct": summary["final_tempo_error_pct"],
+        "ensemble_asynchrony_ms": M.asynchrony(onsets, ictus),
+        "anticipator": M.anticipator_scores(run.ears.updates, reference),
+        "first_conducted_beat": first,
+        "join_time_s": None if conductor.join_time is None else round(conductor.join_time, 4),
+        "beats_conducted": len(ictus),
+        "louder_gestures": conductor.louder,
+        "stopped": conductor.stopped_at is not None,
+        "stopped_at_s": None if conductor.stopped_at is None else round(conductor.stopped_at, 4),
+        "warnings": len(run.realizer.feedback.warnings()),
+        "strategy_details": run.strategy.describe(),
+        "simulated_seconds": round(float(run.realizer.env.now), 3),
+    })
+    if not run.live:
+        out["ensemble_stopped_at_beat"] = run.ensemble.stopped_at_beat
+        out["reference_levels_db"] = {k: round(v, 2) for k, v in run.extra.get("reference_db", {}).items()}
+        out["bar_levels_db"] = conductor.levels
+    run.extra["tempo"] = summary["tempo"]
+    run.extra["beats"] = beats
+    run.extra["target"] = target
+    return _clean(out)
+
+
+def _clean(value):
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, (np.floating, float)):
+        v = float(value)
+        return None if not np.isfinite(v) else round(v, 6)
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True) -> Path:
+    """Write the run's files into the folder ``out`` (created if needed)."""
+    import soundfile
+
+    from agentsim.animation import evaluate_poses, plot_timeline, write_bvh
+    from agentsim.core.feedback import to_json
+    from agentsim.scenarios.conductor.metrics import plot_tempo
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    with open(out / "feedback.jsonl", "w") as f:
+        for item in run.realizer.feedback.items:
+            f.write(to_json(item) + "\n")
+    sr = run.ears.sample_rate
+    soundfile.write(str(out / "ensemble.wav"), run.ears.recording(), sr, subtype="PCM_16")
+    stream = evaluate_poses(run.realizer, fps=run.config.conductor.fps, seed=run.seed)
+    write_bvh(out / "conductor.bvh", stream)
+    if "tempo" not in run.extra:
+        collect_metrics(run)
+    events = [(g["time"], "louder") for g in run.conductor.louder]
+    if run.conductor.stopped_at is not None:
+        events.append((run.conductor.stopped_at, "stop"))
+    title = (f"{run.config.piece.title}: {run.strategy_name}, seed {run.seed} "
+             f"(recovered in {metrics.get('beats_to_recover')} beats)")
+    plot_tempo(out / "tempo.png", run.extra["beats"], run.extra["tempo"], run.extra["target"],
+               run.conductor.ictus, title, events)
+    if pictures:
+        plot_timeline(run.realizer, out / "timeline.png", stream=stream,
+                      title=f"conductor ({run.strategy_name}): behaviours, pegs and feedback")
+    return out

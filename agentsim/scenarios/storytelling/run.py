@@ -1,0 +1,401 @@
+"""``agentsim run storytelling``: tell a story with its gestures on the stressed syllables, and measure it.
+
+``main(args)`` reads the story (a ``.story`` file of the annotation format, a shipped story by name, or
+a Praat TextGrid with ``words`` and ``gestures`` tiers), compiles it to BML, realises it with an
+animator-time strategy under an event-delivery condition, and writes to ``--out``:
+
+=====================  ==============================================================================
+``metrics.json``       the figures: words, gestures, duration, strategy, sync error (p50, p95, max, ms)
+                       overall and per kind, snaps, stalls, warnings, wall time and its stages
+``narration.wav``      the speech as synthesised
+``story.TextGrid``     on the audio's axis: words, phones, gestures (planned), strokes (realised)
+``story.bvh``          the body's motion (clock axis: the audio starts at ``audio_start_s``)
+``timeline.png``       behaviours, phases, pegs and feedback of the first ``--window`` seconds
+``sync_errors.png``    every gesture's sync error over the whole story
+``feedback.jsonl``     the BML feedback, one JSON object per line
+``story.bml``          the BML block that was realised
+``compare.json``       with ``--compare``: the figures of every strategy on the same seed
+=====================  ==============================================================================
+
+Wall time counts everything from reading the story to the last file written except the first-time
+synthesis of the speech, which is cached on disk (``--cache``) and reported separately.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from collections import OrderedDict
+from dataclasses import replace
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from agentsim.core.errors import AgentsimError
+from agentsim.scenarios.storytelling.markup import ANCHORS, Story, StoryError, read_story
+from agentsim.scenarios.storytelling.telling import DEFAULT_DELIVERY, Telling, make_voice, syllable_times, tell
+
+__all__ = ["STORIES_DIR", "add_parser", "main", "resolve_story", "load_story", "shipped_stories",
+           "delivery_from_args", "write_outputs", "comparison_table"]
+
+#: Where the shipped stories live.
+STORIES_DIR = Path(__file__).resolve().parent / "stories"
+
+
+# ----------------------------------------------------------------------------------------------------
+# Stories.
+
+
+def shipped_stories() -> dict[str, Path]:
+    """The shipped stories by name (file stem)."""
+    return {p.stem: p for p in sorted(STORIES_DIR.glob("*.story"))}
+
+
+def resolve_story(spec: str | None) -> Path:
+    """The story file that ``spec`` names: a path, a shipped story's name, or (None) the longest shipped
+    story. Raises :class:`StoryError` with the known names if there is none."""
+    shipped = shipped_stories()
+    if spec is None:
+        if not shipped:
+            raise StoryError(f"no stories in {STORIES_DIR}")
+        return max(shipped.values(), key=lambda p: (len(read_story(p).words), p.name))
+    path = Path(spec).expanduser()
+    if path.is_file():
+        return path
+    stem = path.name[:-len(".story")] if path.name.endswith(".story") else path.name
+    if str(path) in (stem, f"{stem}.story") and stem in shipped:
+        return shipped[stem]
+    raise StoryError(f"no story file or shipped story {spec!r}; shipped stories: {', '.join(shipped) or 'none'}")
+
+
+def load_story(path: Path, scene: dict | None = None) -> Story:
+    """Read a story file, or a TextGrid with ``words`` and ``gestures`` tiers (whose extra targets come
+    from ``scene``)."""
+    if path.suffix.lower() == ".textgrid":
+        from agentsim.scenarios.storytelling.praat import import_textgrid
+
+        try:
+            return import_textgrid(path, scene=scene)
+        except StoryError as exc:
+            if "unknown target" in str(exc):
+                raise StoryError(f"{exc}; for a TextGrid, --scene names a story whose @scene lines declare "
+                                 f"them") from None
+            raise
+    story = read_story(path)
+    if scene:
+        story.scene = {**scene, **story.scene}
+    return story
+
+
+# ----------------------------------------------------------------------------------------------------
+# The command.
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    d = DEFAULT_DELIVERY
+    parser.add_argument("--story", metavar="NAME|FILE",
+                        help="a shipped story's name, a .story file or a TextGrid (default: the longest shipped story)")
+    parser.add_argument("--scene", metavar="NAME|FILE",
+                        help="take extra pointing and gaze targets from this story's @scene lines (for a TextGrid)")
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("--strategy", default="best", metavar="S", help="animator-time strategy (default: best)")
+    which.add_argument("--compare", action="store_true",
+                       help="tell the story with every strategy on the same seed, print a table and write "
+                            "compare.json (the other outputs are those of best)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the playback start and event channel (0)")
+    parser.add_argument("--out", metavar="DIR", default="storytelling_out", help="output directory (storytelling_out)")
+    parser.add_argument("--anchor", choices=ANCHORS, default="stress",
+                        help="how strokes reach the stressed syllable: a phoneme-level mark (stress), the word's mark "
+                             "plus the planned offset (offset), or the word onset alone (word); default stress")
+    parser.add_argument("--timing", choices=["tts", "linear"], default="tts",
+                        help="what the planner knows: the synthesiser's timeline (tts) or Chang's linear model")
+    parser.add_argument("--tts", choices=["espeak", "builtin"], default="espeak", help="speech backend (espeak)")
+    parser.add_argument("--cache", metavar="DIR", help="cache of synthesised speech (default ~/.cache/agentsim/tts)")
+    parser.add_argument("--no-cache", action="store_true", help="synthesise again; write no cache")
+    parser.add_argument("--fps", type=float, default=60.0, help="frame rate of story.bvh (60)")
+    parser.add_argument("--window", type=float, default=30.0, help="seconds drawn in timeline.png (30)")
+    condition = parser.add_argument_group("event delivery (default: the condition of the speech-sync table)")
+    condition.add_argument("--latency", type=float, default=d.latency, help=f"playback latency, s ({d.latency:g})")
+    condition.add_argument("--start-jitter", type=float, default=d.start_jitter,
+                           help=f"unknown extra latency, s ({d.start_jitter:g})")
+    condition.add_argument("--drift", type=float, default=d.drift_ppm, help=f"audio clock drift, ppm ({d.drift_ppm:g})")
+    condition.add_argument("--delay", type=float, default=d.delay, help=f"base event delay, s ({d.delay:g})")
+    condition.add_argument("--jitter", type=float, default=d.jitter, help=f"mean extra event delay, s ({d.jitter:g})")
+    condition.add_argument("--burst", type=float, default=d.burst_probability,
+                           help=f"probability an event stalls the channel ({d.burst_probability:g})")
+    condition.add_argument("--burst-hold", type=float, default=d.burst_hold,
+                           help=f"longest stall, s ({d.burst_hold:g})")
+    condition.add_argument("--loss", type=float, default=d.loss, help=f"probability an event is lost ({d.loss:g})")
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add ``storytelling`` to the subcommands of ``agentsim run``; its handler is :func:`main`."""
+    parser = subparsers.add_parser(
+        "storytelling", help="tell a story with gestures on the stressed syllables and measure the sync",
+        description="Tell an annotated story (beats, pointing, iconic gestures, nods, gaze shifts, eyebrow "
+                    "raises on the stressed syllables of their words) through the realizer while the speech's "
+                    "progress events arrive late, scattered and in bursts; write metrics.json, narration.wav, "
+                    "story.TextGrid, story.bvh, timeline.png and feedback.jsonl to --out.")
+    _add_arguments(parser)
+    parser.set_defaults(handler=main)
+    return parser
+
+
+def delivery_from_args(args: argparse.Namespace):
+    """The event-delivery condition the options ask for (:class:`AgentsimError` if it makes no sense)."""
+    try:
+        return DEFAULT_DELIVERY.with_(latency=args.latency, start_jitter=args.start_jitter, drift_ppm=args.drift,
+                                      delay=args.delay, jitter=args.jitter, burst_probability=args.burst,
+                                      burst_hold=args.burst_hold, loss=args.loss)
+    except ValueError as exc:
+        raise AgentsimError(f"bad event-delivery condition: {exc}") from None
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run ``agentsim run storytelling`` with parsed ``args``; returns the exit status.
+
+    Raises :class:`AgentsimError` (a missing story, a bad tag, an unknown strategy, a bad condition)
+    before anything is synthesised or realised.
+    """
+    from agentsim.speech.animator_time import STRATEGIES
+
+    started = time.perf_counter()
+    strategy = getattr(args, "strategy", "best") or "best"
+    if strategy not in STRATEGIES:
+        raise AgentsimError(f"unknown strategy {strategy!r}; known: {', '.join(sorted(STRATEGIES))}")
+    if not args.fps > 0:
+        raise AgentsimError("--fps must be positive")
+    if not args.window > 0:
+        raise AgentsimError("--window must be positive")
+    delivery = delivery_from_args(args)
+    scene = read_story(resolve_story(args.scene)).scene if getattr(args, "scene", None) else None
+    story = load_story(resolve_story(args.story), scene)
+    out = Path(args.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise AgentsimError(f"cannot create the output directory {str(out)!r}: {exc}") from None
+    voice = make_voice(args.tts, cache_dir=args.cache, cache=not args.no_cache)
+    cache = voice.backend
+
+    strategies = list(STRATEGIES) if args.compare else [strategy]
+    tellings: dict[str, Telling] = {}
+    for name in strategies:
+        tellings[name] = tell(story, strategy=name, delivery=delivery, seed=args.seed, voice=voice,
+                              anchor=args.anchor, timing=args.timing)
+    telling = tellings[strategy]
+    stages = write_outputs(telling, out, fps=args.fps, window=args.window, seed=args.seed)
+    synthesis = cache.synthesis_seconds
+    wall = time.perf_counter() - started - synthesis
+    simulated_others = sum(t.wall_seconds for n, t in tellings.items() if n != strategy)
+
+    metrics = telling.metrics()
+    metrics["wall_seconds"] = wall - simulated_others
+    metrics["wall_fraction_of_story"] = metrics["wall_seconds"] / metrics["duration_s"]
+    metrics["synthesis_seconds"] = synthesis
+    metrics["cached"] = cache.key(story.text) not in cache.synthesised  # the story's speech came from the cache
+    metrics["cache_load_seconds"] = cache.load_seconds
+    metrics["stages_seconds"] = OrderedDict([("simulation", telling.wall_seconds)] + list(stages.items()))
+    metrics["fps"] = args.fps
+    metrics.update(telling.extra)
+    if args.compare:
+        rows = OrderedDict((name, _row(t)) for name, t in tellings.items())
+        (out / "compare.json").write_text(json.dumps(_clean(OrderedDict(
+            story=story.title, seed=args.seed, anchor=args.anchor, timing=args.timing,
+            delivery=metrics["delivery"], strategies=rows)), indent=2) + "\n")
+        metrics["compare_wall_seconds"] = wall
+        print(comparison_table(rows))
+    (out / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
+    e = metrics["sync_error_ms"]
+    print(f"{story.title}: {metrics['words']} words, {metrics['gestures']} gestures, "
+          f"{metrics['duration_s']:.1f} s of speech; strategy {strategy}: sync error p50 {e['p50']:.2f} ms, "
+          f"p95 {e['p95']:.2f} ms, max {e['max']:.2f} ms; {metrics['snaps']} snaps, {metrics['warnings']} warnings, "
+          f"{metrics['missed']} missed; wall {metrics['wall_seconds']:.2f} s "
+          f"({100 * metrics['wall_fraction_of_story']:.2f} % of the story)"
+          + (f", first synthesis {synthesis:.2f} s" if synthesis else "") + f"; written to {out}/")
+    return 0
+
+
+def _row(t: Telling) -> "OrderedDict":
+    m = t.metrics()
+    return OrderedDict(gestures=m["gestures"], missed=m["missed"], warnings=m["warnings"],
+                       p50_ms=m["sync_error_ms"]["p50"], p95_ms=m["sync_error_ms"]["p95"],
+                       max_ms=m["sync_error_ms"]["max"], signed_mean_ms=m["sync_error_ms"]["signed_mean"],
+                       snaps=m["snaps"], stall_s=m["stall_s"], simulation_s=t.wall_seconds)
+
+
+def comparison_table(rows: dict) -> str:
+    """A plain-text table of the strategies' figures (one row per strategy)."""
+    head = (f"{'strategy':<14}{'gestures':>9}{'missed':>8}{'p50 ms':>10}{'p95 ms':>10}{'max ms':>10}"
+            f"{'snaps':>8}{'stall s':>9}{'sim s':>8}")
+    lines = [head, "-" * len(head)]
+    for name, r in rows.items():
+        lines.append(f"{name:<14}{r['gestures']:>9d}{r['missed']:>8d}{r['p50_ms']:>10.2f}{r['p95_ms']:>10.2f}"
+                     f"{r['max_ms']:>10.2f}{r['snaps']:>8d}{r['stall_s']:>9.2f}{r['simulation_s']:>8.2f}")
+    return "\n".join(lines)
+
+
+def _clean(value):
+    """``value`` with NaN and infinities as None and numpy scalars as Python numbers (for JSON)."""
+    if isinstance(value, dict):
+        return OrderedDict((k, _clean(v)) for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, (np.floating, float)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+# ----------------------------------------------------------------------------------------------------
+# Outputs.
+
+
+def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float = 30.0,
+                  seed: int = 0) -> "OrderedDict[str, float]":
+    """Write a telling's files (all but ``metrics.json``) to ``out``; returns the wall seconds of each
+    stage."""
+    from agentsim.animation import evaluate_poses, write_bvh
+    from agentsim.core.feedback import to_json
+    from agentsim.scenarios.storytelling.praat import export_textgrid
+    from agentsim.speech.exports import write_wav
+
+    stages: OrderedDict[str, float] = OrderedDict()
+
+    def stage(name, started):
+        stages[name] = time.perf_counter() - started
+        return time.perf_counter()
+
+    t = time.perf_counter()
+    (out / "story.bml").write_text(telling.bml)
+    with open(out / "feedback.jsonl", "w") as f:
+        for item in telling.realizer.feedback.items:
+            f.write(to_json(item) + "\n")
+    t = stage("feedback", t)
+    stream = evaluate_poses(telling.realizer, fps=fps, seed=seed, scene=telling.story.scene)
+    t = stage("poses", t)
+    write_bvh(out / "story.bvh", stream)
+    t = stage("bvh", t)
+    telling.extra["motion_strokes"] = motion_strokes(telling, stream)
+    t = stage("motion check", t)
+    utterance = telling.utterance
+    if utterance.audio is not None:
+        write_wav(out / "narration.wav", utterance)
+    t = stage("wav", t)
+    playback = telling.playback
+    _, planned, _ = syllable_times(telling.story, utterance)
+    realised = (telling.passed - playback.t0) / playback.scale  # audio axis
+    export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, realised, telling.ids)
+    t = stage("textgrid", t)
+    plot_window(telling, out / "timeline.png", stream, window)
+    plot_errors(telling, out / "sync_errors.png")
+    stage("plots", t)
+    return stages
+
+
+def motion_strokes(telling: Telling, stream) -> "OrderedDict":
+    """Where the evaluated motion has its strokes (the wrist's lowest point, the head's first extreme,
+    the arm's arrival at the target) against the stroke feedback: how many were measured, how many kept
+    their arm or head through the stroke (``intact``: no other behaviour took it over meanwhile), and the
+    absolute difference of the intact ones in ms (between frames where the extreme can be interpolated)."""
+    from agentsim.animation.analysis import measure_strokes
+
+    measures = measure_strokes(stream, telling.realizer.feedback.sync_times())
+    intact = [m for m in measures if m.intact]
+    error = np.abs([m.refined_error for m in intact]) * 1000.0
+    summary = OrderedDict(measured=len(measures), intact=len(intact),
+                          taken_over=[f"{m.behaviour} ({m.side})" for m in measures if not m.intact])
+    if len(error):
+        summary.update(p50_ms=float(np.percentile(error, 50)), p95_ms=float(np.percentile(error, 95)),
+                       max_ms=float(error.max()))
+    return summary
+
+
+class _ClippedTimed:
+    """A timed behaviour seen up to a time: later sync points are unknown (not drawn)."""
+
+    def __init__(self, timed, t_end: float):
+        self._timed = timed
+        self._t_end = t_end
+
+    def __getattr__(self, name):
+        return getattr(self._timed, name)
+
+    def times(self):
+        return [t if t is not None and t <= self._t_end else None for t in self._timed.times()]
+
+
+def plot_window(telling: Telling, png: Path, stream, window: float = 30.0) -> Path:
+    """``plot_timeline`` of the behaviours that start in the first ``window`` seconds, with the poses of
+    that window (a whole story would need one row per gesture, hundreds of rows)."""
+    from agentsim.animation import plot_timeline
+
+    realizer = telling.realizer
+    runs = [SimpleNamespace(id=run.id, timed=[_ClippedTimed(tb, window) for tb in run.timed
+                                              if tb.times()[0] is not None and tb.times()[0] < window])
+            for run in realizer.scheduler.all_runs]
+    view = SimpleNamespace(scheduler=SimpleNamespace(all_runs=runs),
+                           feedback=SimpleNamespace(items=[f for f in realizer.feedback.items
+                                                           if f.get("globalTime", math.inf) <= window]))
+    n = int(np.searchsorted(stream.times, window, side="right"))
+    part = replace(stream, times=stream.times[:n], values=stream.values[:n], positions=stream.positions[:n],
+                   writers=stream.writers[:n] if stream.writers is not None else None)
+    total = float(telling.utterance.duration)
+    return plot_timeline(view, png, stream=part, width=16.0,
+                         title=f"{telling.story.title}: the first {window:g} s of {total:.0f} s "
+                               f"(strategy {telling.strategy})")
+
+
+def plot_errors(telling: Telling, png: Path) -> Path:
+    """Every gesture's sync error (ms) against when it was heard, by kind, with the p95 band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = np.isfinite(telling.passed)
+    heard = telling.heard[ok]
+    errors = 1000.0 * (telling.passed[ok] - heard)
+    kinds = np.array([g.kind for g in telling.story.gestures])[ok]
+    fig, ax = plt.subplots(figsize=(12, 3.6))
+    for kind in dict.fromkeys(kinds):
+        sel = kinds == kind
+        ax.plot(heard[sel], errors[sel], ".", markersize=4, label=f"{kind} ({int(sel.sum())})")
+    if len(errors):
+        p95 = float(np.percentile(np.abs(errors), 95))
+        ax.axhspan(-p95, p95, color="#deebf7", zorder=0, label=f"|error| <= p95 = {p95:.1f} ms")
+    ax.axhline(0.0, color="black", linewidth=0.6)
+    ax.set_xlabel("when the stressed syllable was heard (s)")
+    ax.set_ylabel("stroke - syllable (ms)")
+    ax.set_title(f"{telling.story.title}: sync error of {len(errors)} gestures (strategy {telling.strategy})")
+    ax.legend(fontsize=7, ncol=5, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
+
+
+# ----------------------------------------------------------------------------------------------------
+
+
+def _standalone(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m agentsim.scenarios.storytelling.run",
+                                     description="Tell a story with gestures on the stressed syllables.")
+    _add_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        return main(args)
+    except AgentsimError as exc:
+        print(f"agentsim: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(_standalone())
