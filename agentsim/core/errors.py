@@ -39,11 +39,15 @@ class ScheduleError(AgentsimError):
     """A behaviour cannot be given the timing asked of it."""
 
 
-class SpeechBackendUnavailable(AgentsimError):
-    """A text-to-speech backend cannot run here, for instance because its system library is not installed.
+class Unavailable(AgentsimError):
+    """Something the work needs is missing here: a system library, a program, a soundfont, a device.
 
-    The message says what to install.
+    The message says what to install or set, and it is raised before the work starts.
     """
+
+
+class SpeechBackendUnavailable(Unavailable):
+    """A text-to-speech backend cannot run here, for instance because its system library is not installed."""
 
 
 class AnticipatorError(AgentsimError):

@@ -1,0 +1,172 @@
+"""The package layers: every module's imports point down or sideways, never up, and never in a circle.
+
+The layers, lowest first (the README's "Layout" says the same in prose):
+
+* core: the clock, errors, PegBoard, block model, plan, solver, scheduler, feedback, anticipator
+  interface and recording;
+* libraries that know nothing of the realizer: reading BML, speech, beats, music, animation;
+* the realizer's parts: engines and anticipators;
+* the realizer, which wires them together;
+* scenarios, which use the realizer;
+* the command line.
+
+Every import statement counts, including those inside functions and under ``TYPE_CHECKING``: an
+import that is only deferred is still a dependency.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGE = ROOT / "agentsim"
+
+LAYERS: list[tuple[str, tuple[str, ...]]] = [
+    ("core", ("agentsim", "agentsim.core")),
+    ("libraries", ("agentsim.bml", "agentsim.speech", "agentsim.beats", "agentsim.music", "agentsim.animation")),
+    ("realizer parts", ("agentsim.engines", "agentsim.anticipators")),
+    ("realizer", ("agentsim.realizer",)),
+    ("scenarios", ("agentsim.scenarios",)),
+    ("command line", ("agentsim.cli", "agentsim.__main__")),
+]
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+MODULES = {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def unit_of(module: str) -> str:
+    """The package (or top module) of the layer table that a module belongs to: the longest match."""
+    best = ""
+    for _, units in LAYERS:
+        for unit in units:
+            if (module == unit or module.startswith(unit + ".")) and len(unit) > len(best):
+                best = unit
+    return best
+
+
+RANK = {unit: rank for rank, (_, units) in enumerate(LAYERS) for unit in units}
+
+
+def imports_of(module: str) -> set[str]:
+    """The agentsim modules that ``module`` imports (a package's ``__init__`` counts as the package)."""
+    path = MODULES[module]
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                origin = ".".join(base + ([node.module] if node.module else []))
+            else:
+                origin = node.module or ""
+            names = [origin] + [f"{origin}.{a.name}" for a in node.names]
+        else:
+            continue
+        for name in names:
+            while name and name not in MODULES:
+                name = name.rpartition(".")[0]
+            if name and name != module:
+                found.add(name)
+    return found
+
+
+GRAPH = {m: imports_of(m) for m in MODULES}
+
+
+def test_every_module_has_a_layer():
+    assert [m for m in MODULES if not unit_of(m)] == []
+
+
+def test_no_import_points_up():
+    upward = []
+    for module, targets in GRAPH.items():
+        for target in targets:
+            source_unit, target_unit = unit_of(module), unit_of(target)
+            if RANK[target_unit] > RANK[source_unit]:
+                upward.append(f"{module} ({source_unit}) imports {target} ({target_unit})")
+    assert upward == []
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one node (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on_stack: set[str] = set()
+    stack: list[str] = []
+    found: list[list[str]] = []
+    counter = 0
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is None:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    component = []
+                    while True:
+                        top = stack.pop()
+                        on_stack.discard(top)
+                        component.append(top)
+                        if top == node:
+                            break
+                    if len(component) > 1:
+                        found.append(sorted(component))
+            elif child not in index:
+                index[child] = low[child] = counter
+                counter += 1
+                stack.append(child)
+                on_stack.add(child)
+                work.append((child, iter(sorted(graph.get(child, ())))))
+            elif child in on_stack:
+                low[node] = min(low[node], index[child])
+    return found
+
+
+def test_no_import_cycle_between_modules():
+    assert _cycles(GRAPH) == []
+
+
+def test_no_import_cycle_between_packages():
+    units: dict[str, set[str]] = {}
+    for module, targets in GRAPH.items():
+        source = unit_of(module)
+        units.setdefault(source, set()).update(unit_of(t) for t in targets if unit_of(t) != source)
+    assert _cycles(units) == []
+
+
+def test_the_checks_catch_what_they_are_meant_to():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert unit_of("agentsim.core.scheduler") == "agentsim.core"
+    assert unit_of("agentsim.cli.speech") == "agentsim.cli"
+    assert RANK[unit_of("agentsim.engines.speech")] > RANK[unit_of("agentsim.speech.backend")]
+    assert "agentsim.core.pegboard" in GRAPH["agentsim.core.plan"]
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_module_says_what_it_is(module):
+    """Every module opens with a docstring (one sentence at least) saying what lives there."""
+    tree = ast.parse(MODULES[module].read_text(encoding="utf-8"))
+    assert ast.get_docstring(tree), f"{module} has no docstring"
