@@ -6,14 +6,17 @@ from typing import Iterable
 
 import simpy
 
+from agentsim.bml.parser import guess_block_id, parse_bml
 from agentsim.core.block import Block
 from agentsim.core.clock import make_environment
+from agentsim.core.errors import BMLError
+from agentsim.core.feedback import FeedbackLog
+from agentsim.core.pegboard import PegBoard
+from agentsim.core.scheduler import FRAME, Scheduler
+from agentsim.core.timed import BlockRun
 from agentsim.engines.animation import AnimationEngine
 from agentsim.engines.speech import SpeechConfig, SpeechEngine
 from agentsim.engines.wait import WaitEngine
-from agentsim.core.feedback import FeedbackLog
-from agentsim.core.pegboard import PegBoard
-from agentsim.core.scheduler import BlockRun, Scheduler
 from agentsim.speech.backend import TTSBackend
 
 
@@ -33,22 +36,27 @@ class Realizer:
     speech : SpeechConfig, optional
         How speech audio and its progress events meet the animation (animator-time strategy, event
         delivery, what the planner knows); by default the audio plays exactly as planned.
+    prediction_tolerance : float
+        A behaviour is predicted again when one of its sync points moved by more than this (seconds).
     """
 
     def __init__(self, env: simpy.Environment | None = None, realtime: bool = False,
-                 tts: TTSBackend | None = None, anticipators: Iterable = (), speech: SpeechConfig | None = None):
+                 tts: TTSBackend | None = None, anticipators: Iterable = (), speech: SpeechConfig | None = None,
+                 prediction_tolerance: float = FRAME):
         self.env = env if env is not None else make_environment(realtime)
         self.board = PegBoard()
         self.feedback = FeedbackLog()
         if tts is None:
             from agentsim.speech.builtin import BuiltinBackend
             tts = BuiltinBackend()
-        self.engines = [
-            SpeechEngine(self.env, None, tts, speech),
-            AnimationEngine(self.env, None),
-            WaitEngine(self.env, None),
-        ]
-        self.scheduler = Scheduler(self.env, self.board, self.engines, self.feedback)
+        self.scheduler = Scheduler(self.env, self.board, self.feedback, prediction_tolerance)
+        context = self.scheduler.context
+        self.speech = SpeechEngine(context, tts, speech)
+        self.animation = AnimationEngine(context)
+        self.wait = WaitEngine(context)
+        self.engines = [self.speech, self.animation, self.wait]
+        for engine in self.engines:
+            self.scheduler.add_engine(engine)
         self._submissions: list[simpy.Event] = []
         for anticipator in anticipators:
             self.add_anticipator(anticipator)
@@ -58,8 +66,21 @@ class Realizer:
         self.scheduler.add_anticipator(anticipator)
 
     def submit(self, bml: str | bytes | Block, source: str = "") -> BlockRun | None:
-        """Submit a BML block now."""
-        return self.scheduler.submit(bml, source)
+        """Submit a BML block now (XML text or a parsed block). Returns its run, or None if it was refused.
+
+        A document that cannot be read is refused with one PARSING_FAILURE warning (with line and column).
+        """
+        if isinstance(bml, Block):
+            block = bml
+        else:
+            try:
+                block = parse_bml(bml)
+            except BMLError as exc:
+                where = f" in {source}" if source else ""
+                self.scheduler.warn(guess_block_id(bml), "PARSING_FAILURE", f"block refused{where}: {exc}", "agent",
+                                    line=exc.line, column=exc.column)
+                return None
+        return self.scheduler.submit(block, source)
 
     def submit_at(self, time: float, bml: str | bytes | Block, source: str = "") -> simpy.Process:
         """Submit a BML block at simulated time ``time`` (seconds)."""
@@ -74,6 +95,11 @@ class Realizer:
         self._submissions.append(process)
         return process
 
+    def all_ended(self) -> simpy.Process:
+        """An event that happens when every block submitted (or due to be submitted) so far has ended,
+        and every block submitted meanwhile too."""
+        return self.env.process(self._all_done())
+
     def _all_done(self):
         yield simpy.AllOf(self.env, self._submissions)
         while True:
@@ -84,7 +110,7 @@ class Realizer:
 
     def run(self, until: float | None = None) -> None:
         """Run until every submitted block has ended, or until simulated time ``until``."""
-        done = self.env.process(self._all_done())
+        done = self.all_ended()
         if until is not None:
             done = done | self.env.timeout(max(0.0, until - self.env.now))
         self.env.run(until=done)

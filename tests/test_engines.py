@@ -8,7 +8,8 @@ import pytest
 
 from agentsim.core.clock import make_environment
 from agentsim.engines.animation import BEAT, NOD, motion_state
-from agentsim.core.plan import ScheduleError, stretch_times
+from agentsim.core.engine import stretch_times
+from agentsim.core.errors import ScheduleError
 from agentsim.realizer import Realizer
 from conftest import Result, realize
 

@@ -162,7 +162,7 @@ def test_the_checks_catch_what_they_are_meant_to():
     assert unit_of("agentsim.core.scheduler") == "agentsim.core"
     assert unit_of("agentsim.cli.speech") == "agentsim.cli"
     assert RANK[unit_of("agentsim.engines.speech")] > RANK[unit_of("agentsim.speech.backend")]
-    assert "agentsim.core.pegboard" in GRAPH["agentsim.core.plan"]
+    assert "agentsim.core.pegboard" in GRAPH["agentsim.core.timed"]
 
 
 @pytest.mark.parametrize("module", sorted(MODULES))

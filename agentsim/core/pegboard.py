@@ -16,7 +16,9 @@ from typing import Callable
 _generation = 0
 
 
-def _bump() -> None:
+def invalidate_times() -> None:
+    """Forget every cached peg time: call it when a :class:`ComputedPeg`'s source changed (a speech's
+    animator time learnt something), since no ``set`` tells the pegs tied to it."""
     global _generation
     _generation += 1
 
@@ -43,7 +45,7 @@ class TimePeg:
         if time == self._time:
             return
         self._time = time
-        _bump()
+        invalidate_times()
         if self.board is not None:
             self.board.moved(self)
 
@@ -99,7 +101,7 @@ class OffsetPeg(TimePeg):
         """Change the offset by ``delta`` seconds, moving this peg and all tied to it."""
         if delta:
             self.offset += delta
-            _bump()
+            invalidate_times()
             if self.board is not None:
                 self.board.moved(self)
 
@@ -107,7 +109,7 @@ class OffsetPeg(TimePeg):
         """Tie this peg to another ``base`` at ``offset``."""
         self.base = base
         self.offset = offset
-        _bump()
+        invalidate_times()
         if self.board is not None:
             self.board.moved(self)
 
@@ -124,6 +126,23 @@ class OffsetPeg(TimePeg):
         return peg
 
 
+class ComputedPeg(TimePeg):
+    """A peg whose time is computed from something else (a behaviour's timing, a speech's animator time).
+
+    Subclasses define the ``time`` property; the peg cannot be set. Whoever changes its source calls
+    :func:`invalidate_times` and reports the move (an engine through its context).
+    """
+
+    __slots__ = ()
+
+    @property
+    def time(self) -> float | None:
+        raise NotImplementedError
+
+    def set(self, time: float | None) -> None:
+        raise ValueError(f"{self.name} is computed from its source and cannot be moved directly")
+
+
 class PegBoard:
     """The shared board of time pegs: block pegs, anticipator pegs and named behaviour sync pegs.
 
@@ -133,8 +152,9 @@ class PegBoard:
 
     def __init__(self) -> None:
         self.block_pegs: dict[str, TimePeg] = {}
-        self.sync_pegs: dict[tuple[str, str, str], tuple[TimePeg, float]] = {}
-        self._behaviours: dict[tuple[str, str], tuple[list[str], Callable[[int], TimePeg]]] = {}
+        # block id -> {(behaviour id, sync id): (peg, offset)}, and block id -> {behaviour id: ...}
+        self._sync_pegs: dict[str, dict[tuple[str, str], tuple[TimePeg, float]]] = {}
+        self._behaviours: dict[str, dict[str, tuple[list[str], Callable[[int], TimePeg]]]] = {}
         self._listeners: list[Callable[[TimePeg], None]] = []
         self.muted = 0
 
@@ -142,33 +162,39 @@ class PegBoard:
         """The peg standing for the start of block ``block_id`` (created on first use)."""
         peg = self.block_pegs.get(block_id)
         if peg is None:
-            peg = TimePeg(time, name=f"{block_id}:start", board=self)
-            self.block_pegs[block_id] = peg
+            peg = self.new_block_peg(block_id, time)
+        return peg
+
+    def new_block_peg(self, block_id: str, time: float | None) -> TimePeg:
+        """A new peg for the start of block ``block_id``, replacing any earlier block of that id."""
+        peg = TimePeg(time, name=f"{block_id}:start", board=self)
+        self.block_pegs[block_id] = peg
         return peg
 
     def register_behaviour(self, block_id: str, behaviour_id: str, sync_ids: list[str],
                            peg_for: Callable[[int], TimePeg]) -> None:
         """Make every sync point of a behaviour findable; ``peg_for(i)`` makes the peg of sync ``i`` when
         another block first asks for it."""
-        self._behaviours[(block_id, behaviour_id)] = (sync_ids, peg_for)
+        self._behaviours.setdefault(block_id, {})[behaviour_id] = (sync_ids, peg_for)
 
     def find_sync(self, block_id: str, behaviour_id: str, sync_id: str) -> tuple[TimePeg, float] | None:
         """Where ``block:behaviour:sync`` is: a peg and an offset (time = ``peg.time + offset``)."""
-        found = self.sync_pegs.get((block_id, behaviour_id, sync_id))
-        if found is None and (block_id, behaviour_id) in self._behaviours:
-            sync_ids, peg_for = self._behaviours[(block_id, behaviour_id)]
-            if sync_id in sync_ids:
-                found = self.sync_pegs[(block_id, behaviour_id, sync_id)] = (peg_for(sync_ids.index(sync_id)), 0.0)
+        pegs = self._sync_pegs.setdefault(block_id, {})
+        found = pegs.get((behaviour_id, sync_id))
+        if found is None:
+            registered = self._behaviours.get(block_id, {}).get(behaviour_id)
+            if registered is not None and sync_id in registered[0]:
+                sync_ids, peg_for = registered
+                found = pegs[(behaviour_id, sync_id)] = (peg_for(sync_ids.index(sync_id)), 0.0)
         return found
 
     def forget_block(self, block_id: str) -> None:
         """Forget where the sync points of a block are (pegs already handed out stay valid)."""
-        for key in [k for k in self.sync_pegs if k[0] == block_id]:
-            del self.sync_pegs[key]
-        for key in [k for k in self._behaviours if k[0] == block_id]:
-            del self._behaviours[key]
+        self._sync_pegs.pop(block_id, None)
+        self._behaviours.pop(block_id, None)
 
     def on_move(self, listener: Callable[[TimePeg], None]) -> None:
+        """Call ``listener(peg)`` whenever a peg is moved (outside :meth:`quiet`)."""
         self._listeners.append(listener)
 
     @contextlib.contextmanager
@@ -181,6 +207,7 @@ class PegBoard:
             self.muted -= 1
 
     def moved(self, peg: TimePeg) -> None:
+        """``peg`` was moved: tell the listeners (unless quiet)."""
         if self.muted:
             return
         for listener in self._listeners:

@@ -1,26 +1,34 @@
 """The scheduler: BML blocks from submission to end, composition, re-timing and feedback.
 
-It parses each block, has the :class:`~agentsim.core.solver.BlockSolver` tie its behaviours to time pegs,
-hands the timed behaviours to the engines' planners and starts the block when its composition allows
-(MERGE: now; APPEND: when every earlier block has ended; REPLACE: after ending every earlier block).
-When a peg moves while a plan plays, every behaviour tied to it is re-timed through its pegs, the
-planners are asked which behaviours became invalid, those are dropped with a warning, and a new
-prediction is sent.
+It has the :class:`~agentsim.core.solver.BlockSolver` tie each block's behaviours to time pegs, hands the
+timed behaviours to the engines' planners and starts the block when its composition allows (MERGE: now;
+APPEND: when every earlier block has ended; REPLACE: after ending every earlier block).
+
+Every peg movement, whatever moved it (an anticipator, a speech's animator time, a block starting
+later than planned), goes through one entry point, :meth:`Scheduler.pegs_moved`. Once per instant, after
+everything that moved pegs at that instant, :meth:`Scheduler.retime` asks the planners which of the
+affected behaviours became invalid, drops those with a warning, sends predictionFeedback for the
+behaviours whose predicted timing moved by more than the prediction tolerance, and wakes the players.
 """
 
 from __future__ import annotations
 
 import functools
+from typing import Iterable
 
 import simpy
 
 from agentsim.core import feedback as fb
 from agentsim.core.block import Block
-from agentsim.bml.parser import guess_block_id, parse_bml
-from agentsim.core.errors import BMLError
-from agentsim.core.pegboard import OffsetPeg, PegBoard, TimePeg
-from agentsim.core.plan import EPSILON, Engine, ScheduleError, SyncPeg, TimedBehaviour
+from agentsim.core.engine import Engine, EngineContext
+from agentsim.core.errors import ScheduleError
+from agentsim.core.pegboard import PegBoard, TimePeg, invalidate_times
 from agentsim.core.solver import BlockSolver
+from agentsim.core.timed import EPSILON, BlockRun, SyncPeg, TimedBehaviour
+
+#: Predictions are sent again for a behaviour when one of its sync points moved by more than this
+#: (seconds): one frame at 60 frames per second.
+FRAME = 1.0 / 60.0
 
 
 def _start_time(timed: TimedBehaviour) -> float:
@@ -28,44 +36,99 @@ def _start_time(timed: TimedBehaviour) -> float:
     return start if start is not None and start < float("inf") else float("-inf")
 
 
-class BlockRun:
-    """One submitted block on its way: pending, running, ended (or refused)."""
+def _moved(times: list[float | None], last: list[float | None], tolerance: float) -> bool:
+    if len(times) != len(last):
+        return True
+    for a, b in zip(times, last):
+        if (a is None) != (b is None):
+            return True
+        if a is not None and a != b and not abs(a - b) <= tolerance:
+            return True
+    return False
 
-    def __init__(self, env: simpy.Environment, block: Block, block_peg: TimePeg):
-        self.block = block
-        self.block_peg = block_peg
-        self.state = "pending"
-        self.timed: list[TimedBehaviour] = []
-        self.ended = env.event()
-        self.last_prediction: list | None = None
 
-    @property
-    def id(self) -> str:
-        return self.block.id
+class Dependants:
+    """The live behaviours whose timing hangs from some pegs, by start, with the near ones at hand.
 
-    def live(self) -> list[TimedBehaviour]:
-        return [t for t in self.timed if t.state in ("planned", "active")]
+    It follows the blocks as they come: when a block is submitted, the list is made again the next time it
+    is asked for. :meth:`near` keeps the behaviours that have come within a horizon and are still live, so
+    that pegs moving at every progress event of a speech re-time only what is about to happen.
+    """
+
+    def __init__(self, scheduler: "Scheduler", pegs: Iterable[TimePeg]):
+        self.scheduler = scheduler
+        self.peg_ids = {id(p) for p in pegs}
+        self.version = -1
+        self.behaviours: list[TimedBehaviour] = []
+        self._starts: list[float] = []
+        self._admitted = 0
+        self._near: dict[TimedBehaviour, None] = {}
+
+    def _refresh(self) -> None:
+        if self.version == self.scheduler.structure_version:
+            return
+        self.version = self.scheduler.structure_version
+        found = [t for t in self.scheduler.live_behaviours() if t.hangs_from(self.peg_ids)]
+        found.sort(key=_start_time)
+        self.behaviours = found
+        self._starts = [_start_time(t) for t in found]
+        self._admitted = 0
+        self._near = {}
+
+    def all(self) -> list[TimedBehaviour]:
+        """Every live dependant, by start."""
+        self._refresh()
+        return [t for t in self.behaviours if t.live]
+
+    def near(self, until: float) -> list[TimedBehaviour]:
+        """The live dependants that start by ``until`` (global seconds) or have an unknown start."""
+        self._refresh()
+        while self._admitted < len(self.behaviours) and self._starts[self._admitted] <= until:
+            self._near[self.behaviours[self._admitted]] = None
+            self._admitted += 1
+        self._near = {t: None for t in self._near if t.live}
+        return list(self._near)
 
 
 class Scheduler:
-    """Schedules BML blocks onto engines and reports what happens as feedback."""
+    """Schedules BML blocks onto engines and reports what happens as feedback.
 
-    def __init__(self, env: simpy.Environment, board: PegBoard, engines: list[Engine], log: fb.FeedbackLog):
+    Parameters
+    ----------
+    env : simpy.Environment
+        The clock.
+    board : PegBoard
+        The shared time pegs.
+    log : FeedbackLog
+        Where feedback goes.
+    prediction_tolerance : float
+        A behaviour is predicted again when one of its sync points moved by more than this (seconds).
+    """
+
+    def __init__(self, env: simpy.Environment, board: PegBoard, log: fb.FeedbackLog,
+                 prediction_tolerance: float = FRAME):
         self.env = env
         self.board = board
-        self.engines = {t: e for e in engines for t in e.planner.behaviour_types}
-        self.engine_list = engines
         self.log = log
+        self.prediction_tolerance = prediction_tolerance
+        self.engines: dict[str, Engine] = {}  # behaviour type -> engine
+        self.engine_list: list[Engine] = []
         self.anticipators: dict[str, object] = {}
         self.runs: list[BlockRun] = []  # not yet ended, in submission order
         self.all_runs: list[BlockRun] = []
+        #: bumped whenever behaviours are added, so that :class:`Dependants` know to look again
+        self.structure_version = 0
+        self._pending: dict[TimedBehaviour, None] | None = {}  # to re-time this instant; None: all
         self._retime_scheduled = False
-        board.on_move(self.peg_moved)
-        for engine in engines:
-            engine._report = self.sync_passed
-            if hasattr(engine, "progress"):
-                engine.progress = self.speech_progress
-                engine.dependants_of = self.dependants_of
+        board.on_move(self.pegs_moved)
+        self.context = EngineContext(env=env, board=board, sync_passed=self.sync_passed,
+                                     pegs_moved=self.pegs_moved, dependants_of=self.dependants_of)
+
+    def add_engine(self, engine: Engine) -> None:
+        """Let ``engine`` realise the behaviour types its planner names (it was made with :attr:`context`)."""
+        self.engine_list.append(engine)
+        for behaviour_type in engine.planner.behaviour_types:
+            self.engines[behaviour_type] = engine
 
     # ------------------------------------------------------------------ anticipators
     def add_anticipator(self, anticipator) -> None:
@@ -87,18 +150,9 @@ class Scheduler:
              line: int | None = None, column: int | None = None) -> None:
         self.log.send(fb.warning(target, kind, description, self.env.now, character, modified, line, column))
 
-    def submit(self, bml: str | bytes | Block, source: str = "") -> BlockRun | None:
-        """Submit one BML block now. Returns its run, or None if it was refused."""
+    def submit(self, block: Block, source: str = "") -> BlockRun | None:
+        """Submit one parsed block now. Returns its run, or None if it was refused."""
         where = f" in {source}" if source else ""
-        if isinstance(bml, Block):
-            block = bml
-        else:
-            try:
-                block = parse_bml(bml)
-            except BMLError as exc:
-                self.warn(guess_block_id(bml), "PARSING_FAILURE", f"block refused{where}: {exc}", "agent",
-                          line=exc.line, column=exc.column)
-                return None
         character = block.character_id
         for w in block.warnings:
             target = f"{block.id}:{w.behaviours[0]}" if w.behaviours else block.id
@@ -114,9 +168,7 @@ class Scheduler:
         start = now
         if block.composition == "APPEND":
             start = max([now] + [self.predicted_end(r) for r in self.runs])
-        block_peg = TimePeg(start, name=f"{block.id}:start", board=self.board)
-        self.board.block_pegs[block.id] = block_peg
-        run = BlockRun(self.env, block, block_peg)
+        run = BlockRun(block, self.board.new_block_peg(block.id, start), self.env.event())
         earlier = list(self.runs)
         solver = BlockSolver(block, run, self.board, self.engines, self.anticipator_peg, self.live_behaviours)
         run.timed = solver.solve()
@@ -135,6 +187,7 @@ class Scheduler:
         for timed in run.timed:
             timed.engine.planner.add(timed)
             self.board.register_behaviour(block.id, timed.id, timed.sync_ids, functools.partial(SyncPeg, timed))
+        self.structure_version += 1
         self.runs.append(run)
         self.predict(run, force=True)
         if block.composition == "APPEND" and earlier:
@@ -170,6 +223,7 @@ class Scheduler:
         self.end_if_done(run, run.block_peg.time)
 
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
+        """Sync point ``index`` of ``timed`` was passed at ``time``: feedback, and the end of what is done."""
         run = timed.run
         sync_id = timed.sync_ids[index]
         self.log.send(fb.sync_point_progress(run.id, timed.id, sync_id, time - run.block_peg.time, time,
@@ -185,6 +239,7 @@ class Scheduler:
 
     def end(self, run: BlockRun, time: float) -> None:
         run.state = "ended"
+        run.ended_at = time
         self.log.send(fb.block_progress(run.id, "end", time, run.block.character_id))
         if run in self.runs:
             self.runs.remove(run)
@@ -195,14 +250,40 @@ class Scheduler:
         now = self.env.now
         for timed in run.live():
             timed.state = "dropped"
+            timed.stopped = now
             timed.engine.remove(timed)
         if run.state == "pending":
             self.log.send(fb.block_progress(run.id, "start", now, run.block.character_id))
             run.state = "running"
         self.end(run, now)
 
+    def drop(self, timed: TimedBehaviour, reason: str) -> None:
+        timed.state = "dropped"
+        timed.stopped = self.env.now
+        timed.engine.remove(timed)
+        run = timed.run
+        self.warn(f"{run.id}:{timed.id}", "IMPOSSIBLE_TO_SCHEDULE", f"{timed.id}: {reason}; behaviour dropped",
+                  run.block.character_id, [timed.id])
+
     # ------------------------------------------------------------------ re-timing
-    def peg_moved(self, peg: TimePeg) -> None:
+    def dependants_of(self, pegs: Iterable[TimePeg]) -> Dependants:
+        """The live behaviours whose timing hangs from ``pegs``, kept up to date as blocks come."""
+        return Dependants(self, pegs)
+
+    def pegs_moved(self, pegs: Iterable[TimePeg] | TimePeg | Dependants | None = None,
+                   horizon: float | None = None) -> None:
+        """Pegs moved (set, shifted, or their computed times changed): re-time what hangs from them.
+
+        The one entry point for every peg movement. Without ``horizon`` every live behaviour is looked at;
+        with ``pegs`` given as :class:`Dependants` and a ``horizon`` (seconds), only those that start
+        within it. The re-timing itself happens once per instant, after everything that moved pegs then.
+        """
+        invalidate_times()
+        if self._pending is not None:
+            if horizon is not None and isinstance(pegs, Dependants):
+                self._pending.update(dict.fromkeys(pegs.near(self.env.now + horizon)))
+            else:
+                self._pending = None
         if not self._retime_scheduled:
             self._retime_scheduled = True
             self.env.process(self._retime_soon())
@@ -210,83 +291,75 @@ class Scheduler:
     def _retime_soon(self):
         yield self.env.timeout(0)
         self._retime_scheduled = False
-        self.retime()
+        pending, self._pending = self._pending, {}
+        self.retime(None if pending is None else list(pending))
 
-    def retime(self) -> None:
-        """Pegs moved: drop behaviours that became invalid, update predictions, wake the players."""
-        with self.board.quiet():
-            for i, run in enumerate(self.runs):
-                if run.state == "pending" and run.block.composition == "APPEND":
-                    earlier = [self.predicted_end(r) for r in self.runs[:i]]
-                    run.block_peg.set(max([self.env.now] + earlier))
-        for engine in self.engine_list:
-            for timed, reason in engine.planner.invalid_behaviours():
-                self.drop(timed, f"after re-timing: {reason}")
-        for run in list(self.runs):
-            self.predict(run)
+    def retime(self, behaviours: list[TimedBehaviour] | None = None) -> None:
+        """Pegs moved: drop behaviours that became invalid, update predictions, wake the players.
+
+        ``behaviours``: the ones affected (default: every live behaviour, and the start of every block
+        waiting to be appended).
+        """
+        if behaviours is None:
+            with self.board.quiet():
+                for i, run in enumerate(self.runs):
+                    if run.state == "pending" and run.block.composition == "APPEND":
+                        earlier = [self.predicted_end(r) for r in self.runs[:i]]
+                        run.block_peg.set(max([self.env.now] + earlier))
+            candidates = [t for engine in self.engine_list for t in engine.planner.plan]
+        else:
+            candidates = behaviours
+        for timed in candidates:
+            if timed.live:
+                reason = timed.engine.planner.invalid(timed)
+                if reason is not None:
+                    self.drop(timed, f"after re-timing: {reason}")
+        if behaviours is None:
+            runs = list(self.runs)
+            for run in runs:
+                self.predict(run)
+        else:
+            by_run: dict[BlockRun, list[TimedBehaviour]] = {}
+            for timed in behaviours:
+                by_run.setdefault(timed.run, []).append(timed)
+            runs = list(by_run)
+            for run in runs:
+                self.predict(run, by_run[run])
+        for run in runs:
             self.end_if_done(run, self.env.now)
-        for engine in self.engine_list:
-            engine.plan.kick()
+        if behaviours is None:
+            for engine in self.engine_list:
+                engine.plan.kick()
+        else:
+            for timed in behaviours:
+                if timed.state == "active":
+                    timed.engine.plan.kick([timed])
 
-    #: Behaviours tied to a speech whose next sync point is further ahead than this (seconds) are not
-    #: woken at every progress event; they are checked when they come closer.
-    SPEECH_HORIZON = 2.0
+    def predict(self, run: BlockRun, behaviours: list[TimedBehaviour] | None = None, force: bool = False) -> None:
+        """Send predictionFeedback for the behaviours of a block whose predicted timing moved by more than
+        the tolerance since they were last predicted (all of the block's live behaviours if ``force``).
 
-    def dependants_of(self, pegs: set[int]) -> list[TimedBehaviour]:
-        """Live behaviours with a key hanging from one of ``pegs`` (ids), by their next sync time."""
-        found = []
-        for timed in self.live_behaviours():
-            for key in timed.keys:
-                peg = key.peg if key is not None else None
-                while isinstance(peg, OffsetPeg) and id(peg) not in pegs:
-                    peg = peg.base
-                if peg is not None and id(peg) in pegs:
-                    found.append(timed)
-                    break
-        found.sort(key=_start_time)
-        return found
-
-    def speech_progress(self, playback) -> None:
-        """A speech's animator time changed: wake the players of the behaviours tied to it that are near."""
-        horizon = self.env.now + self.SPEECH_HORIZON
-        speech = playback.timed
-        if speech.state == "active":
-            speech.engine.plan.kick([speech])
-        dependants = playback.dependants  # in order of start, as planned when the speech began
-        starts = playback.dependant_starts
-        first = playback.first_live
-        while first < len(dependants) and dependants[first].state in ("finished", "dropped"):
-            first += 1
-        playback.first_live = first
-        for i in range(first, len(dependants)):
-            if starts[i] > horizon:
-                break
-            timed = dependants[i]
-            if timed.state == "active":
-                timed.engine.plan.kick([timed])
-
-    def drop(self, timed: TimedBehaviour, reason: str) -> None:
-        timed.state = "dropped"
-        timed.engine.remove(timed)
-        run = timed.run
-        self.warn(f"{run.id}:{timed.id}", "IMPOSSIBLE_TO_SCHEDULE", f"{timed.id}: {reason}; behaviour dropped",
-                  run.block.character_id, [timed.id])
-
-    def predict(self, run: BlockRun, force: bool = False) -> None:
-        """Send predictionFeedback for a block if its predicted timing changed (or ``force``)."""
-        behaviours = []
-        flat: list[float] = []
-        for timed in run.live():
-            times = timed.times()
-            flat.extend(t if t is not None else float("nan") for t in times)
-            behaviours.append({"id": timed.id, "type": timed.behaviour.type, "globalStart": times[0],
-                               "globalEnd": times[-1], "syncs": dict(zip(timed.sync_ids, times))})
-        start = run.block_peg.time
-        signature = [start] + flat
-        if not force and run.last_prediction is not None and len(signature) == len(run.last_prediction) and all(
-                abs(a - b) <= EPSILON or (a != a and b != b) for a, b in zip(signature, run.last_prediction)):
+        ``behaviours``: the ones to look at (default: every live behaviour of the block).
+        """
+        if run.state not in ("pending", "running"):
             return
-        run.last_prediction = signature
-        end = max([start] + [b["globalEnd"] for b in behaviours if b["globalEnd"] is not None])
-        self.log.send(fb.prediction(run.id, self.env.now, run.block.character_id, start, end, behaviours))
-
+        tolerance = self.prediction_tolerance
+        entries = []
+        for timed in run.live() if behaviours is None else behaviours:
+            if not timed.live:
+                continue
+            times = timed.times()
+            last = run.predicted.get(timed.id)
+            if force or last is None or _moved(times, last, tolerance):
+                run.predicted[timed.id] = times
+                entries.append({"id": timed.id, "type": timed.behaviour.type, "globalStart": times[0],
+                                "globalEnd": times[-1], "syncs": dict(zip(timed.sync_ids, times))})
+        start = run.block_peg.time
+        start_moved = run.predicted_start is None or (start != run.predicted_start
+                                                       and not abs(start - run.predicted_start) <= tolerance)
+        if not (force or entries or start_moved):
+            return
+        run.predicted_start = start
+        ends = [run.predicted[t.id][-1] for t in run.timed if t.live and t.id in run.predicted]
+        end = max([start] + [e for e in ends if e is not None])
+        self.log.send(fb.prediction(run.id, self.env.now, run.block.character_id, start, end, entries))

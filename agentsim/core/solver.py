@@ -14,15 +14,13 @@ from __future__ import annotations
 
 import heapq
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable, Protocol
+from typing import Callable, Protocol
 
-from agentsim.core.block import Behaviour, Block, Constraint, SyncRef
-from agentsim.core.block import BEHAVIOUR_TYPES
+from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, SyncRef
+from agentsim.core.engine import Engine
+from agentsim.core.errors import ScheduleError
 from agentsim.core.pegboard import OffsetPeg, PegBoard, TimePeg
-from agentsim.core.plan import EPSILON, Engine, KeyRef, ScheduleError, TimedBehaviour
-
-if TYPE_CHECKING:  # pragma: no cover
-    from agentsim.core.scheduler import BlockRun
+from agentsim.core.timed import EPSILON, BlockRun, KeyRef, TimedBehaviour
 
 TOLERANCE = 1e-6
 
@@ -94,7 +92,7 @@ class _Ties:
 class BlockSolver:
     """Resolves the timing of one block into timed behaviours tied to pegs."""
 
-    def __init__(self, block: Block, run: "BlockRun", board: PegBoard, engines: dict[str, Engine],
+    def __init__(self, block: Block, run: BlockRun, board: PegBoard, engines: dict[str, Engine],
                  anticipator_peg: AnticipatorLookup, existing: Callable[[], list[TimedBehaviour]]):
         self.block = block
         self.run = run
@@ -334,6 +332,7 @@ class BlockSolver:
                 keys[i] = KeyRef(ref_key.peg, offset)
         timed = TimedBehaviour(self.run, beh, preferred, keys, engine)
         timed.tied = [sync_id in groups for sync_id in beh.sync_ids]
+        timed.fixed = [sync_id in groups and groups[sync_id][0] in self.ties.fixed_node for sync_id in beh.sync_ids]
         self.timed[beh.id] = timed
         return newly_known
 

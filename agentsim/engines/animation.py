@@ -5,7 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from agentsim.core.block import Behaviour
-from agentsim.core.plan import Engine, Planner, ScheduleError
+from agentsim.core.engine import Engine, EngineContext, Planner
+from agentsim.core.errors import ScheduleError
 
 
 @dataclass(frozen=True)
@@ -102,8 +103,8 @@ class AnimationPlanner(Planner):
 class AnimationEngine(Engine):
     name = "animation"
 
-    def __init__(self, env, on_sync):
-        super().__init__(env, AnimationPlanner(), on_sync)
+    def __init__(self, context: EngineContext):
+        super().__init__(context, AnimationPlanner())
 
 
 PHASE_NAMES = {

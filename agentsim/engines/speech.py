@@ -16,16 +16,16 @@ everything tied to it, is passed when ``t_A`` reaches its planned speech time.
 from __future__ import annotations
 
 import bisect
-import contextlib
 import math
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
 from agentsim.core.block import Behaviour
-from agentsim.core.pegboard import OffsetPeg, TimePeg, _bump
-from agentsim.core.plan import Engine, KeyRef, Planner, ScheduleError, TimedBehaviour
+from agentsim.core.engine import Engine, EngineContext, Planner
+from agentsim.core.errors import ScheduleError
+from agentsim.core.pegboard import ComputedPeg, OffsetPeg
+from agentsim.core.timed import KeyRef, TimedBehaviour
 from agentsim.speech.backend import SpeechText, TTSBackend, Utterance
 
 #: Speech keys may be off their rigid spacing by this much (seconds) before the speech is invalid.
@@ -139,7 +139,7 @@ class SpeechPlanner(Planner):
         self.speaking.discard(id(timed.behaviour))
 
 
-class SpeechTimePeg(TimePeg):
+class SpeechTimePeg(ComputedPeg):
     """A peg at speech time ``s`` of an utterance being played: its time is when animator time reaches s."""
 
     __slots__ = ("playback", "s")
@@ -152,9 +152,6 @@ class SpeechTimePeg(TimePeg):
     @property
     def time(self) -> float | None:
         return self.playback.crossing(self.s)
-
-    def set(self, time: float | None) -> None:
-        raise ValueError(f"{self.name} follows the speech and cannot be moved directly")
 
 
 @dataclass
@@ -173,9 +170,7 @@ class Playback:
     finished: bool = False
     history: list = field(default_factory=list)  # (clock time, t_A) breakpoints of t_A up to the last event
     history_max: list = field(default_factory=list)  # running maximum of t_A along the history
-    dependants: list = field(default_factory=list)  # behaviours tied to this speech, by start
-    dependant_starts: list = field(default_factory=list)
-    first_live: int = 0  # dependants before this index have finished
+    dependants: object = None  # what the scheduler says hangs from the speech's pegs
     trace: list = field(default_factory=list)
 
     @property
@@ -193,10 +188,10 @@ class Playback:
     def record(self, now: float) -> None:
         """Keep how t_A went since the last event, before the next event changes its future."""
         last = self.history[-1][0] if self.history else None
-        path = getattr(self.strategy, "_path", None)
-        points = [t for t in path.times if last is not None and last < t < now] if path is not None else []
+        path = self.strategy.path
+        points = [t for t in path.times if last is not None and last < t < now]
         for t in points + [now]:
-            p = path.at(t) if path is not None else self.strategy.position(t)
+            p = path.at(t)
             self.history.append((t, p))
             self.history_max.append(max(p, self.history_max[-1]) if self.history_max else p)
 
@@ -220,15 +215,18 @@ class Playback:
 
 
 class SpeechEngine(Engine):
-    name = "speech"
+    """Plays speech behaviours; with a strategy, their sync points follow the audio through animator time."""
 
-    def __init__(self, env, on_sync, backend: TTSBackend, config: SpeechConfig | None = None):
-        super().__init__(env, SpeechPlanner(backend, config), on_sync)
+    name = "speech"
+    #: After a progress event, the behaviours tied to the speech that start within this many seconds are
+    #: re-timed (the rest when they come nearer): it covers how far t_A can move a behaviour earlier
+    #: between events.
+    HORIZON = 3.0
+
+    def __init__(self, context: EngineContext, backend: TTSBackend, config: SpeechConfig | None = None):
+        super().__init__(context, SpeechPlanner(backend, config))
         self.config = self.planner.config
         self.playbacks: list[Playback] = []
-        #: set by the scheduler: ``progress(playback)`` wakes the behaviours tied to a speech
-        self.progress: Callable[[Playback], None] | None = None
-        self.dependants_of: Callable[[set[int]], list[TimedBehaviour]] | None = None
 
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
         if index == 0:
@@ -243,7 +241,7 @@ class SpeechEngine(Engine):
         they were tied to (an anticipator, another block), keeping their times. Behaviours sharing those
         pegs now follow the speech."""
         block_peg = timed.run.block_peg
-        with _quiet(block_peg):
+        with self.context.board.quiet():
             for peg in set(timed.own_pegs()):
                 peg.freeze(block_peg)
 
@@ -274,20 +272,17 @@ class SpeechEngine(Engine):
         self.playbacks.append(playback)
         planner.speaking.add(id(timed.behaviour))
         # Tie the speech's sync points, and every peg shared with them, to animator time.
-        block_peg = timed.run.block_peg
         speech_pegs = [SpeechTimePeg(playback, p, name=f"{timed.block_id}:{timed.id}:{s}")
                        for p, s in zip(timed.preferred, timed.sync_ids)]
-        with _quiet(block_peg):
+        # (A peg held by a time given from outside, a number or an anticipator, keeps that time: what shares
+        # it with the speech's start is tied to the number, not to the audio.)
+        with self.context.board.quiet():
             for i, key in enumerate(timed.keys):
-                if key is not None and timed.tied[i] and isinstance(key.peg, OffsetPeg):
+                if key is not None and timed.tied[i] and not timed.fixed[i] and isinstance(key.peg, OffsetPeg):
                     key.peg.rebase(speech_pegs[i], -key.offset)
             timed.keys = [KeyRef(peg, 0.0) for peg in speech_pegs]
-        if self.dependants_of is not None:
-            playback.dependants = [t for t in self.dependants_of({id(p) for p in speech_pegs}) if t is not timed]
-            # a margin covers how far t_A may move a behaviour earlier before it is next looked at
-            # (unknown starts are always looked at)
-            playback.dependant_starts = [t.start - 1.0 if t.start is not None and t.start < math.inf else -math.inf
-                                         for t in playback.dependants]
+        playback.dependants = self.context.dependants_of(speech_pegs)
+        self.context.pegs_moved(playback.dependants)  # the speech now runs on t_A: everything tied to it moved
         self.env.process(self._deliver(playback))
         if config.trace_frame:
             self.env.process(self._trace(playback, config.trace_frame))
@@ -299,24 +294,14 @@ class SpeechEngine(Engine):
                 yield env.timeout(event.arrival_time - env.now)
             playback.record(env.now)
             playback.strategy.on_event(event, env.now)
-            self._moved(playback)
+            self.context.pegs_moved(playback.dependants, horizon=self.HORIZON)
         # After the last event and the longest it could have been held, t_A learns nothing more.
         last = max([playback.t_end] + [e.arrival_time for e in playback.delivered])
         if last > env.now:
             yield env.timeout(last - env.now)
         playback.record(env.now)
         playback.finished = True
-        _bump()
-        for timed in [playback.timed] + playback.dependants:
-            if timed.state == "active":
-                timed.engine.plan.kick([timed])
-
-    def _moved(self, playback: Playback) -> None:
-        _bump()
-        if self.progress is not None:
-            self.progress(playback)
-        else:
-            self.plan.kick()
+        self.context.pegs_moved(playback.dependants)  # what t_A has not reached, it never will: it passes now
 
     def _trace(self, playback: Playback, frame: float):
         env = self.env
@@ -328,7 +313,3 @@ class SpeechEngine(Engine):
             playback.trace.append((t, playback.strategy.position(t)))
             t += frame
 
-
-def _quiet(block_peg: TimePeg):
-    """The board's quiet context (the engine reports its own peg moves), or nothing without a board."""
-    return block_peg.board.quiet() if block_peg.board is not None else contextlib.nullcontext()

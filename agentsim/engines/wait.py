@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from agentsim.core.block import Behaviour
-from agentsim.core.plan import Engine, Planner, ScheduleError
+from agentsim.core.engine import Engine, EngineContext, Planner
+from agentsim.core.errors import ScheduleError
 
 
 class WaitPlanner(Planner):
@@ -22,5 +23,5 @@ class WaitPlanner(Planner):
 class WaitEngine(Engine):
     name = "wait"
 
-    def __init__(self, env, on_sync):
-        super().__init__(env, WaitPlanner(), on_sync)
+    def __init__(self, context: EngineContext):
+        super().__init__(context, WaitPlanner())

@@ -149,7 +149,7 @@ class AnimatorTime:
         self.plan: SpeechPlan | None = None
         self.t_request = 0.0
         self.t0_pred = 0.0
-        self._path = Path(0.0, 0.0, 1.0)
+        self.path = Path(0.0, 0.0, 1.0)
 
     def reset(self, plan: SpeechPlan, t_request: float) -> None:
         """Start a new utterance: ``plan`` is what is known in advance, playback is requested at ``t_request``."""
@@ -158,21 +158,21 @@ class AnimatorTime:
         self.plan = plan
         self.t_request = float(t_request)
         self.t0_pred = self.t_request + plan.latency
-        self._path = Path(self.t_request, self.t_request - self.t0_pred, 1.0)
+        self.path = Path(self.t_request, self.t_request - self.t0_pred, 1.0)
 
     def on_event(self, event: ProgressEvent, now: float) -> None:
         """A progress event arrived at clock time ``now``."""
 
     def position(self, t: float) -> float:
         """``t_A`` at clock time ``t``: the speech time (plan axis) the animation shows."""
-        return self._path.at(t)
+        return self.path.at(t)
 
     def crossing(self, s: float, now: float) -> float:
         """Earliest clock time ``>= now`` at which ``t_A`` reaches ``s`` if no further event arrives.
 
         ``math.inf`` if it never would.
         """
-        return self._path.crossing(s, now)
+        return self.path.crossing(s, now)
 
     def _require_plan(self) -> SpeechPlan:
         if self.plan is None:
@@ -222,7 +222,7 @@ class LinearModelTime(AnimatorTime):
             dt = times[k + 1] - times[k]
             path.then(times[k], (positions[k + 1] - positions[k]) / dt if dt > 0 else 0.0)
         path.then(times[-1], 1.0)
-        self._path = path
+        self.path = path
 
 
 class ChangNaive(AnimatorTime):
@@ -242,7 +242,7 @@ class ChangNaive(AnimatorTime):
     def reset(self, plan: SpeechPlan, t_request: float) -> None:
         super().reset(plan, t_request)
         first = float(plan.unit_onsets[0]) if len(plan.unit_onsets) else 0.0
-        self._path = self._capped(self.t_request, self.t_request - self.t0_pred, first)
+        self.path = self._capped(self.t_request, self.t_request - self.t0_pred, first)
 
     @staticmethod
     def _capped(t: float, p: float, cap: float) -> Path:
@@ -257,7 +257,7 @@ class ChangNaive(AnimatorTime):
             return
         cap = plan.next_unit(p)
         start = now - plan.delay  # estimated time at which the unit started
-        self._path = self._capped(now, min(p + (now - start), cap), cap)
+        self.path = self._capped(now, min(p + (now - start), cap), cap)
 
 
 class ChangSmooth(AnimatorTime):
@@ -282,11 +282,11 @@ class ChangSmooth(AnimatorTime):
         p = plan.event_position(event)
         if p is None:
             return
-        a = self._path.at(now)
+        a = self.path.at(now)
         target = p + plan.delay
         if event.kind == "end":
             rate = 1.0 if a < p else 0.0
-            self._path = Path(now, a, rate)
+            self.path = Path(now, a, rate)
             return
         k = plan.word_of(event)
         m = int(event.payload.get("in_word", 0)) if event.kind == "phoneme" else 0
@@ -299,7 +299,7 @@ class ChangSmooth(AnimatorTime):
             path.then(now + (nxt - a) / rate, self.min_rate)
         elif a >= nxt:
             path = Path(now, a, self.min_rate)
-        self._path = path
+        self.path = path
 
 
 class Skip70ms(AnimatorTime):
@@ -318,10 +318,10 @@ class Skip70ms(AnimatorTime):
         p = plan.event_position(event)
         if p is None:
             return
-        a = self._path.at(now)
+        a = self.path.at(now)
         estimate = p + plan.delay
         if abs(estimate - a) > self.threshold:
-            self._path = Path(now, estimate, 1.0)
+            self.path = Path(now, estimate, 1.0)
 
 
 def lower_envelope_line(p: np.ndarray, y: np.ndarray, p_ref: float) -> tuple[float, float]:
@@ -468,20 +468,20 @@ class BestTime(AnimatorTime):
         if p is None:
             return
         y = (event.arrival_time if math.isfinite(event.arrival_time) else now) - plan.delay
-        a = self._path.at(now)
+        a = self.path.at(now)
         if self._warp is None:
             self._p.append(p)
             self._y.append(y)
             self._fit_line()
             rate = 1.0 / self._slope
             target = (now - self._intercept) * rate
-            self._path = self._follow(now, a, [(now + self.settle, target + self.settle * rate)], rate,
+            self.path = self._follow(now, a, [(now + self.settle, target + self.settle * rate)], rate,
                                       self.min_rate)
         else:
             self._warp.observe(event, y, now)
             milestones, rate = self._warp.milestones(now, a)
             path = self._follow(now, a, milestones, rate, self.warp_min_rate)
-            self._path = path
+            self.path = path
 
     def _follow(self, now: float, a: float, milestones: Sequence[tuple[float, float]], final_rate: float,
                 min_rate: float) -> Path:

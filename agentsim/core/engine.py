@@ -1,161 +1,24 @@
 """Engines as Elckerlyc splits them: a Planner fills a Plan with timed behaviours, a Player plays it.
 
-A :class:`TimedBehaviour` has one key per sync point. Keys tied to time pegs (:class:`KeyRef`) move when
-their pegs move; the other keys are placed by linear time warping between their tied neighbours, using
-the behaviour's preferred timing. The scheduler talks to planners only through the :class:`Planner`
-interface (Elckerlyc section 5.2): resolve unknown times, add, remove, list invalid behaviours.
+The scheduler talks to planners only through the :class:`Planner` interface (Elckerlyc section 5.2):
+preferred timing, resolve unknown times, add, remove, list invalid behaviours. An :class:`Engine` is
+handed its collaborators at construction in an :class:`EngineContext`, as AsapRealizer's
+``DefaultEngine(planner, player, planManager)`` is.
 """
 
 from __future__ import annotations
 
 import heapq
-import itertools
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import simpy
 
 from agentsim.core.block import Behaviour
 from agentsim.core.errors import ScheduleError
-from agentsim.core.pegboard import OffsetPeg, TimePeg
-
-if TYPE_CHECKING:  # pragma: no cover
-    from agentsim.core.scheduler import BlockRun
-
-#: Two times closer than this (seconds) are the same time.
-EPSILON = 1e-9
-
-
-@dataclass(frozen=True)
-class KeyRef:
-    """Where a key is tied: ``peg.time + offset`` (global seconds)."""
-
-    peg: TimePeg
-    offset: float = 0.0
-
-    @property
-    def time(self) -> float | None:
-        t = self.peg.time
-        return None if t is None else t + self.offset
-
-
-_planned = itertools.count()
-
-
-class TimedBehaviour:
-    """A behaviour placed in time: its sync points, preferred timing, keys and what has been played."""
-
-    def __init__(self, run: "BlockRun", behaviour: Behaviour, preferred: Sequence[float],
-                 keys: list[KeyRef | None], engine: "Engine"):
-        self.run = run
-        self.behaviour = behaviour
-        self.sync_ids = list(behaviour.sync_ids)
-        self.preferred = list(preferred)
-        self.keys = keys
-        self.engine = engine
-        self.passed: list[float | None] = [None] * len(self.sync_ids)
-        self.order = next(_planned)  # ties at one time are passed in planning order
-        self.tied = [False] * len(self.sync_ids)  # which keys share a peg with other sync points
-        self.heap_version = 0  # which of the player's heap entries for this behaviour is current
-        self.next_index = 0
-        self.state = "planned"  # planned -> active -> finished | dropped
-
-    @property
-    def id(self) -> str:
-        return self.behaviour.id
-
-    @property
-    def block_id(self) -> str:
-        return self.run.block.id
-
-    def _anchor(self, i: int) -> float | None:
-        passed = self.passed[i]
-        if passed is not None:
-            return passed
-        key = self.keys[i]
-        return None if key is None else key.time
-
-    def time(self, i: int) -> float | None:
-        """Global time of sync point ``i`` as planned now (or as it was passed)."""
-        t = self._anchor(i)
-        if t is not None:
-            return t
-        lo = i - 1
-        while lo >= 0 and self._anchor(lo) is None:
-            lo -= 1
-        hi = i + 1
-        while hi < len(self.keys) and self._anchor(hi) is None:
-            hi += 1
-        if lo < 0 or hi >= len(self.keys):
-            return None
-        t_lo, t_hi = self._anchor(lo), self._anchor(hi)
-        p_lo, p_hi = self.preferred[lo], self.preferred[hi]
-        if p_hi <= p_lo:
-            return t_lo
-        return t_lo + (self.preferred[i] - p_lo) / (p_hi - p_lo) * (t_hi - t_lo)
-
-    def times(self) -> list[float | None]:
-        """Global times of all sync points (one pass: tied keys, then warping between them)."""
-        times = [self._anchor(i) for i in range(len(self.keys))]
-        pref = self.preferred
-        lo = None
-        for hi, t_hi in enumerate(times):
-            if t_hi is None:
-                continue
-            if lo is not None and hi > lo + 1:
-                t_lo, p_lo, p_hi = times[lo], pref[lo], pref[hi]
-                for i in range(lo + 1, hi):
-                    times[i] = t_lo if p_hi <= p_lo else t_lo + (pref[i] - p_lo) / (p_hi - p_lo) * (t_hi - t_lo)
-            lo = hi
-        return times
-
-    def sync_time(self, sync_id: str) -> float | None:
-        return self.time(self.sync_ids.index(sync_id))
-
-    @property
-    def start(self) -> float | None:
-        return self.time(0)
-
-    @property
-    def end(self) -> float | None:
-        return self.time(len(self.sync_ids) - 1)
-
-    def next_time(self) -> float | None:
-        """When the next sync point is due (None if not active, done, or not known to come)."""
-        if self.state != "active" or self.next_index >= len(self.sync_ids):
-            return None
-        t = self.time(self.next_index)
-        return t if t is not None and t < math.inf else None
-
-    def own_pegs(self) -> Iterable[OffsetPeg]:
-        for key in self.keys:
-            if key is not None and isinstance(key.peg, OffsetPeg):
-                yield key.peg
-
-    def __repr__(self) -> str:
-        return f"TimedBehaviour({self.block_id}:{self.id}, {self.times()})"
-
-
-class SyncPeg(TimePeg):
-    """A read-only peg at one sync point of a timed behaviour, tied or placed by time warping.
-
-    It lets other blocks tie their behaviours to any sync point of this one.
-    """
-
-    __slots__ = ("timed", "index")
-
-    def __init__(self, timed: TimedBehaviour, index: int):
-        super().__init__(None, name=f"{timed.block_id}:{timed.id}:{timed.sync_ids[index]}")
-        self.timed = timed
-        self.index = index
-
-    @property
-    def time(self) -> float | None:
-        return self.timed.time(self.index)
-
-    def set(self, time: float | None) -> None:
-        raise ValueError(f"{self.name} is placed by its behaviour and cannot be moved directly")
+from agentsim.core.pegboard import PegBoard, TimePeg
+from agentsim.core.timed import EPSILON, TimedBehaviour
 
 
 def stretch_times(preferred: Sequence[float], known: dict[int, float], start: float = 0.0) -> list[float]:
@@ -201,7 +64,8 @@ class Planner:
     rigid = False
 
     def __init__(self) -> None:
-        self.plan: list[TimedBehaviour] = []
+        #: the behaviours in this planner's plan, in the order they were added (a dict used as an ordered set)
+        self.plan: dict[TimedBehaviour, None] = {}
 
     def preferred(self, behaviour: Behaviour) -> list[float]:
         """Preferred time of each sync point, seconds after the behaviour's start."""
@@ -229,27 +93,30 @@ class Planner:
             raise ScheduleError("the behaviour would have no duration")
 
     def add(self, timed: TimedBehaviour) -> None:
-        self.plan.append(timed)
+        self.plan[timed] = None
 
     def remove(self, timed: TimedBehaviour) -> None:
-        if timed in self.plan:
-            self.plan.remove(timed)
+        self.plan.pop(timed, None)
+
+    def invalid(self, timed: TimedBehaviour) -> str | None:
+        """Why ``timed``'s current timing (after pegs moved) is no longer valid, or None if it is."""
+        if timed.state == "finished":
+            return None
+        times = timed.times()
+        if any(t is None for t in times):
+            return "a sync point lost its time"
+        if any(t == math.inf for t in times):
+            return None  # waiting for the world (speech that has not got there yet): nothing to judge now
+        try:
+            self.check_times(timed.behaviour, timed.preferred, times)
+        except ScheduleError as exc:
+            return str(exc)
+        return None
 
     def invalid_behaviours(self) -> list[tuple[TimedBehaviour, str]]:
         """Behaviours in the plan whose current timing (after pegs moved) is no longer valid."""
-        invalid = []
-        for timed in self.plan:
-            if timed.state == "finished":
-                continue
-            times = timed.times()
-            if any(t is None for t in times):
-                invalid.append((timed, "a sync point lost its time"))
-                continue
-            try:
-                self.check_times(timed.behaviour, timed.preferred, times)
-            except ScheduleError as exc:
-                invalid.append((timed, str(exc)))
-        return invalid
+        found = ((timed, self.invalid(timed)) for timed in self.plan)
+        return [(timed, reason) for timed, reason in found if reason is not None]
 
 
 class Plan:
@@ -260,7 +127,7 @@ class Plan:
 
     def __init__(self, env: simpy.Environment):
         self.env = env
-        self.behaviours: list[TimedBehaviour] = []
+        self.behaviours: dict[TimedBehaviour, None] = {}  # shared with the planner's plan
         self._changed = env.event()
         self.moved: set[TimedBehaviour] | None = set()  # None: everything
 
@@ -369,23 +236,52 @@ class Player:
             self._push(timed)
 
 
+@dataclass(frozen=True)
+class EngineContext:
+    """What an engine is handed at construction: the clock, the PegBoard, and three ways to talk back.
+
+    Attributes
+    ----------
+    env : simpy.Environment
+        The clock.
+    board : PegBoard
+        The shared time pegs.
+    sync_passed : callable
+        ``sync_passed(timed, index, time)``: sync point ``index`` of ``timed`` was passed at global
+        ``time`` (seconds); the scheduler sends its feedback and ends what is done.
+    pegs_moved : callable
+        ``pegs_moved(pegs, horizon=None)``: these pegs moved (or their computed times changed). ``pegs``
+        is an iterable of pegs or what :attr:`dependants_of` returned for them. With ``horizon``
+        (seconds), only the dependants whose next sync point is that near are re-timed now; the caller
+        reports again as time goes on.
+    dependants_of : callable
+        ``dependants_of(pegs)``: the live behaviours whose timing hangs from ``pegs``, kept up to date as
+        blocks come and go, ordered by start.
+    """
+
+    env: simpy.Environment
+    board: PegBoard
+    sync_passed: Callable[[TimedBehaviour, int, float], None]
+    pegs_moved: Callable[..., None]
+    dependants_of: Callable[[Iterable[TimePeg]], object]
+
+
 class Engine:
     """A Planner, its Plan and a Player, for one output channel (speech, animation, ...)."""
 
     name = "engine"
 
-    def __init__(self, env: simpy.Environment, planner: Planner,
-                 on_sync: Callable[[TimedBehaviour, int, float], None]):
-        self.env = env
+    def __init__(self, context: EngineContext, planner: Planner):
+        self.context = context
+        self.env = context.env
         self.planner = planner
-        self.plan = Plan(env)
+        self.plan = Plan(self.env)
         self.planner.plan = self.plan.behaviours
-        self.player = Player(env, self.plan, self.sync_passed)
-        self._report = on_sync
+        self.player = Player(self.env, self.plan, self.sync_passed)
 
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
         """A sync point was passed: engine-specific work, then feedback."""
-        self._report(timed, index, time)
+        self.context.sync_passed(timed, index, time)
 
     def activate(self, timed: TimedBehaviour) -> None:
         timed.state = "active"

@@ -1,0 +1,206 @@
+"""Behaviours placed in time, and the runs of the blocks they belong to.
+
+A :class:`TimedBehaviour` has one key per sync point. Keys tied to time pegs (:class:`KeyRef`) move when
+their pegs move; the other keys are placed by linear time warping between their tied neighbours, using
+the behaviour's preferred timing. A :class:`BlockRun` is one submitted block on its way from pending to
+ended, with the timed behaviours the solver made of it and what was last predicted of them.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Iterator, Sequence
+
+import simpy
+
+from agentsim.core.block import Behaviour, Block
+from agentsim.core.pegboard import ComputedPeg, OffsetPeg, TimePeg
+
+#: Two times closer than this (seconds) are the same time.
+EPSILON = 1e-9
+
+
+@dataclass(frozen=True)
+class KeyRef:
+    """Where a key is tied: ``peg.time + offset`` (global seconds)."""
+
+    peg: TimePeg
+    offset: float = 0.0
+
+    @property
+    def time(self) -> float | None:
+        t = self.peg.time
+        return None if t is None else t + self.offset
+
+
+_planned = itertools.count()
+
+
+class TimedBehaviour:
+    """A behaviour placed in time: its sync points, preferred timing, keys and what has been played.
+
+    ``engine`` is the :class:`~agentsim.core.engine.Engine` that plays it.
+    """
+
+    def __init__(self, run: "BlockRun", behaviour: Behaviour, preferred: Sequence[float],
+                 keys: list[KeyRef | None], engine: Any):
+        self.run = run
+        self.behaviour = behaviour
+        self.sync_ids = list(behaviour.sync_ids)
+        self.preferred = list(preferred)
+        self.keys = keys
+        self.engine = engine
+        self.passed: list[float | None] = [None] * len(self.sync_ids)
+        self.order = next(_planned)  # ties at one time are passed in planning order
+        self.tied = [False] * len(self.sync_ids)  # which keys share a peg with other sync points
+        # which of those pegs are held by a time given from outside: a number, an anticipator, another block
+        self.fixed = [False] * len(self.sync_ids)
+        self.heap_version = 0  # which of the player's heap entries for this behaviour is current
+        self.next_index = 0
+        self.state = "planned"  # planned -> active -> finished | dropped
+        self.stopped: float | None = None  # when it was dropped or cut, if it was
+
+    @property
+    def id(self) -> str:
+        return self.behaviour.id
+
+    @property
+    def block_id(self) -> str:
+        return self.run.block.id
+
+    @property
+    def live(self) -> bool:
+        """Planned or playing (not finished, not dropped)."""
+        return self.state in ("planned", "active")
+
+    def _anchor(self, i: int) -> float | None:
+        passed = self.passed[i]
+        if passed is not None:
+            return passed
+        key = self.keys[i]
+        return None if key is None else key.time
+
+    def time(self, i: int) -> float | None:
+        """Global time of sync point ``i`` as planned now (or as it was passed)."""
+        t = self._anchor(i)
+        if t is not None:
+            return t
+        lo = i - 1
+        while lo >= 0 and self._anchor(lo) is None:
+            lo -= 1
+        hi = i + 1
+        while hi < len(self.keys) and self._anchor(hi) is None:
+            hi += 1
+        if lo < 0 or hi >= len(self.keys):
+            return None
+        t_lo, t_hi = self._anchor(lo), self._anchor(hi)
+        p_lo, p_hi = self.preferred[lo], self.preferred[hi]
+        if p_hi <= p_lo:
+            return t_lo
+        return t_lo + (self.preferred[i] - p_lo) / (p_hi - p_lo) * (t_hi - t_lo)
+
+    def times(self) -> list[float | None]:
+        """Global times of all sync points (one pass: tied keys, then warping between them)."""
+        times = [self._anchor(i) for i in range(len(self.keys))]
+        pref = self.preferred
+        lo = None
+        for hi, t_hi in enumerate(times):
+            if t_hi is None:
+                continue
+            if lo is not None and hi > lo + 1:
+                t_lo, p_lo, p_hi = times[lo], pref[lo], pref[hi]
+                for i in range(lo + 1, hi):
+                    times[i] = t_lo if p_hi <= p_lo else t_lo + (pref[i] - p_lo) / (p_hi - p_lo) * (t_hi - t_lo)
+            lo = hi
+        return times
+
+    def sync_time(self, sync_id: str) -> float | None:
+        return self.time(self.sync_ids.index(sync_id))
+
+    @property
+    def start(self) -> float | None:
+        return self.time(0)
+
+    @property
+    def end(self) -> float | None:
+        return self.time(len(self.sync_ids) - 1)
+
+    def next_time(self) -> float | None:
+        """When the next sync point is due (None if not active, done, or not known to come)."""
+        if self.state != "active" or self.next_index >= len(self.sync_ids):
+            return None
+        t = self.time(self.next_index)
+        return t if t is not None and t < math.inf else None
+
+    def own_pegs(self) -> Iterable[OffsetPeg]:
+        for key in self.keys:
+            if key is not None and isinstance(key.peg, OffsetPeg):
+                yield key.peg
+
+    def pegs_below(self) -> Iterator[TimePeg]:
+        """Every peg this behaviour's timing hangs from: its keys' pegs, what they are tied to, and the pegs
+        of behaviours whose sync points it is tied to (once each)."""
+        seen: set[int] = set()
+        todo = [key.peg for key in self.keys if key is not None]
+        while todo:
+            peg = todo.pop()
+            if peg is None or id(peg) in seen:
+                continue
+            seen.add(id(peg))
+            yield peg
+            if isinstance(peg, OffsetPeg):
+                todo.append(peg.base)
+            elif isinstance(peg, SyncPeg):
+                todo.extend(key.peg for key in peg.timed.keys if key is not None)
+
+    def hangs_from(self, peg_ids: set[int]) -> bool:
+        """Whether any peg this behaviour's timing hangs from is one of ``peg_ids`` (``id()`` of pegs)."""
+        return any(id(peg) in peg_ids for peg in self.pegs_below())
+
+    def __repr__(self) -> str:
+        return f"TimedBehaviour({self.block_id}:{self.id}, {self.times()})"
+
+
+class SyncPeg(ComputedPeg):
+    """A read-only peg at one sync point of a timed behaviour, tied or placed by time warping.
+
+    It lets other blocks tie their behaviours to any sync point of this one.
+    """
+
+    __slots__ = ("timed", "index")
+
+    def __init__(self, timed: TimedBehaviour, index: int):
+        super().__init__(None, name=f"{timed.block_id}:{timed.id}:{timed.sync_ids[index]}")
+        self.timed = timed
+        self.index = index
+
+    @property
+    def time(self) -> float | None:
+        return self.timed.time(self.index)
+
+
+@dataclass(eq=False)
+class BlockRun:
+    """One submitted block on its way: pending, running, ended (or refused).
+
+    ``predicted`` holds, for each behaviour, the times last sent in a predictionFeedback.
+    """
+
+    block: Block
+    block_peg: TimePeg
+    ended: simpy.Event
+    state: str = "pending"  # pending -> running -> ended, or refused
+    timed: list[TimedBehaviour] = field(default_factory=list)
+    predicted: dict[str, list[float | None]] = field(default_factory=dict)
+    predicted_start: float | None = None
+    ended_at: float | None = None
+
+    @property
+    def id(self) -> str:
+        return self.block.id
+
+    def live(self) -> list[TimedBehaviour]:
+        """Its behaviours that are planned or playing, in document order."""
+        return [t for t in self.timed if t.live]
