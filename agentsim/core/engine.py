@@ -98,11 +98,18 @@ class Planner:
     def remove(self, timed: TimedBehaviour) -> None:
         self.plan.pop(timed, None)
 
-    def invalid(self, timed: TimedBehaviour) -> str | None:
-        """Why ``timed``'s current timing (after pegs moved) is no longer valid, or None if it is."""
+    def judges(self, timed: TimedBehaviour) -> bool:
+        """Whether :meth:`invalid` needs ``timed``'s times to judge it (False: it is valid whatever they are)."""
+        return timed.state != "finished"
+
+    def invalid(self, timed: TimedBehaviour, times: list[float | None] | None = None) -> str | None:
+        """Why ``timed``'s current timing (after pegs moved) is no longer valid, or None if it is.
+
+        ``times``: its current times, if the caller has them already.
+        """
         if timed.state == "finished":
             return None
-        times = timed.times()
+        times = timed.times() if times is None else times
         if any(t is None for t in times):
             return "a sync point lost its time"
         if any(t == math.inf for t in times):

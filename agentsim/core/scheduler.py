@@ -14,6 +14,7 @@ behaviours whose predicted timing moved by more than the prediction tolerance, a
 from __future__ import annotations
 
 import functools
+import math
 from typing import Iterable
 
 import simpy
@@ -32,8 +33,12 @@ FRAME = 1.0 / 60.0
 
 
 def _start_time(timed: TimedBehaviour) -> float:
+    """When a behaviour is expected to start: as timed now, or as planned while it waits for the world
+    (an infinite start); minus infinity if not known at all."""
     start = timed.start
-    return start if start is not None and start < float("inf") else float("-inf")
+    if start is not None and start == math.inf:
+        start = timed.planned_start
+    return start if start is not None and start < math.inf else -math.inf
 
 
 def _moved(times: list[float | None], last: list[float | None], tolerance: float) -> bool:
@@ -119,6 +124,7 @@ class Scheduler:
         #: bumped whenever behaviours are added, so that :class:`Dependants` know to look again
         self.structure_version = 0
         self._pending: dict[TimedBehaviour, None] | None = {}  # to re-time this instant; None: all
+        self._pending_until = 0.0  # ... and up to when
         self._retime_scheduled = False
         board.on_move(self.pegs_moved)
         self.context = EngineContext(env=env, board=board, sync_passed=self.sync_passed,
@@ -185,6 +191,7 @@ class Scheduler:
             return run
         self.board.forget_block(block.id)
         for timed in run.timed:
+            timed.planned_start = timed.start
             timed.engine.planner.add(timed)
             self.board.register_behaviour(block.id, timed.id, timed.sync_ids, functools.partial(SyncPeg, timed))
         self.structure_version += 1
@@ -281,7 +288,8 @@ class Scheduler:
         invalidate_times()
         if self._pending is not None:
             if horizon is not None and isinstance(pegs, Dependants):
-                self._pending.update(dict.fromkeys(pegs.near(self.env.now + horizon)))
+                self._pending_until = self.env.now + horizon
+                self._pending.update(dict.fromkeys(pegs.near(self._pending_until)))
             else:
                 self._pending = None
         if not self._retime_scheduled:
@@ -292,13 +300,17 @@ class Scheduler:
         yield self.env.timeout(0)
         self._retime_scheduled = False
         pending, self._pending = self._pending, {}
-        self.retime(None if pending is None else list(pending))
+        if pending is None:
+            self.retime()
+        else:
+            self.retime(list(pending), until=self._pending_until)
 
-    def retime(self, behaviours: list[TimedBehaviour] | None = None) -> None:
+    def retime(self, behaviours: list[TimedBehaviour] | None = None, until: float | None = None) -> None:
         """Pegs moved: drop behaviours that became invalid, update predictions, wake the players.
 
         ``behaviours``: the ones affected (default: every live behaviour, and the start of every block
-        waiting to be appended).
+        waiting to be appended). ``until``: only their sync points due by then (global seconds) are
+        predicted again; later ones are when they come nearer.
         """
         if behaviours is None:
             with self.board.quiet():
@@ -309,37 +321,43 @@ class Scheduler:
             candidates = [t for engine in self.engine_list for t in engine.planner.plan]
         else:
             candidates = behaviours
+        dropped: dict[BlockRun, None] = {}
+        timed_now: dict[TimedBehaviour, list[float | None]] = {}  # times computed once, for both uses
         for timed in candidates:
             if timed.live:
-                reason = timed.engine.planner.invalid(timed)
+                planner = timed.engine.planner
+                times = timed_now[timed] = timed.times() if planner.judges(timed) else None
+                reason = planner.invalid(timed, times)
                 if reason is not None:
                     self.drop(timed, f"after re-timing: {reason}")
+                    dropped[timed.run] = None
         if behaviours is None:
-            runs = list(self.runs)
-            for run in runs:
+            for run in list(self.runs):
                 self.predict(run)
-        else:
-            by_run: dict[BlockRun, list[TimedBehaviour]] = {}
-            for timed in behaviours:
-                by_run.setdefault(timed.run, []).append(timed)
-            runs = list(by_run)
-            for run in runs:
-                self.predict(run, by_run[run])
-        for run in runs:
-            self.end_if_done(run, self.env.now)
-        if behaviours is None:
+                self.end_if_done(run, self.env.now)
             for engine in self.engine_list:
                 engine.plan.kick()
-        else:
-            for timed in behaviours:
-                if timed.state == "active":
-                    timed.engine.plan.kick([timed])
+            return
+        by_run: dict[BlockRun, list[TimedBehaviour]] = {}
+        for timed in behaviours:
+            by_run.setdefault(timed.run, []).append(timed)
+        for run, affected in by_run.items():
+            self.predict(run, affected, until, timed_now)
+        for run in dropped:
+            self.end_if_done(run, self.env.now)
+        for timed in behaviours:
+            if timed.state == "active":
+                timed.engine.plan.kick([timed])
 
-    def predict(self, run: BlockRun, behaviours: list[TimedBehaviour] | None = None, force: bool = False) -> None:
+    def predict(self, run: BlockRun, behaviours: list[TimedBehaviour] | None = None, until: float | None = None,
+                timed_now: dict[TimedBehaviour, list[float | None] | None] | None = None,
+                force: bool = False) -> None:
         """Send predictionFeedback for the behaviours of a block whose predicted timing moved by more than
         the tolerance since they were last predicted (all of the block's live behaviours if ``force``).
 
-        ``behaviours``: the ones to look at (default: every live behaviour of the block).
+        ``behaviours``: the ones to look at (default: every live behaviour of the block). ``until``: look
+        only at their sync points not yet passed and due by then (global seconds), and say only those.
+        ``timed_now``: times of some of them computed already.
         """
         if run.state not in ("pending", "running"):
             return
@@ -348,18 +366,32 @@ class Scheduler:
         for timed in run.live() if behaviours is None else behaviours:
             if not timed.live:
                 continue
-            times = timed.times()
             last = run.predicted.get(timed.id)
-            if force or last is None or _moved(times, last, tolerance):
-                run.predicted[timed.id] = times
-                entries.append({"id": timed.id, "type": timed.behaviour.type, "globalStart": times[0],
-                                "globalEnd": times[-1], "syncs": dict(zip(timed.sync_ids, times))})
+            known = timed_now.get(timed) if timed_now else None
+            if until is None or last is None:
+                indices = range(len(timed.sync_ids))
+                times = known if known is not None else timed.times()
+            elif known is not None:
+                indices = range(timed.next_index, len(timed.sync_ids))
+                times = known[timed.next_index:]
+            else:
+                indices, times = timed.window(until)
+            if not (force or last is None or _moved(times, [last[i] for i in indices], tolerance)):
+                continue
+            if last is None or len(indices) == len(last):
+                last = run.predicted[timed.id] = list(times)
+            else:
+                for i, t in zip(indices, times):
+                    last[i] = t
+            run.note_end(timed, last[-1])
+            entries.append({"id": timed.id, "type": timed.behaviour.type, "globalStart": timed.start,
+                            "globalEnd": last[-1], "syncs": {timed.sync_ids[i]: t for i, t in zip(indices, times)}})
         start = run.block_peg.time
         start_moved = run.predicted_start is None or (start != run.predicted_start
                                                        and not abs(start - run.predicted_start) <= tolerance)
         if not (force or entries or start_moved):
             return
         run.predicted_start = start
-        ends = [run.predicted[t.id][-1] for t in run.timed if t.live and t.id in run.predicted]
-        end = max([start] + [e for e in ends if e is not None])
+        end = run.predicted_end()
+        end = start if end is None else max(start, end)
         self.log.send(fb.prediction(run.id, self.env.now, run.block.character_id, start, end, entries))

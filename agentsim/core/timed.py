@@ -8,6 +8,7 @@ ended, with the timed behaviours the solver made of it and what was last predict
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import math
 from dataclasses import dataclass, field
@@ -36,6 +37,7 @@ class KeyRef:
 
 
 _planned = itertools.count()
+_versions = itertools.count()
 
 
 class TimedBehaviour:
@@ -61,6 +63,7 @@ class TimedBehaviour:
         self.next_index = 0
         self.state = "planned"  # planned -> active -> finished | dropped
         self.stopped: float | None = None  # when it was dropped or cut, if it was
+        self.planned_start: float | None = None  # its start as first planned
 
     @property
     def id(self) -> str:
@@ -126,6 +129,19 @@ class TimedBehaviour:
     @property
     def end(self) -> float | None:
         return self.time(len(self.sync_ids) - 1)
+
+    def window(self, until: float) -> tuple[range, list[float | None]]:
+        """The sync points not yet passed and due by ``until`` (global seconds), with their times: indices
+        and times, up to and including the first one due later (or unknown)."""
+        times: list[float | None] = []
+        i = self.next_index
+        while i < len(self.sync_ids):
+            t = self.time(i)
+            times.append(t)
+            i += 1
+            if t is None or t > until:
+                break
+        return range(self.next_index, i), times
 
     def next_time(self) -> float | None:
         """When the next sync point is due (None if not active, done, or not known to come)."""
@@ -196,10 +212,29 @@ class BlockRun:
     predicted: dict[str, list[float | None]] = field(default_factory=dict)
     predicted_start: float | None = None
     ended_at: float | None = None
+    # the predicted ends of its behaviours, as a max-heap with lazy deletion: (-end, version, timed)
+    _ends: list[tuple[float, int, TimedBehaviour]] = field(default_factory=list, repr=False)
+    _end_version: dict[TimedBehaviour, int] = field(default_factory=dict, repr=False)
 
     @property
     def id(self) -> str:
         return self.block.id
+
+    def note_end(self, timed: TimedBehaviour, end: float | None) -> None:
+        """Remember the predicted end (global seconds) of one of its behaviours (None, inf: not known)."""
+        version = next(_versions)
+        self._end_version[timed] = version
+        if end is not None and math.isfinite(end):
+            heapq.heappush(self._ends, (-end, version, timed))
+
+    def predicted_end(self) -> float | None:
+        """The latest predicted end of its live behaviours, as last noted (None if none is known)."""
+        while self._ends:
+            end, version, timed = self._ends[0]
+            if timed.live and self._end_version.get(timed) == version:
+                return -end
+            heapq.heappop(self._ends)
+        return None
 
     def live(self) -> list[TimedBehaviour]:
         """Its behaviours that are planned or playing, in document order."""

@@ -132,6 +132,14 @@ class SpeechPlanner(Planner):
             if abs((t - times[0]) - p) > RIGID_TOLERANCE:
                 raise ScheduleError("speech cannot be stretched or skewed to meet its constraints")
 
+    def judges(self, timed: TimedBehaviour) -> bool:
+        return id(timed.behaviour) not in self.speaking and super().judges(timed)
+
+    def invalid(self, timed: TimedBehaviour, times: list[float | None] | None = None) -> str | None:
+        if id(timed.behaviour) in self.speaking:
+            return None  # it follows its audio: its sync points come in order, when they are heard
+        return super().invalid(timed, times)
+
     def remove(self, timed: TimedBehaviour) -> None:
         super().remove(timed)
         for store in (self._utterances, self._plans):
@@ -293,8 +301,10 @@ class SpeechEngine(Engine):
             if event.arrival_time > env.now:
                 yield env.timeout(event.arrival_time - env.now)
             playback.record(env.now)
+            before = playback.strategy.path
             playback.strategy.on_event(event, env.now)
-            self.context.pegs_moved(playback.dependants, horizon=self.HORIZON)
+            if playback.strategy.path is not before:  # the event changed the future of t_A
+                self.context.pegs_moved(playback.dependants, horizon=self.HORIZON)
         # After the last event and the longest it could have been held, t_A learns nothing more.
         last = max([playback.t_end] + [e.arrival_time for e in playback.delivered])
         if last > env.now:
