@@ -262,15 +262,16 @@ class EngineContext:
         (seconds), only the dependants whose next sync point is that near are re-timed now; the caller
         reports again as time goes on.
     dependants_of : callable
-        ``dependants_of(pegs)``: the live behaviours whose timing hangs from ``pegs``, kept up to date as
-        blocks come and go, ordered by start.
+        ``dependants_of(pegs, planned_now=None)``: the live behaviours whose timing hangs from ``pegs``,
+        kept up to date as blocks come and go, ordered by planned start; ``planned_now()`` says which
+        planned time the owner of the pegs has reached (default: the clock), to judge which are near.
     """
 
     env: simpy.Environment
     board: PegBoard
     sync_passed: Callable[[TimedBehaviour, int, float], None]
     pegs_moved: Callable[..., None]
-    dependants_of: Callable[[Iterable[TimePeg]], object]
+    dependants_of: Callable[..., object]
 
 
 class Engine:

@@ -32,15 +32,6 @@ from agentsim.core.timed import EPSILON, BlockRun, SyncPeg, TimedBehaviour
 FRAME = 1.0 / 60.0
 
 
-def _start_time(timed: TimedBehaviour) -> float:
-    """When a behaviour is expected to start: as timed now, or as planned while it waits for the world
-    (an infinite start); minus infinity if not known at all."""
-    start = timed.start
-    if start is not None and start == math.inf:
-        start = timed.planned_start
-    return start if start is not None and start < math.inf else -math.inf
-
-
 def _moved(times: list[float | None], last: list[float | None], tolerance: float) -> bool:
     if len(times) != len(last):
         return True
@@ -53,16 +44,20 @@ def _moved(times: list[float | None], last: list[float | None], tolerance: float
 
 
 class Dependants:
-    """The live behaviours whose timing hangs from some pegs, by start, with the near ones at hand.
+    """The live behaviours whose timing hangs from some pegs, by planned start, with the near ones at hand.
 
     It follows the blocks as they come: when a block is submitted, the list is made again the next time it
     is asked for. :meth:`near` keeps the behaviours that have come within a horizon and are still live, so
-    that pegs moving at every progress event of a speech re-time only what is about to happen.
+    that pegs moving at every progress event of a speech re-time only what is about to happen. Nearness is
+    judged on the planned timeline: ``planned_now()`` says which planned time the owner of the pegs has
+    reached (a speech: its planned start plus how far its animator time has got), so that a strategy
+    whose predictions run far ahead or behind does not make behaviours come too late.
     """
 
-    def __init__(self, scheduler: "Scheduler", pegs: Iterable[TimePeg]):
+    def __init__(self, scheduler: "Scheduler", pegs: Iterable[TimePeg], planned_now=None):
         self.scheduler = scheduler
         self.peg_ids = {id(p) for p in pegs}
+        self.planned_now = planned_now if planned_now is not None else (lambda: scheduler.env.now)
         self.version = -1
         self.behaviours: list[TimedBehaviour] = []
         self._starts: list[float] = []
@@ -74,20 +69,24 @@ class Dependants:
             return
         self.version = self.scheduler.structure_version
         found = [t for t in self.scheduler.live_behaviours() if t.hangs_from(self.peg_ids)]
-        found.sort(key=_start_time)
-        self.behaviours = found
-        self._starts = [_start_time(t) for t in found]
+        starts = [t.planned_start if t.planned_start is not None and math.isfinite(t.planned_start) else -math.inf
+                  for t in found]
+        order = sorted(range(len(found)), key=starts.__getitem__)
+        self.behaviours = [found[i] for i in order]
+        self._starts = [starts[i] for i in order]
         self._admitted = 0
         self._near = {}
 
     def all(self) -> list[TimedBehaviour]:
-        """Every live dependant, by start."""
+        """Every live dependant, by planned start."""
         self._refresh()
         return [t for t in self.behaviours if t.live]
 
-    def near(self, until: float) -> list[TimedBehaviour]:
-        """The live dependants that start by ``until`` (global seconds) or have an unknown start."""
+    def near(self, horizon: float) -> list[TimedBehaviour]:
+        """The live dependants planned to start within ``horizon`` seconds of the planned time reached now,
+        or with no planned start."""
         self._refresh()
+        until = self.planned_now() + horizon
         while self._admitted < len(self.behaviours) and self._starts[self._admitted] <= until:
             self._near[self.behaviours[self._admitted]] = None
             self._admitted += 1
@@ -273,9 +272,12 @@ class Scheduler:
                   run.block.character_id, [timed.id])
 
     # ------------------------------------------------------------------ re-timing
-    def dependants_of(self, pegs: Iterable[TimePeg]) -> Dependants:
-        """The live behaviours whose timing hangs from ``pegs``, kept up to date as blocks come."""
-        return Dependants(self, pegs)
+    def dependants_of(self, pegs: Iterable[TimePeg], planned_now=None) -> Dependants:
+        """The live behaviours whose timing hangs from ``pegs``, kept up to date as blocks come.
+
+        ``planned_now()``: the planned time the owner of the pegs has reached (default: the clock).
+        """
+        return Dependants(self, pegs, planned_now)
 
     def pegs_moved(self, pegs: Iterable[TimePeg] | TimePeg | Dependants | None = None,
                    horizon: float | None = None) -> None:
@@ -289,7 +291,7 @@ class Scheduler:
         if self._pending is not None:
             if horizon is not None and isinstance(pegs, Dependants):
                 self._pending_until = self.env.now + horizon
-                self._pending.update(dict.fromkeys(pegs.near(self._pending_until)))
+                self._pending.update(dict.fromkeys(pegs.near(horizon)))
             else:
                 self._pending = None
         if not self._retime_scheduled:

@@ -289,7 +289,9 @@ class SpeechEngine(Engine):
                 if key is not None and timed.tied[i] and not timed.fixed[i] and isinstance(key.peg, OffsetPeg):
                     key.peg.rebase(speech_pegs[i], -key.offset)
             timed.keys = [KeyRef(peg, 0.0) for peg in speech_pegs]
-        playback.dependants = self.context.dependants_of(speech_pegs)
+        planned_start = timed.planned_start if timed.planned_start is not None else t_request
+        playback.dependants = self.context.dependants_of(
+            speech_pegs, planned_now=lambda: planned_start + strategy.position(self.env.now))
         self.context.pegs_moved(playback.dependants)  # the speech now runs on t_A: everything tied to it moved
         self.env.process(self._deliver(playback))
         if config.trace_frame:
