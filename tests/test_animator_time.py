@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from agentsim.core.errors import AgentsimError
 from agentsim.speech.animator_time import (
     STRATEGIES,
     AnimatorTime,
@@ -22,6 +23,7 @@ from agentsim.speech.animator_time import (
     Path,
     Skip70ms,
     SpeechPlan,
+    check_strategy,
     lower_envelope_line,
     make_strategy,
 )
@@ -105,6 +107,16 @@ def test_registry_names():
         assert make_strategy(name).name == name
     with pytest.raises(ValueError):
         make_strategy("psychic")
+
+
+def test_an_unknown_name_is_an_agentsim_error_naming_every_known_strategy():
+    for check in (check_strategy, make_strategy,
+                  lambda name: run_sync_eval(TEXT, BuiltinBackend(), name, DeliveryModel())):
+        with pytest.raises(AgentsimError, match="unknown strategy 'psychic'") as caught:
+            check("psychic")
+        assert all(name in str(caught.value) for name in STRATEGIES)
+    for name in STRATEGIES:
+        assert check_strategy(name) == name
 
 
 # -- baselines on hand-built sequences -------------------------------------------------------------------

@@ -10,6 +10,7 @@ delivery
     Progress events of a playing utterance and the late, jittery, bursty channel that delivers them.
 animator_time
     Animator-time strategies (Chang's ``t_A``) behind one interface, registered in ``STRATEGIES``.
+    A package: path, base, baselines, envelope, warps and best, with the registry in its ``__init__``.
 linear_model
     Chang's linear characters-to-time model; plans from it or from a backend's own timeline.
 metrics

@@ -17,7 +17,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import simpy
 
-from agentsim.speech.animator_time import STRATEGIES, make_strategy
+from agentsim.speech.animator_time import check_strategy, make_strategy
 from agentsim.speech.backend import SpeechText, TTSBackend, Utterance
 from agentsim.speech.builtin import FUNCTION_WORDS
 from agentsim.speech.delivery import DeliveryModel, deliver, delivery_process, true_events
@@ -124,7 +124,8 @@ def run_sync_eval(text: str, backend: TTSBackend, strategy_name: str, delivery: 
     backend : TTSBackend
         Text-to-speech backend giving the true timeline.
     strategy_name : str
-        A key of :data:`agentsim.speech.animator_time.STRATEGIES`.
+        A key of :data:`agentsim.speech.animator_time.STRATEGIES` (checked by
+        :func:`~agentsim.speech.animator_time.check_strategy`).
     delivery : DeliveryModel
         Playback start, drift and event channel.
     timing : {"tts", "linear"}
@@ -159,8 +160,7 @@ def run_sync_eval(text: str, backend: TTSBackend, strategy_name: str, delivery: 
         mean absolute error, signed mean, n), ``snaps``, ``stall_s`` and ``rate`` (``min``, ``max``),
         all over the frames from the true start to the true end of the audio.
     """
-    if strategy_name not in STRATEGIES:
-        raise ValueError(f"unknown strategy {strategy_name!r}; known: {sorted(STRATEGIES)}")
+    check_strategy(strategy_name)
     if timing not in TIMINGS:
         raise ValueError(f"timing must be one of {TIMINGS}, not {timing!r}")
     utterance = synthesize_cached(backend, text)
