@@ -10,7 +10,8 @@ import pytest
 
 from agentsim.animation import DriverManager, evaluate_poses, write_bvh, write_npz
 from agentsim.animation.analysis import head_orientation, measure_strokes
-from agentsim.animation.drivers import ArbitrationError, Arbitrator, Driver
+from agentsim.animation.arbitrator import ArbitrationError, Arbitrator
+from agentsim.animation.drivers import Driver
 from agentsim.realizer import Realizer
 from conftest import EXAMPLES
 

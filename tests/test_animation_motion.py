@@ -10,7 +10,8 @@ from agentsim.animation import DriverManager, TimeSource, evaluate_poses, plot_t
 from agentsim.animation.analysis import lowest, measure_strokes, pointing_arrival
 from agentsim.animation.body import Body, euler_matrix, matrix_euler
 from agentsim.animation.drivers import PRIORITY, Driver, SlaveDriver
-from agentsim.animation.motion import KeyTimes, ReplacementGroup, GazeDriver
+from agentsim.animation.head import GazeDriver
+from agentsim.animation.motion import KeyTimes, ReplacementGroup
 from agentsim.realizer import Realizer
 
 BML_NS = "http://www.bml-initiative.org/bml/bml-1.0"

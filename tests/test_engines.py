@@ -6,8 +6,8 @@ import time
 
 import pytest
 
+from agentsim.animation.units import BEAT, NOD, motion_state
 from agentsim.core.clock import make_environment
-from agentsim.engines.animation import BEAT, NOD, motion_state
 from agentsim.core.engine import stretch_times
 from agentsim.core.errors import ScheduleError
 from agentsim.realizer import Realizer

@@ -5,31 +5,47 @@ manner of Chang's Pantomime (drivers, a priority Arbitrator over degrees of free
 with motor functions) and Elckerlyc's Animation Player (motion units whose keys are placed by linear
 time warping, transition units, replacement groups):
 
-=============  ==========================================================================================
-module         what lives there
-=============  ==========================================================================================
-``body``       the H-Anim style skeleton: joints, offsets, Euler channels (BVH order ZXY), joint limits,
-               degrees of freedom by name (``"skullbase.pitch"``), forward kinematics and the analytic
-               two-link arm inverse kinematics.
-``drivers``    Driver, Arbitrator (one writer per DOF and frame), master/slave drivers, the background
-               drivers (breathing, eye-blink reflex, idle sway, eye fixation), the DriverManager with its
-               motor functions, and TimeSource (the time a driver is advanced by).
-``motion``     procedural motion units for every BML behaviour type, driven by a TimedBehaviour's actual
-               key times: gesture phases with holds filled by an interpolator, the ictus of beats and
-               conducting patterns at the stroke key, nods, shakes, pointing by inverse kinematics, gaze,
-               face, posture, locomotion, and the jaw during speech.
-``output``     ``evaluate_poses`` (a PoseStream of joint angles and joint positions per frame),
-               ``write_bvh``, ``write_npz`` and ``plot_timeline``.
-``analysis``   measuring where the motion really has its stroke (ictus, nod bottom, pointing arrival)
-               against the stroke feedback.
-=============  ==========================================================================================
+===============  ========================================================================================
+module           what lives there
+===============  ========================================================================================
+``body``         the H-Anim style skeleton: joints, offsets, Euler channels (BVH order ZXY), joint
+                 limits, degrees of freedom by name (``"skullbase.pitch"``), forward kinematics and the
+                 analytic two-link arm inverse kinematics.
+``units``        motion units: the preferred key times and phases of every kind of motion, the binding
+                 of a behaviour to its unit, and where a timed unit is at a given time.
+``time_source``  TimeSource: the time a driver is advanced by (the clock, or animator time that
+                 follows the speech).
+``drivers``      Driver and SlaveDriver (one motor skill each, master and slave) and the priorities.
+``arbitrator``   the Arbitrator: one writer per DOF and frame, granted by priority.
+``background``   the background drivers: idle sway, breathing, eye fixation and the eye-blink reflex.
+``scene``        named points of the world that behaviours aim at.
+``motion``       the MotionDriver base of the motion units: key times and linear time warping,
+                 blending curves and the hold interpolator, replacement groups.
+``arms``         gesture strokes (the ictus of beats and conducting patterns at the stroke key),
+                 pointing by inverse kinematics, hand shapes and key frame sequences.
+``head``         nods, shakes and tilts, head turns, gaze with its eyes, saccades and held eyelids.
+``pose``         face expressions and postures blended to and held, locomotion, the jaw during speech.
+``functions``    motor functions by name with default parameters (background drivers, motion units).
+``manager``      the DriverManager: drivers, Arbitrator and motor functions of one body, and the event
+                 sweep that evaluates poses.
+``behaviours``   ``build_drivers``: the motion drivers that play a list of timed BML behaviours.
+``output``       ``evaluate_poses`` (a PoseStream of joint angles and joint positions per frame),
+                 ``write_bvh`` and ``write_npz``.
+``timeline``     ``plot_timeline``: behaviours, phases, pegs and feedback on one time axis.
+``analysis``     measuring where the motion really has its stroke (ictus, nod bottom, pointing arrival)
+                 against the stroke feedback.
+===============  ========================================================================================
 
 Times are seconds, lengths metres, joint angles degrees.
 """
 
+from agentsim.animation.arbitrator import Arbitrator
 from agentsim.animation.body import Body
-from agentsim.animation.drivers import Arbitrator, Driver, DriverManager, TimeSource
-from agentsim.animation.output import PoseStream, evaluate_poses, plot_timeline, write_bvh, write_npz
+from agentsim.animation.drivers import Driver
+from agentsim.animation.manager import DriverManager
+from agentsim.animation.output import PoseStream, evaluate_poses, write_bvh, write_npz
+from agentsim.animation.time_source import TimeSource
+from agentsim.animation.timeline import plot_timeline
 
 __all__ = [
     "Arbitrator", "Body", "Driver", "DriverManager", "PoseStream", "TimeSource", "evaluate_poses",

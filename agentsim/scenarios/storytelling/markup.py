@@ -27,9 +27,9 @@ tag                      gesture (BML)
 =======================  ==========================================================================
 
 Hand gestures (``beat``, ``point``, ``icon``) take an optional last argument ``left``, ``right`` or
-``both`` (``[beat:both]``, ``[point:door:left]``); without it the motion module chooses (the right hand,
+``both`` (``[beat:both]``, ``[point:door:left]``); without it the animation library chooses (the right hand,
 or the left when the right is busy; pointing: the hand on the target's side). Targets are the points
-of :data:`agentsim.animation.motion.DEFAULT_SCENE` and those a story declares with ``@scene``.
+of :data:`agentsim.animation.scene.DEFAULT_SCENE` and those a story declares with ``@scene``.
 
 :func:`parse_story` reads the format into a :class:`Story`; :func:`compile_bml` writes the BML block that
 tells it; :meth:`Story.to_markup` writes the format back.
@@ -42,7 +42,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
-from agentsim.animation.motion import DEFAULT_SCENE, FACE_LEXEMES, GESTURE_FORMS
+from agentsim.animation.arms import GESTURE_FORMS
+from agentsim.animation.pose import FACE_LEXEMES
+from agentsim.animation.scene import DEFAULT_SCENE
 from agentsim.bml.parser import normalize_space
 from agentsim.bml.vocabulary import BML_NAMESPACE
 from agentsim.core.errors import AgentsimError
@@ -354,7 +356,7 @@ def mark_name(word: int, anchor: str = "stress") -> str:
 def release_delay(gesture: Gesture) -> float | None:
     """Seconds from a gesture's syllable sync point to its end as its motion unit prefers them (None for
     a gaze shift, which ends on its syllable)."""
-    from agentsim.engines import animation as units
+    from agentsim.animation import units
 
     unit = {"beat": units.BEAT, "icon": units.GESTURE, "point": units.POINTING, "nod": units.NOD,
             "shake": units.SHAKE, "brows": units.FACE, "face": units.FACE}.get(gesture.kind)

@@ -16,7 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
-from agentsim.animation.motion import DEFAULT_SCENE
+from agentsim.animation.scene import DEFAULT_SCENE
 from agentsim.scenarios.storytelling.markup import Story, StoryError, _gesture, parse_story
 from agentsim.speech.backend import Utterance
 

@@ -1,0 +1,253 @@
+"""Motion drivers from timed BML behaviours: which driver plays each behaviour, on which hand, until when.
+
+:func:`build_drivers` turns the TimedBehaviours a realizer played into drivers on a
+:class:`~agentsim.animation.manager.DriverManager`; gestures and pointing get their hands chosen,
+conducting beats numbered and coarticulation on each hand.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from agentsim.animation.arms import GESTURE_FORMS, GestureDriver, PointingDriver, conducting_meter, conducting_path
+from agentsim.animation.drivers import PRIORITY
+from agentsim.animation.head import GazeDriver, HeadDriver, HeadTurnDriver
+from agentsim.animation.manager import DriverManager
+from agentsim.animation.motion import KeyTimes, ReplacementGroup
+from agentsim.animation.pose import POSTURES, LocomotionDriver, PoseDriver, SpeechJawDriver, face_values
+from agentsim.animation.scene import Scene, offset_target
+from agentsim.animation.time_source import TimeSource
+from agentsim.animation.units import repetition
+
+
+@dataclass
+class UnitInfo:
+    """What became of one timed behaviour: its keys, the drivers playing it, hands, and when it stopped."""
+
+    block: str
+    id: str
+    type: str
+    lexeme: str
+    keys: dict[str, float]
+    drivers: list[str] = field(default_factory=list)
+    sides: list[str] = field(default_factory=list)
+    stop: float | None = None
+    target: list[float] | None = None
+    note: str = ""
+
+    def as_dict(self) -> dict:
+        return {"block": self.block, "id": self.id, "type": self.type, "lexeme": self.lexeme,
+                "keys": dict(self.keys), "drivers": list(self.drivers), "sides": list(self.sides),
+                "stop": self.stop, "target": self.target, "note": self.note}
+
+
+def _stop_times(feedback_items: Sequence[dict] | None) -> tuple[dict[str, float], dict[str, float]]:
+    """Drop times by ``block:behaviour`` (from warnings) and end times of blocks (from block progress)."""
+    drops: dict[str, float] = {}
+    ends: dict[str, float] = {}
+    for f in feedback_items or ():
+        if f.get("type") == "warningFeedback":
+            target = str(f.get("id", ""))
+            block = target.split(":", 1)[0]
+            for b in f.get("modifiedBehaviours", []) or []:
+                drops.setdefault(f"{block}:{b}", float(f.get("globalTime", 0.0)))
+        elif f.get("type") == "blockProgress" and str(f.get("id", "")).endswith(":end"):
+            ends[str(f["id"])[:-4]] = float(f.get("globalTime", 0.0))
+    return drops, ends
+
+
+def _speech_pegged(timed, speech_ids: set[tuple[str, str]]) -> bool:
+    for ref in timed.behaviour.refs.values():
+        if ref.kind == "sync" and ref.behaviour is not None:
+            if ((ref.block or timed.block_id), ref.behaviour) in speech_ids:
+                return True
+    return False
+
+
+def _beat_index(behaviour) -> int | None:
+    meter = conducting_meter(behaviour.attributes.get("lexeme", ""))
+    if meter and meter[1]:
+        return meter[1]
+    for k, v in behaviour.attributes.items():
+        if k.lower().split(":")[-1] == "beat":
+            try:
+                return int(float(v))
+            except ValueError:
+                return None
+    return None
+
+
+def build_drivers(manager: DriverManager, timed_list: Sequence, feedback_items: Sequence[dict] | None = None,
+                  animator_time: TimeSource | None = None) -> list[UnitInfo]:
+    """Create the motion drivers that play ``timed_list`` (TimedBehaviours) and add them to ``manager``.
+
+    A behaviour that never started is left out; one that was dropped or interrupted after it started
+    plays until then (the time comes from warning or block feedback, else its last passed sync point).
+    Behaviours tied to speech are advanced by ``animator_time`` when given.
+    """
+    drops, block_ends = _stop_times(feedback_items)
+    scene = manager.scene
+    speech_ids = {(t.block_id, t.id) for t in timed_list if t.behaviour.type == "speech"}
+    groups = {"gaze": ReplacementGroup("gaze")}
+    infos: list[UnitInfo] = []
+    arm_items: list[tuple] = []
+
+    for timed in sorted(timed_list, key=lambda x: (x.times()[0] if x.times()[0] is not None else math.inf, x.order)):
+        b = timed.behaviour
+        if b.type == "wait":
+            continue
+        started = timed.passed[0] is not None
+        if timed.state == "dropped" and not started:
+            continue
+        stop = None
+        if timed.state == "dropped":
+            key = f"{timed.block_id}:{timed.id}"
+            passed = [p for p in timed.passed if p is not None]
+            stop = drops.get(key, block_ends.get(timed.block_id, passed[-1] if passed else None))
+        try:
+            keys = KeyTimes.from_timed(timed, fill=stop)
+        except ValueError:
+            continue
+        lexeme = b.attributes.get("lexeme", "")
+        info = UnitInfo(timed.block_id, timed.id, b.type, lexeme, keys.as_dict(), stop=stop)
+        infos.append(info)
+        ts = animator_time if (animator_time is not None and (b.type == "speech" or _speech_pegged(timed, speech_ids))) \
+            else None
+        name = f"{timed.block_id}:{timed.id}"
+        common = {"stop": stop, "time_source": ts}
+        if b.type in ("gesture", "pointing"):
+            arm_items.append((timed, keys, info, common))
+            continue
+        if b.type == "speech":
+            drv = manager.add(SpeechJawDriver(name, keys, **common))
+        elif b.type == "head":
+            try:
+                amount = float(b.attributes.get("amount", "0.5"))
+            except ValueError:
+                amount = 0.5
+            drv = manager.add(HeadDriver(name, keys, lexeme or "NOD", 28.0 * amount, repetition(b), **common))
+        elif b.type in ("gaze", "gazeShift"):
+            target = _bml_target(scene, b)
+            info.target = [float(x) for x in target]
+            drv = manager.add(GazeDriver(name, keys, target, b.attributes.get("influence", "HEAD"),
+                                         arrive="ready" if b.type == "gaze" else "end", shift=b.type == "gazeShift",
+                                         group=groups["gaze"], **common))
+        elif b.type == "headDirectionShift":
+            drv = manager.add(HeadTurnDriver(name, keys, _bml_target(scene, b), arrive="end", shift=True, **common))
+        elif b.type in ("faceLexeme", "faceFacs", "face", "faceShift"):
+            values = face_values("faceFacs" if b.type == "faceFacs" else "faceLexeme", b.attributes)
+            if not values:
+                info.note = "no DOFs for this expression"
+                continue
+            if b.type == "faceShift":
+                drv = manager.add(PoseDriver(name, keys, values, PRIORITY["shift"], "end", release=None, **common))
+            else:
+                drv = manager.add(PoseDriver(name, keys, values, PRIORITY["behaviour"], "attackPeak", **common))
+        elif b.type in ("posture", "postureShift"):
+            label = (b.attributes.get("lexeme") or b.attributes.get("type") or "WEIGHT_SHIFT").upper()
+            values = POSTURES.get(label, POSTURES["WEIGHT_SHIFT"])
+            if b.type == "posture":
+                drv = manager.add(PoseDriver(name, keys, values, PRIORITY["behaviour"], "ready", **common))
+            else:
+                drv = manager.add(PoseDriver(name, keys, values, PRIORITY["shift"], "end", release="end",
+                                             rest_after=True, **common))
+        elif b.type == "locomotion":
+            drv = manager.add(LocomotionDriver(name, keys, _bml_target(scene, b), **common))
+        else:
+            info.note = "no motion for this behaviour type"
+            continue
+        info.drivers.append(drv.name)
+
+    _build_arms(manager, arm_items, scene)
+    return infos
+
+
+def _bml_target(scene: Scene, behaviour) -> np.ndarray:
+    attrs = behaviour.attributes
+    point = scene.point(attrs.get("target", ""))
+    try:
+        angle = float(attrs.get("offsetAngle", "0"))
+    except ValueError:
+        angle = 0.0
+    if angle:
+        point = offset_target(point, np.array([0.0, 1.665, 0.085]), angle, attrs.get("offsetDirection", "RIGHT"))
+    return point
+
+
+def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> None:
+    """Gestures and pointing: choose hands, number conducting beats, coarticulate on each hand."""
+    # Hands: the mode says, else the right hand (pointing: the hand on the target's side), unless that
+    # hand is busy then and the other is free. Behaviours with a mode are placed first.
+    busy: dict[str, list[tuple[float, float]]] = {"l": [], "r": []}
+    planned: list[tuple[str, tuple]] = []
+    explicit_modes = {"LEFT_HAND": ["l"], "LEFT": ["l"], "RIGHT_HAND": ["r"], "RIGHT": ["r"],
+                      "BOTH_HANDS": ["l", "r"], "BOTH": ["l", "r"]}
+    ordered = sorted(items, key=lambda it: it[0].behaviour.attributes.get("mode", "").upper() not in explicit_modes)
+    for item in ordered:
+        timed, keys, info, common = item
+        b = timed.behaviour
+        sides = explicit_modes.get(b.attributes.get("mode", "").upper())
+        if sides is None:
+            if b.type == "pointing":
+                first = "l" if scene.point(b.attributes.get("target", ""))[0] > 0 else "r"
+            else:
+                first = "r"
+            other = "l" if first == "r" else "r"
+            clash = lambda s: any(a < keys.end and keys.start < e for a, e in busy[s])  # noqa: E731
+            sides = [other] if clash(first) and not clash(other) else [first]
+        for s in sides:
+            busy[s].append((keys.start, keys.end))
+            planned.append((s, item))
+    # Conducting: number the beats of each hand in stroke order, unless the lexeme or an attribute says.
+    counters: dict[tuple[str, int], int] = {}
+    beat_of: dict[tuple[str, int], int] = {}
+    for s, item in sorted(planned, key=lambda x: x[1][1].time("stroke")):
+        b = item[0].behaviour
+        meter = conducting_meter(b.attributes.get("lexeme", "")) if b.type == "gesture" else None
+        if meter is None:
+            continue
+        explicit = _beat_index(b)
+        n = counters.get((s, meter[0]), 0)
+        beat = explicit if explicit is not None else n % max(meter[0], 1) + 1
+        counters[(s, meter[0])] = beat
+        beat_of[(s, id(item))] = beat
+    # Coarticulation: a gesture taking over a hand whose previous gesture is past its stroke starts at
+    # once (dropping that one's retraction); one arriving during the previous stroke waits for its end.
+    last: dict[str, tuple] = {}
+    for s, item in sorted(planned, key=lambda x: (x[1][1].start, x[1][0].order)):
+        timed, keys, info, common = item
+        b = timed.behaviour
+        acquire = keys.start
+        prev = last.get(s)
+        if prev is not None and prev[1].end > keys.start:
+            prev_end = prev[1].time("strokeEnd")
+            if prev_end <= keys.time("strokeStart"):
+                acquire = max(keys.start, prev_end)
+                info.note = (info.note + " coarticulated").strip()
+        last[s] = item
+        name = f"{timed.block_id}:{timed.id}" + (f" ({'left' if s == 'l' else 'right'})" if len(
+            [p for p in planned if p[1] is item]) > 1 else "")
+        if b.type == "pointing":
+            target = _bml_target(scene, b)
+            info.target = [float(x) for x in target]
+            drv = PointingDriver(name, keys, s, target, acquire=acquire, **common)
+        else:
+            lexeme = b.attributes.get("lexeme", "").upper() or "BEAT"
+            meter = conducting_meter(lexeme)
+            if meter is not None:
+                try:
+                    amount = float(b.attributes.get("amount", "1"))
+                except ValueError:
+                    amount = 1.0
+                path = conducting_path(meter[0], beat_of.get((s, id(item)), 1), amount)
+                info.note = (info.note + f" beat {beat_of.get((s, id(item)), 1)} of {meter[0]}").strip()
+            else:
+                path = GESTURE_FORMS.get(lexeme, GESTURE_FORMS["DEFAULT"])
+            drv = GestureDriver(name, keys, s, path, acquire=acquire, **common)
+        manager.add(drv)
+        info.drivers.append(drv.name)
+        info.sides.append(s)

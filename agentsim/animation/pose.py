@@ -1,0 +1,186 @@
+"""Held poses (face expressions, postures and their shifts), locomotion, and the jaw while speaking."""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+import numpy as np
+
+from agentsim.animation.drivers import PRIORITY
+from agentsim.animation.motion import EASE, STOP_HANDOVER, KeyTimes, MotionDriver, blend_in, frac
+
+FACE_LEXEMES: dict[str, dict[str, float]] = {
+    "RAISE_BROWS": {"l_eyebrow.pitch": -12.0, "r_eyebrow.pitch": -12.0},
+    "BROW_RAISE": {"l_eyebrow.pitch": -12.0, "r_eyebrow.pitch": -12.0},
+    "FROWN": {"l_eyebrow.pitch": 9.0, "r_eyebrow.pitch": 9.0, "l_eyebrow.roll": -6.0, "r_eyebrow.roll": 6.0},
+    "LOWER_BROWS": {"l_eyebrow.pitch": 9.0, "r_eyebrow.pitch": 9.0},
+    "CLOSE_EYES": {"l_eyelid.pitch": 72.0, "r_eyelid.pitch": 72.0},
+    "BLINK": {"l_eyelid.pitch": 72.0, "r_eyelid.pitch": 72.0},
+    "WIDEN_EYES": {"l_eyelid.pitch": -18.0, "r_eyelid.pitch": -18.0, "l_eyebrow.pitch": -6.0,
+                   "r_eyebrow.pitch": -6.0},
+    "OPEN_MOUTH": {"temporomandibular.pitch": 16.0},
+    "SMILE": {"temporomandibular.pitch": 3.0, "l_eyebrow.pitch": -3.0, "r_eyebrow.pitch": -3.0},
+    "SURPRISE": {"l_eyebrow.pitch": -14.0, "r_eyebrow.pitch": -14.0, "temporomandibular.pitch": 12.0,
+                 "l_eyelid.pitch": -15.0, "r_eyelid.pitch": -15.0},
+}
+#: FACS action units that this skeleton can show.
+FACS_UNITS: dict[int, dict[str, float]] = {
+    1: {"l_eyebrow.pitch": -7.0, "r_eyebrow.pitch": -7.0, "l_eyebrow.roll": 3.0, "r_eyebrow.roll": -3.0},
+    2: {"l_eyebrow.pitch": -7.0, "r_eyebrow.pitch": -7.0, "l_eyebrow.roll": -3.0, "r_eyebrow.roll": 3.0},
+    4: {"l_eyebrow.pitch": 9.0, "r_eyebrow.pitch": 9.0},
+    5: {"l_eyelid.pitch": -18.0, "r_eyelid.pitch": -18.0},
+    7: {"l_eyelid.pitch": 25.0, "r_eyelid.pitch": 25.0},
+    26: {"temporomandibular.pitch": 12.0},
+    27: {"temporomandibular.pitch": 22.0},
+    41: {"l_eyelid.pitch": 35.0, "r_eyelid.pitch": 35.0},
+    43: {"l_eyelid.pitch": 72.0, "r_eyelid.pitch": 72.0},
+    45: {"l_eyelid.pitch": 72.0, "r_eyelid.pitch": 72.0},
+}
+
+POSTURES: dict[str, dict[str, float]] = {
+    "LEAN_FORWARD": {"vl5.pitch": 8.0, "HumanoidRoot.tz": 0.02},
+    "LEAN_BACK": {"vl5.pitch": -6.0, "HumanoidRoot.tz": -0.02},
+    "LEAN_LEFT": {"vl5.roll": -5.0, "HumanoidRoot.tx": 0.02},
+    "LEAN_RIGHT": {"vl5.roll": 5.0, "HumanoidRoot.tx": -0.02},
+    "WEIGHT_SHIFT": {"HumanoidRoot.tx": 0.025, "vl5.roll": 2.0, "r_knee.pitch": 8.0, "r_hip.pitch": -4.0},
+}
+
+
+def face_values(behaviour_type: str, attrs: Mapping[str, str]) -> dict[str, float]:
+    """DOF values of a face behaviour at full attack (scaled by ``amount``, one side if ``side`` says so)."""
+    try:
+        amount = float(attrs.get("amount", "1"))
+    except ValueError:
+        amount = 1.0
+    values: dict[str, float] = {}
+    if behaviour_type == "faceFacs":
+        try:
+            au = int(float(attrs.get("au", "0")))
+        except ValueError:
+            au = 0
+        values = dict(FACS_UNITS.get(au, {}))
+    else:
+        values = dict(FACE_LEXEMES.get(attrs.get("lexeme", "").upper(), {}))
+    side = attrs.get("side", "BOTH").upper()
+    if side in ("LEFT", "RIGHT"):
+        keep = "l_" if side == "LEFT" else "r_"
+        values = {k: v for k, v in values.items() if not (k[:2] in ("l_", "r_") and not k.startswith(keep))}
+    return {k: v * amount for k, v in values.items()}
+
+
+class PoseDriver(MotionDriver):
+    """Blends DOFs to fixed values and holds them: face expressions (attack to ``attackPeak``), postures
+    (to ``ready``), and their shift variants (to ``end``; a shift holds its values afterwards: a face
+    shift keeps its DOFs, a posture shift makes the values the rest pose)."""
+
+    def __init__(self, name: str, keys: KeyTimes, values: Mapping[str, float], priority: int,
+                 arrive: str, release: str | None = "relax", rest_after: bool = False, **kw):
+        super().__init__(name, keys, priority, list(values), **kw)
+        self.values = dict(values)
+        self.arrive = arrive
+        self.rest_after = rest_after
+        self.hold_forever = release is None
+        self.release_key = release or "end"
+
+    def occupies_until(self) -> float:
+        return math.inf if self.hold_forever else self.keys.end
+
+    def setup(self) -> None:
+        if not self.hold_forever:
+            return super().setup()
+        acquire = self.time_source.inverse(self.acquire)
+        if self.stop_time is not None and self.stop_time < acquire:
+            self.stopped = True
+            return
+        self.manager.at(acquire, self.begin_unit)
+        if self.stop_time is not None:
+            self.manager.at(self.stop_time, lambda t: self.stop(STOP_HANDOVER))
+
+    def handover(self) -> float:
+        return STOP_HANDOVER if self.rest_after else super().handover()
+
+    def finish_unit(self, t: float) -> None:
+        idle = self.manager.idle
+        if self.rest_after and idle is not None:
+            for name, v in self.values.items():
+                if name in idle.base:
+                    idle.set_base(name, float(self.arbitrator.current[self.body.dof(name)]), t)
+
+    def on_tick(self, t: np.ndarray) -> None:
+        n = len(t)
+        rest = self.body.rest_pose()
+        target = {}
+        for k, v in self.values.items():  # root translations are offsets from the rest position
+            target[k] = np.full(n, v + (rest[self.body.dof(k)] if k.startswith("HumanoidRoot.t") else 0.0))
+        self.write_held(blend_in(self, target, t, self.begun, self.keys.time(self.arrive)))
+
+
+# --------------------------------------------------------------------------------------------- locomotion, speech
+class LocomotionDriver(MotionDriver):
+    """Walks the root to a goal (a point short of the target) between start and end, legs swinging;
+    the goal becomes the rest position of the root."""
+
+    STEP_RATE = 1.8  # steps per second
+
+    def __init__(self, name: str, keys: KeyTimes, target: np.ndarray, **kw):
+        dofs = ["HumanoidRoot.tx", "HumanoidRoot.tz", "HumanoidRoot.yaw", "l_hip.pitch", "r_hip.pitch",
+                "l_knee.pitch", "r_knee.pitch"]
+        super().__init__(name, keys, PRIORITY["shift"], dofs, **kw)
+        self.release_key = "end"
+        self.target = np.asarray(target, dtype=float)
+        self.goal: np.ndarray | None = None
+
+    def handover(self) -> float:
+        return STOP_HANDOVER
+
+    def on_dof_grant(self, dofs, t, current, blend) -> None:
+        super().on_dof_grant(dofs, t, current, blend)
+        if self.goal is None:
+            here = np.array([self.start_value("HumanoidRoot.tx"), self.start_value("HumanoidRoot.tz")])
+            there = self.target[[0, 2]]
+            d = there - here
+            dist = float(np.linalg.norm(d))
+            self.goal = here if dist < 0.7 else here + d * (dist - 0.6) / dist
+
+    def finish_unit(self, t: float) -> None:
+        idle = self.manager.idle
+        if idle is not None:
+            for name in ("HumanoidRoot.tx", "HumanoidRoot.tz"):
+                idle.set_base(name, float(self.arbitrator.current[self.body.dof(name)]), t)
+
+    def on_tick(self, t: np.ndarray) -> None:
+        t0, t1 = self.begun, self.keys.end
+        here = np.array([self.start_value("HumanoidRoot.tx"), self.start_value("HumanoidRoot.tz")])
+        f = EASE(frac(t, t0, t1))
+        pos = here + np.multiply.outer(f, self.goal - here)
+        d = self.goal - here
+        heading = math.degrees(math.atan2(d[0], d[1])) if np.linalg.norm(d) > 1e-6 else 0.0
+        turn = np.sin(np.pi * frac(t, t0, t1)) ** 0.5
+        walking = np.sin(np.pi * frac(t, t0, t1))
+        phase = 2 * np.pi * self.STEP_RATE / 2 * (t - t0)
+        values = {"HumanoidRoot.tx": pos[:, 0], "HumanoidRoot.tz": pos[:, 1],
+                  "HumanoidRoot.yaw": heading * turn,
+                  "l_hip.pitch": -20 * walking * np.sin(phase), "r_hip.pitch": 20 * walking * np.sin(phase),
+                  "l_knee.pitch": 30 * walking * np.maximum(0, np.sin(phase + np.pi / 2)),
+                  "r_knee.pitch": 30 * walking * np.maximum(0, -np.sin(phase + np.pi / 2))}
+        self.write_held(values)
+
+
+class SpeechJawDriver(MotionDriver):
+    """The jaw opening and closing at syllable rate while speech plays (start to end)."""
+
+    SYLLABLE_RATE = 4.3
+
+    def __init__(self, name: str, keys: KeyTimes, **kw):
+        super().__init__(name, keys, PRIORITY["speech"], ["temporomandibular.pitch"], **kw)
+        self.release_key = keys.sync_ids[-1]
+
+    def release_time(self) -> float:
+        return self.keys.end
+
+    def on_tick(self, t: np.ndarray) -> None:
+        t0, t1 = self.keys.start, self.keys.end
+        env = np.clip(np.minimum(t - t0, t1 - t) / 0.1, 0, 1)
+        jaw = 9.0 * (0.5 - 0.5 * np.cos(2 * np.pi * self.SYLLABLE_RATE * (t - t0)))
+        self.write_held({"temporomandibular.pitch": self.start_value("temporomandibular.pitch") * (1 - env) + jaw * env})

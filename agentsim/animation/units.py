@@ -1,0 +1,112 @@
+"""Motion units: the preferred timing of each kind of motion (its keys and phases), and where a timed one is now.
+
+A behaviour is bound to a :class:`MotionUnit` by its type and lexeme (:func:`motion_unit`); the
+animation engine stretches the unit's keys between the constraints, and the motion drivers place their
+motion between the keys by linear time warping.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from agentsim.core.block import Behaviour
+
+
+@dataclass(frozen=True)
+class MotionUnit:
+    """A motion's preferred timing: seconds from its start to each sync point, and its duration limits.
+
+    Phases lie between consecutive keys (for a gesture: preparation, pre-stroke hold, stroke, post-stroke
+    hold, retraction). The canonical time of a key is its preferred time over the preferred duration.
+    """
+
+    name: str
+    keys: tuple[float, ...]
+    min_duration: float = 0.05
+    max_duration: float = 3600.0
+    #: index of the key range (start, end) that grows with ``repetition``
+    repeat: tuple[int, int] | None = None
+
+    def preferred(self, repetition: int = 1) -> list[float]:
+        keys = list(self.keys)
+        if self.repeat is not None and repetition > 1:
+            a, b = self.repeat
+            extra = (keys[b] - keys[a]) * (repetition - 1)
+            keys = keys[:b] + [k + extra for k in keys[b:]]
+        return keys
+
+    def canonical(self, repetition: int = 1) -> list[float]:
+        """Keys as canonical times 0 <= alpha <= 1."""
+        keys = self.preferred(repetition)
+        span = keys[-1] - keys[0]
+        return [(k - keys[0]) / span if span > 0 else 0.0 for k in keys]
+
+
+#                                 start ready sStart stroke sEnd relax  end
+BEAT = MotionUnit("beat", (0.0, 0.30, 0.32, 0.45, 0.55, 0.65, 0.95), min_duration=0.1)
+GESTURE = MotionUnit("gesture", (0.0, 0.40, 0.45, 0.65, 0.85, 1.00, 1.40), min_duration=0.15)
+POINTING = MotionUnit("pointing", (0.0, 0.50, 0.55, 0.70, 0.85, 1.60, 2.00), min_duration=0.2)
+NOD = MotionUnit("nod", (0.0, 0.10, 0.10, 0.25, 0.40, 0.40, 0.55), min_duration=0.1, repeat=(2, 4))
+SHAKE = MotionUnit("shake", (0.0, 0.10, 0.10, 0.30, 0.50, 0.50, 0.65), min_duration=0.1, repeat=(2, 4))
+#                                 start ready relax end
+GAZE = MotionUnit("gaze", (0.0, 0.30, 1.80, 2.10), min_duration=0.05)
+POSTURE = MotionUnit("posture", (0.0, 1.00, 3.00, 4.00), min_duration=0.3)
+#                                 start attackPeak relax end
+FACE = MotionUnit("face", (0.0, 0.20, 1.00, 1.30), min_duration=0.05)
+#                                 start end
+SHIFT = MotionUnit("shift", (0.0, 0.60), min_duration=0.05)
+POSTURE_SHIFT = MotionUnit("postureShift", (0.0, 1.50), min_duration=0.2)
+LOCOMOTION = MotionUnit("locomotion", (0.0, 2.00), min_duration=0.2)
+
+_BY_TYPE = {
+    "pointing": POINTING, "gaze": GAZE, "posture": POSTURE, "faceLexeme": FACE, "faceFacs": FACE,
+    "face": FACE, "gazeShift": SHIFT, "headDirectionShift": SHIFT, "faceShift": SHIFT,
+    "postureShift": POSTURE_SHIFT, "locomotion": LOCOMOTION,
+}
+
+
+def motion_unit(behaviour: Behaviour) -> MotionUnit:
+    """The motion unit a behaviour is bound to (the gesture binding)."""
+    lexeme = behaviour.attributes.get("lexeme", "").upper()
+    if behaviour.type == "gesture":
+        return BEAT if lexeme in ("", "BEAT") else GESTURE
+    if behaviour.type == "head":
+        return SHAKE if lexeme == "SHAKE" else NOD
+    return _BY_TYPE[behaviour.type]
+
+
+def repetition(behaviour: Behaviour) -> int:
+    try:
+        return max(1, min(100, int(float(behaviour.attributes.get("repetition", "1")))))
+    except ValueError:
+        return 1
+
+
+PHASE_NAMES = {
+    ("start", "ready"): "preparation", ("ready", "strokeStart"): "pre-stroke hold",
+    ("strokeStart", "stroke"): "stroke", ("stroke", "strokeEnd"): "stroke",
+    ("strokeEnd", "relax"): "post-stroke hold", ("relax", "end"): "retraction",
+    ("ready", "relax"): "hold", ("start", "attackPeak"): "attack", ("attackPeak", "relax"): "sustain",
+    ("start", "end"): "transition",
+}
+
+
+def motion_state(timed, t: float) -> tuple[str, float] | None:
+    """Where a timed motion unit is at global time ``t``: its phase and canonical time alpha (0..1).
+
+    Alpha is found by linear time warping between the keys around ``t`` (Elckerlyc's f^-1(t)); None
+    before the start or after the end.
+    """
+    times = timed.times()
+    if t < times[0] or t > times[-1]:
+        return None
+    unit = motion_unit(timed.behaviour)
+    alphas = unit.canonical(repetition(timed.behaviour))
+    syncs = timed.sync_ids
+    for i in range(len(times) - 1):
+        t0, t1 = times[i], times[i + 1]
+        if t < t1 or i == len(times) - 2:
+            frac = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
+            alpha = alphas[i] + frac * (alphas[i + 1] - alphas[i])
+            return PHASE_NAMES.get((syncs[i], syncs[i + 1]), f"{syncs[i]}-{syncs[i + 1]}"), alpha
+    return None
