@@ -9,7 +9,9 @@ import pytest
 from scipy.signal import resample_poly
 
 from agentsim.beats.evaluation import evaluate_predictions, select_predictions, track_and_evaluate, track_file
-from agentsim.beats.tracking import CausalBeatTracker, IOIBaselineTracker, SpectralFluxEnvelope, make_tracker
+from agentsim.beats.baselines import IOIBaselineTracker
+from agentsim.beats.envelope import SpectralFluxEnvelope
+from agentsim.beats.tracking import CausalBeatTracker, make_tracker
 from agentsim.music.ensemble import SynthEvent, render_ensemble_full, render_events
 
 SR = 22050
@@ -246,13 +248,13 @@ def test_clicks_in_range_are_tracked():
 def test_onset_envelope_is_causal():
     rng = np.random.default_rng(0)
     x = (0.1 * rng.standard_normal(SR)).astype(np.float32)
-    env = SpectralFluxEnvelope(SR)
-    env.push(x[:10000])
-    first = env.values(0, env.n_frames).copy()
-    env.push(x[10000:])
+    envelope = SpectralFluxEnvelope(SR)
+    envelope.push(x[:10000])
+    first = envelope.values(0, envelope.n_frames).copy()
+    envelope.push(x[10000:])
     # later audio never changes frames already computed
-    np.testing.assert_array_equal(env.values(0, first.size), first)
+    np.testing.assert_array_equal(envelope.values(0, first.size), first)
     # every frame ends at or before the audio heard
-    assert (env.n_frames - 1) * env.hop + env.n_fft <= env.n_samples
+    assert (envelope.n_frames - 1) * envelope.hop + envelope.n_fft <= envelope.n_samples
     with pytest.raises(ValueError):
         CausalBeatTracker(SR, min_bpm=200, max_bpm=100)

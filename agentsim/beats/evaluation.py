@@ -175,7 +175,7 @@ def track_file(
         An audio file (read with soundfile, mixed to mono) or mono samples.
     tracker_name : {"causal", "baseline", "librosa_offline"}
         :class:`~agentsim.beats.tracking.CausalBeatTracker`, the
-        :class:`~agentsim.beats.tracking.IOIBaselineTracker`, or librosa's offline beat tracker
+        :class:`~agentsim.beats.baselines.IOIBaselineTracker`, or librosa's offline beat tracker
         (one update at 0 s holding every beat it finds in the whole audio).
     block_size : int
         Samples per block fed to the tracker.
@@ -193,7 +193,8 @@ def track_file(
         "updates": [{"t": T, "beats": [...]}, ...]}``, with an update after every block whose
         predictions differ from the previous update's.
     """
-    from agentsim.beats.tracking import librosa_offline_beats, make_tracker
+    from agentsim.beats.baselines import librosa_offline_beats
+    from agentsim.beats.tracking import make_tracker
 
     audio, sr = _load_audio(source, sample_rate)
     audio_seconds = audio.size / sr

@@ -46,7 +46,7 @@ def beats(args: argparse.Namespace) -> int:
         run = track_file(audio, args.tracker, args.block, sample_rate=sample_rate)
     run.pop("sample_rate", None)
     if args.reference:
-        from agentsim.beats.tracking import np  # numpy, as the tracker uses it
+        import numpy as np
 
         try:
             reference = np.loadtxt(args.reference, ndmin=1)
