@@ -10,7 +10,9 @@ from scipy.signal import resample_poly
 
 from agentsim.beats.evaluation import evaluate_predictions, select_predictions, track_and_evaluate, track_file
 from agentsim.beats.tracking import CausalBeatTracker, IOIBaselineTracker, SpectralFluxEnvelope, make_tracker
-from agentsim.music.ensemble import SynthEvent, render_ensemble_full, render_events
+from agentsim.music.ensemble import render_ensemble_full
+from agentsim.music.events import SynthEvent
+from agentsim.music.rendering import render_events
 
 SR = 22050
 

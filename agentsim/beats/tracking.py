@@ -23,7 +23,7 @@ Design
        the recent mean), times its onset in the waveform: the first difference of the samples, its
        energy in 0.5 ms blocks locates the rise, then the first sample after a quiet stretch that
        climbs 10 % of the way from the floor to the peak (the same rule as
-       :func:`agentsim.music.ensemble.energy_onsets`). An onset within the innovation gate updates
+       :func:`agentsim.music.onsets.energy_onsets`). An onset within the innovation gate updates
        the filter; otherwise the filter only advances. Ramps and rubato are followed through the
        period-change state.
     5. Sudden changes: a salient onset outside the gate is kept as a candidate. If, a beat later, the
