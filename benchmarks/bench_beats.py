@@ -26,7 +26,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from agentsim.beats.evaluation import evaluate_predictions, select_predictions, track_file  # noqa: E402
 from agentsim.beats.baselines import librosa_offline_beats  # noqa: E402
-from agentsim.music.ensemble import beat_onset_offset, measure_onset_offsets, render_ensemble_full  # noqa: E402
+from agentsim.music.ensemble import render_ensemble_full  # noqa: E402
+from agentsim.music.onsets import beat_onset_offset, measure_onset_offsets  # noqa: E402
 
 #: (bpm, meter, seed) of the renders (seeds not used while the tracker was developed).
 CONFIGS = [

@@ -214,3 +214,18 @@ def test_impossible_ordering_within_one_tied_cluster_is_reported_once():
     r = realize(block(body))
     assert len(r.warnings) == 1 and r.dropped() == {"g"}
     assert r.t("s:start") == 0.0 and "cannot be before" in r.warnings[0]["description"]
+
+
+def test_ids_with_a_colon_are_refused_because_feedback_ids_join_ids_with_colons():
+    bml = ('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="{block}">'
+           '<gesture id="{beh}" lexeme="BEAT"/><head id="h" lexeme="NOD"/>'
+           '<speech id="s"><text>one <sync id="a:b"/>two</text></speech></bml>')
+    r = realize(bml.format(block="a:b", beh="g"))
+    assert [w["warningType"] for w in r.warnings] == ["PARSING_FAILURE"] and "contains ':'" in r.warnings[0]["description"]
+    assert not r.syncs and not r.blocks
+    r = realize(bml.format(block="b", beh="x:y"))
+    assert sorted(w["description"].split(" (line")[0] for w in r.warnings) == [
+        "behaviour id 'x:y' contains ':', which feedback ids use to join block, behaviour and sync ids; "
+        "behaviour ignored", "speech s: sync id 'a:b' contains ':' and is ignored"]
+    assert {f["id"] for f in r.syncs} == {"b:h:" + s for s in ("start", "ready", "strokeStart", "stroke",
+                                                                "strokeEnd", "relax", "end")} | {"b:s:start", "b:s:end"}

@@ -12,7 +12,9 @@ from agentsim.beats.evaluation import evaluate_predictions, select_predictions, 
 from agentsim.beats.baselines import IOIBaselineTracker
 from agentsim.beats.envelope import SpectralFluxEnvelope
 from agentsim.beats.tracking import CausalBeatTracker, make_tracker
-from agentsim.music.ensemble import SynthEvent, render_ensemble_full, render_events
+from agentsim.music.ensemble import render_ensemble_full
+from agentsim.music.events import SynthEvent
+from agentsim.music.rendering import render_events
 
 SR = 22050
 

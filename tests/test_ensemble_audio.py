@@ -7,27 +7,16 @@ import sys
 import numpy as np
 import pytest
 
-from agentsim.core.errors import AgentsimError, AnticipatorError
-from agentsim.music import ensemble as ea
-from agentsim.music.ensemble import (
-    FluidSynthRenderer,
-    Meter,
-    TempoMap,
-    TempoRamp,
-    TempoStep,
-    build_score,
-    energy_onsets,
-    make_tempo_map,
-    midi_to_events,
-    read_beats,
-    render_ensemble,
-    render_ensemble_full,
-    render_events,
-    render_midi_file,
-    score_events,
-    score_to_midi,
-    write_beats,
-)
+from agentsim.core.errors import AgentsimError, Unavailable
+from agentsim.music import rendering
+from agentsim.music.ensemble import read_beats, render_ensemble, render_ensemble_full, write_beats
+from agentsim.music.events import score_events
+from agentsim.music.instruments import HIHAT, KICK, SNARE
+from agentsim.music.midi import midi_tick_times, midi_to_events, score_to_midi
+from agentsim.music.onsets import beat_onset_offset, energy_onsets, measure_onset_offsets
+from agentsim.music.rendering import FluidSynthRenderer, render_events, render_midi_file
+from agentsim.music.score import build_score
+from agentsim.music.tempo import Meter, TempoChange, TempoMap, TempoRamp, TempoStep, make_tempo_map
 
 
 # ---------------------------------------------------------------------------------------- tempo maps
@@ -56,6 +45,17 @@ def test_step_and_fractional_positions():
     np.testing.assert_allclose(tm.beat_times(5), [0.0, 0.6, 1.2, 1.6, 2.0])
     assert TempoMap(100.0, Meter(2), steps=(TempoStep(1, 1.5),)) == tm
     np.testing.assert_allclose(tm.time_at([0.5, 1.5, 2.25]), [0.3, 0.9, 1.3])
+
+
+def test_tempo_changes_reach_a_new_tempo():
+    # 3/4 at 132 BPM, to 120 BPM over bars 2-3 (counting from 0), then 150 BPM at once from bar 5
+    tm = TempoMap(132.0, Meter(3), changes=(TempoChange(5, 150.0), TempoChange(2, 120.0, ramp_bars=2)))
+    np.testing.assert_allclose(tm.tempo([0, 5, 6, 7, 8, 9, 12, 14, 15, 20]),
+                               [132, 132, 132, 130, 128, 126, 120, 120, 150, 150], rtol=0, atol=1e-12)
+    intervals = 60.0 / tm.tempo(np.arange(15))
+    np.testing.assert_allclose(tm.beat_times(16), np.concatenate([[0.0], np.cumsum(intervals)]), rtol=0, atol=1e-12)
+    with pytest.raises(ValueError):
+        TempoChange(1, 0.0)
 
 
 def test_rubato_is_bounded_smooth_and_seeded():
@@ -90,9 +90,9 @@ def test_score_drum_pattern_marks_beats():
     tm = make_tempo_map(120, "3/4")
     sc = build_score(tm, 2, seed=1)
     drums = [n for n in sc.notes if n.part == "drums"]
-    kicks = sorted(n.start for n in drums if n.key == ea.KICK)
-    snares = sorted(n.start for n in drums if n.key == ea.SNARE)
-    hats = sorted(n.start for n in drums if n.key == ea.HIHAT)
+    kicks = sorted(n.start for n in drums if n.key == KICK)
+    snares = sorted(n.start for n in drums if n.key == SNARE)
+    hats = sorted(n.start for n in drums if n.key == HIHAT)
     assert kicks == [0, 3]
     assert snares == [1, 2, 4, 5]
     assert hats == [i * 0.5 for i in range(12)]
@@ -106,14 +106,14 @@ def test_midi_file_follows_tempo_map(tmp_path):
     path = tmp_path / "piece.mid"
     score_to_midi(sc, path)
     events = midi_to_events(path)
-    hat_on = np.array([e.time for e in events if e.kind == "note_on" and e.channel == 9 and e.data1 == ea.HIHAT])
+    hat_on = np.array([e.time for e in events if e.kind == "note_on" and e.channel == 9 and e.data1 == HIHAT])
     on_beats = hat_on[::2]  # hi-hat on every eighth: even ones are the beats
     np.testing.assert_allclose(on_beats, sc.beat_times(), atol=1e-4)
     direct = score_events(sc)
     assert len([e for e in direct if e.kind == "note_on"]) == len([e for e in events if e.kind == "note_on"])
     beat_ticks = np.arange(sc.n_beats) * 960
-    np.testing.assert_allclose(ea.midi_tick_times(path, beat_ticks), sc.beat_times(), atol=1e-5)
-    np.testing.assert_allclose(ea.midi_tick_times(path, beat_ticks), on_beats, atol=1e-9)
+    np.testing.assert_allclose(midi_tick_times(path, beat_ticks), sc.beat_times(), atol=1e-5)
+    np.testing.assert_allclose(midi_tick_times(path, beat_ticks), on_beats, atol=1e-9)
 
 
 # ---------------------------------------------------------------------------------------- rendering
@@ -148,12 +148,12 @@ def test_rendered_onsets_at_reference_beats_44k():
 
 
 def test_measured_onset_offsets_are_small_and_ordered():
-    m = ea.measure_onset_offsets(22050)
+    m = measure_onset_offsets(22050)
     assert 0.0 < m["kick+hihat"] < 0.005
     assert 0.0 < m["snare+hihat"] < 0.005
     assert m["hihat"] < 0.002
     assert m["strings"] > m["piano"]  # slow strings have a soft attack
-    assert ea.beat_onset_offset(22050) == pytest.approx(0.5 * (m["kick+hihat"] + m["snare+hihat"]))
+    assert beat_onset_offset(22050) == pytest.approx(0.5 * (m["kick+hihat"] + m["snare+hihat"]))
 
 
 def test_render_ensemble_shape_and_reference(ensemble, tmp_path):
@@ -228,20 +228,20 @@ def test_fluidsynth_command_line_render(tmp_path):
 
 
 def test_missing_soundfont_says_how_to_install(tmp_path):
-    with pytest.raises(AnticipatorError, match="apt-get install fluidsynth fluid-soundfont-gm"):
+    with pytest.raises(Unavailable, match="apt-get install fluidsynth fluid-soundfont-gm"):
         render_ensemble(120, "4/4", 1, soundfont=tmp_path / "missing.sf2")
-    with pytest.raises(AnticipatorError, match="apt-get install fluidsynth fluid-soundfont-gm"):
+    with pytest.raises(Unavailable, match="apt-get install fluidsynth fluid-soundfont-gm"):
         FluidSynthRenderer(22050, soundfont=tmp_path / "missing.sf2")
 
 
 def test_missing_fluidsynth_library_says_how_to_install(monkeypatch):
     monkeypatch.setitem(sys.modules, "fluidsynth", None)  # makes `import fluidsynth` fail
-    with pytest.raises(AnticipatorError, match="apt-get install fluidsynth fluid-soundfont-gm"):
+    with pytest.raises(Unavailable, match="apt-get install fluidsynth fluid-soundfont-gm"):
         FluidSynthRenderer(22050)
 
 
 def test_missing_fluidsynth_program_says_how_to_install(monkeypatch, tmp_path):
-    monkeypatch.setattr(ea.shutil, "which", lambda name: None)
-    with pytest.raises(AnticipatorError, match="apt-get install fluidsynth fluid-soundfont-gm"):
+    monkeypatch.setattr(rendering.shutil, "which", lambda name: None)
+    with pytest.raises(Unavailable, match="apt-get install fluidsynth fluid-soundfont-gm"):
         render_midi_file(tmp_path / "x.mid")
-    assert issubclass(AnticipatorError, AgentsimError)  # the one root the command line reports
+    assert issubclass(Unavailable, AgentsimError)  # the one root the command line reports

@@ -6,7 +6,7 @@ salient when it is over twice the recent mean onset strength. Its time, interpol
 comes a little after the energy onset (``peak_bias``); where the envelope keeps the waveform,
 :func:`waveform_onset` times the onset instead: the first difference of the samples, its energy in
 0.5 ms blocks locates the rise, then the first sample after a quiet stretch that climbs 10 % of the
-way from the floor to the peak (the same rule as :func:`agentsim.music.ensemble.energy_onsets`).
+way from the floor to the peak (the same rule as :func:`agentsim.music.onsets.energy_onsets`).
 """
 
 from __future__ import annotations

@@ -200,6 +200,9 @@ def parse_bml(text: str | bytes) -> Block:
     block_id = root.attrs.get("id", "").strip()
     if not block_id:
         raise BMLError("the <bml> block has no id", root.line, root.column)
+    if ":" in block_id:
+        raise BMLError(f"the block id {block_id!r} contains ':', which feedback ids use to join block, behaviour "
+                       "and sync ids", root.line, root.column)
     composition = root.attrs.get("composition", "MERGE").strip().upper() or "MERGE"
     if composition not in ("MERGE", "APPEND", "REPLACE"):
         raise BMLError(f"unknown composition {root.attrs['composition']!r}: expected MERGE, APPEND or REPLACE",
@@ -252,6 +255,10 @@ class _Reader:
         if bid in self.seen:
             self.warn("PARSING_FAILURE", f"duplicate behaviour id {bid!r}: the second one is ignored", node, [bid])
             return
+        if ":" in bid:
+            self.warn("PARSING_FAILURE", f"behaviour id {bid!r} contains ':', which feedback ids use to join block, "
+                      "behaviour and sync ids; behaviour ignored", node)
+            return
         self.seen.add(bid)
         beh = Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), required=required,
                         index=len(self.block.behaviours), line=node.line, column=node.column)
@@ -293,6 +300,9 @@ class _Reader:
                 elif sid in beh.sync_ids:
                     self.warn("PARSING_FAILURE", f"speech {beh.id}: duplicate sync id {sid!r} ignored", child,
                               [beh.id])
+                elif ":" in sid:
+                    self.warn("PARSING_FAILURE", f"speech {beh.id}: sync id {sid!r} contains ':' and is ignored",
+                              child, [beh.id])
                 else:
                     marks.append((len(raw), sid))
                     beh.sync_ids.insert(len(beh.sync_ids) - 1, sid)

@@ -53,6 +53,6 @@ class SpeechBackendUnavailable(Unavailable):
 class AnticipatorError(AgentsimError):
     """An anticipator cannot do its work because of its environment or its input.
 
-    Raised, for example, when the FluidSynth library or the General MIDI soundfont is missing, with a
-    message that says how to install them.
+    A missing library, program or soundfont is :class:`Unavailable` instead (for instance FluidSynth and
+    the General MIDI soundfont of :mod:`agentsim.music.rendering`).
     """

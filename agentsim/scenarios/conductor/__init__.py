@@ -12,7 +12,8 @@ Vorberg 2014), with timekeeper and motor noise.
 module             what lives there
 =================  ========================================================================================
 ``config``         pieces (meter, bars, tempo changes, dynamics) and scenario configurations from TOML,
-                   with their checks; General MIDI instrument names.
+                   with their checks and defaults; meter, tempo and General MIDI instruments are
+                   :mod:`agentsim.music`'s.
 ``ensemble``       the musician model (:class:`~agentsim.scenarios.conductor.ensemble.Timekeeper`) and the
                    simulated ensemble that plays the score into a FluidSynth renderer.
 ``hearing``        the conductor's ears: the beat tracker that also records the audio and measures its

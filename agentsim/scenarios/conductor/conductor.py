@@ -100,7 +100,7 @@ class Conductor:
         return [b for b in beats if b <= self.piece.n_beats]
 
     def bar_bml(self, bar: int) -> str:
-        bpb, unit = self.piece.meter
+        bpb, unit = self.piece.meter.beats_per_bar, self.piece.meter.beat_unit
         marking = self.piece.marking_at(min(max(bar, 1), self.piece.bars))
         amount = AMOUNT.get(marking, 1.0)
         gestures = "".join(

@@ -23,6 +23,12 @@ Piece file::
     marking = "mf"
 
 Configuration file: see ``configs/default.toml``, which spells out every key with its default.
+
+Meter, tempo and instruments are the music library's: a piece's time is an
+:class:`agentsim.music.tempo.TempoMap` (its tempo changes are :class:`~agentsim.music.tempo.TempoChange`),
+instrument names are looked up by :func:`agentsim.music.instruments.gm_program`, and the dynamics
+markings are :data:`agentsim.music.score.DYNAMICS_DB`. The files count bars and beats from 1, the music
+library from 0.
 """
 
 from __future__ import annotations
@@ -36,53 +42,14 @@ from pathlib import Path
 import numpy as np
 
 from agentsim.core.errors import AgentsimError
+from agentsim.music.instruments import DRUM_CHANNEL, DRUM_KIT, PARTS, default_part, gm_program, program_name
+from agentsim.music.score import DYNAMICS_DB
+from agentsim.music.tempo import Meter, TempoChange, TempoMap
 
 HERE = Path(__file__).resolve().parent
 PIECES_DIR = HERE / "pieces"
 CONFIGS_DIR = HERE / "configs"
 DEFAULT_CONFIG = CONFIGS_DIR / "default.toml"
-
-#: General MIDI program names (program number = index), lower case with underscores.
-GM_PROGRAMS: tuple[str, ...] = (
-    "acoustic_grand_piano", "bright_acoustic_piano", "electric_grand_piano", "honky_tonk_piano",
-    "electric_piano_1", "electric_piano_2", "harpsichord", "clavinet",
-    "celesta", "glockenspiel", "music_box", "vibraphone", "marimba", "xylophone", "tubular_bells", "dulcimer",
-    "drawbar_organ", "percussive_organ", "rock_organ", "church_organ", "reed_organ", "accordion", "harmonica",
-    "tango_accordion",
-    "acoustic_guitar_nylon", "acoustic_guitar_steel", "electric_guitar_jazz", "electric_guitar_clean",
-    "electric_guitar_muted", "overdriven_guitar", "distortion_guitar", "guitar_harmonics",
-    "acoustic_bass", "electric_bass_finger", "electric_bass_pick", "fretless_bass", "slap_bass_1", "slap_bass_2",
-    "synth_bass_1", "synth_bass_2",
-    "violin", "viola", "cello", "contrabass", "tremolo_strings", "pizzicato_strings", "orchestral_harp", "timpani",
-    "string_ensemble_1", "string_ensemble_2", "synth_strings_1", "synth_strings_2", "choir_aahs", "voice_oohs",
-    "synth_voice", "orchestra_hit",
-    "trumpet", "trombone", "tuba", "muted_trumpet", "french_horn", "brass_section", "synth_brass_1", "synth_brass_2",
-    "soprano_sax", "alto_sax", "tenor_sax", "baritone_sax", "oboe", "english_horn", "bassoon", "clarinet",
-    "piccolo", "flute", "recorder", "pan_flute", "blown_bottle", "shakuhachi", "whistle", "ocarina",
-    "lead_1_square", "lead_2_sawtooth", "lead_3_calliope", "lead_4_chiff", "lead_5_charang", "lead_6_voice",
-    "lead_7_fifths", "lead_8_bass_lead",
-    "pad_1_new_age", "pad_2_warm", "pad_3_polysynth", "pad_4_choir", "pad_5_bowed", "pad_6_metallic", "pad_7_halo",
-    "pad_8_sweep",
-    "fx_1_rain", "fx_2_soundtrack", "fx_3_crystal", "fx_4_atmosphere", "fx_5_brightness", "fx_6_goblins",
-    "fx_7_echoes", "fx_8_sci_fi",
-    "sitar", "banjo", "shamisen", "koto", "kalimba", "bagpipe", "fiddle", "shanai",
-    "tinkle_bell", "agogo", "steel_drums", "woodblock", "taiko_drum", "melodic_tom", "synth_drum", "reverse_cymbal",
-    "guitar_fret_noise", "breath_noise", "seashore", "bird_tweet", "telephone_ring", "helicopter", "applause",
-    "gunshot",
-)
-#: Short names for common instruments.
-INSTRUMENT_ALIASES = {"piano": 0, "bass": 33, "finger_bass": 33, "strings": 49, "slow_strings": 49,
-                      "electric_piano": 4, "organ": 16, "guitar": 24}
-#: Names of the General MIDI percussion kit (channel 10).
-DRUM_NAMES = ("drums", "drum_kit", "standard_kit", "percussion")
-#: Lines of the generated score a musician can play (see :func:`agentsim.music.ensemble.build_score`).
-PARTS = ("drums", "bass", "piano", "strings")
-DRUM_CHANNEL = 9
-
-#: Dynamics markings and their level in dB relative to the score's nominal (forte) velocities. A level
-#: of L dB scales MIDI velocities by ``10 ** (L / 40)``: FluidSynth's default velocity curve makes the
-#: amplitude grow with the square of the velocity.
-DYNAMICS_DB = {"pp": -18.0, "p": -12.0, "mp": -7.0, "mf": -3.5, "f": 0.0, "ff": 3.0}
 
 #: Meters with conducting patterns (beats per bar).
 METER_BEATS = (2, 3, 4)
@@ -95,36 +62,49 @@ def _fail(where: str, message: str) -> AgentsimError:
 
 # ---------------------------------------------------------------------------------------------- pieces
 @dataclass(frozen=True)
-class TempoChange:
-    """From ``bar`` (1-based) on the score's tempo is ``bpm``, reached linearly over ``ramp_bars`` bars
-    (0: at once)."""
-
-    bar: int
-    bpm: float
-    ramp_bars: float = 0.0
-
-
-@dataclass(frozen=True)
 class Piece:
     """What the score says about time and loudness.
 
     Beats are numbered from 1 (the first beat of bar 1), as the conductor counts them and as BML refers to
-    them (``anticipators:plan:beat17``). ``tempo_at(n)`` is the score's tempo from beat ``n`` to beat
-    ``n + 1``.
+    them (``anticipators:plan:beat17``); bars too. ``tempo_at(n)`` is the score's tempo from beat ``n`` to
+    beat ``n + 1``.
+
+    Attributes
+    ----------
+    title : str
+        The piece's title.
+    tempo_map : TempoMap
+        Meter, tempo at bar 1 and tempo changes (beat ``n`` here is beat ``n - 1`` of the map).
+    bars : int
+        Number of bars.
+    dynamics : tuple of (int, str)
+        Dynamics markings (:data:`~agentsim.music.score.DYNAMICS_DB`) from a bar (1-based) on.
+    music_seed : int
+        Seed of the generated score's notes (:func:`~agentsim.music.score.build_score`).
+    source : str
+        Where the piece was read from.
     """
 
     title: str = "untitled"
-    meter: tuple[int, int] = (4, 4)
+    tempo_map: TempoMap = field(default_factory=lambda: TempoMap(120.0))
     bars: int = 24
-    tempo: float = 120.0
-    tempo_changes: tuple[TempoChange, ...] = ()
     dynamics: tuple[tuple[int, str], ...] = ((1, "mf"),)
     music_seed: int = 3
     source: str = ""
 
     @property
+    def meter(self) -> Meter:
+        """The time signature."""
+        return self.tempo_map.meter
+
+    @property
+    def tempo(self) -> float:
+        """Score tempo (BPM) at bar 1."""
+        return self.tempo_map.bpm
+
+    @property
     def beats_per_bar(self) -> int:
-        return self.meter[0]
+        return self.meter.beats_per_bar
 
     @property
     def n_beats(self) -> int:
@@ -143,26 +123,15 @@ class Piece:
 
     def tempo_at(self, beat: float) -> float:
         """Score tempo (BPM) at beat position ``beat`` (1-based; fractions allowed)."""
-        bar_pos = (beat - 1) / self.beats_per_bar + 1  # 1-based bar position
-        bpm = self.tempo
-        for change in sorted(self.tempo_changes, key=lambda c: c.bar):
-            if bar_pos < change.bar:
-                break
-            if change.ramp_bars > 0:
-                frac = min(1.0, (bar_pos - change.bar) / change.ramp_bars)
-                bpm = bpm + frac * (change.bpm - bpm)
-            else:
-                bpm = change.bpm
-        return float(bpm)
+        return float(self.tempo_map.tempo(beat - 1))
 
     def target_bpm(self) -> np.ndarray:
         """Score tempo of every beat 1..n_beats (index 0 is beat 1)."""
-        return np.array([self.tempo_at(n) for n in range(1, self.n_beats + 1)])
+        return self.tempo_map.tempo(np.arange(self.n_beats))
 
     def score_offsets(self) -> np.ndarray:
         """Seconds from beat 1 to every beat 1..n_beats + 1 at the score's tempo."""
-        periods = 60.0 / self.target_bpm()
-        return np.concatenate([[0.0], np.cumsum(periods)])
+        return self.tempo_map.beat_times(self.n_beats + 1)
 
     def marking_at(self, bar: int) -> str:
         """The dynamics marking in force in bar ``bar``."""
@@ -173,7 +142,7 @@ class Piece:
         return marking
 
     def level_db(self, beat: int) -> float:
-        """Level (dB, :data:`DYNAMICS_DB`) the score asks for at beat ``beat``."""
+        """Level (dB, :data:`~agentsim.music.score.DYNAMICS_DB`) the score asks for at beat ``beat``."""
         return DYNAMICS_DB[self.marking_at(self.bar_of(beat))]
 
 
@@ -206,7 +175,8 @@ def _check_keys(table: dict, allowed, where: str) -> None:
 
 
 def parse_meter(text, where: str = "piece") -> tuple[int, int]:
-    """``"4/4"`` -> (4, 4); AgentsimError for anything that is not 2/4, 3/4 or 4/4 (or x/2, x/8)."""
+    """``"4/4"`` -> (4, 4), the beats per bar and beat unit of a :class:`~agentsim.music.tempo.Meter`;
+    AgentsimError for anything that is not 2/4, 3/4 or 4/4 (or x/2, x/8)."""
     num, sep, den = str(text).strip().partition("/")
     try:
         beats, unit = int(num), int(den if sep else 4)
@@ -241,7 +211,7 @@ def piece_from_dict(data: dict, where: str = "piece") -> Piece:
         bpm = _number(ch, "bpm", w, None, positive=True)
         if not 30 <= bpm <= 240:
             raise _fail(w, f"bpm {bpm:g} is outside the conductable range 30..240 BPM")
-        changes.append(TempoChange(bar, bpm, _number(ch, "ramp_bars", w, 0.0, minimum=0.0)))
+        changes.append(TempoChange(bar - 1, bpm, _number(ch, "ramp_bars", w, 0.0, minimum=0.0)))
     dynamics = []
     for i, d in enumerate(data.get("dynamics", [{"bar": 1, "marking": "mf"}])):
         w = f"{where}: dynamics[{i}]"
@@ -253,8 +223,9 @@ def piece_from_dict(data: dict, where: str = "piece") -> Piece:
         if marking not in DYNAMICS_DB:
             raise _fail(w, f"unknown dynamics marking {d.get('marking')!r}; use one of {', '.join(DYNAMICS_DB)}")
         dynamics.append((bar, marking))
-    return Piece(title=str(data.get("title", "untitled")), meter=meter, bars=bars, tempo=tempo,
-                 tempo_changes=tuple(changes), dynamics=tuple(sorted(dynamics)) or ((1, "mf"),),
+    return Piece(title=str(data.get("title", "untitled")),
+                 tempo_map=TempoMap(tempo, Meter(*meter), changes=tuple(changes)),
+                 bars=bars, dynamics=tuple(sorted(dynamics)) or ((1, "mf"),),
                  music_seed=_number(data, "music_seed", where, 3, int, minimum=0), source=where)
 
 
@@ -363,43 +334,22 @@ class MusicianConfig:
     plays and its timing model."""
 
     name: str
-    program: int  # General MIDI program; -1 for the percussion kit
+    program: int  # General MIDI program; DRUM_KIT (-1) for the percussion kit
     channel: int
     part: str
     model: ModelParams = field(default_factory=ModelParams)
 
     @property
     def instrument(self) -> str:
-        return "drums" if self.program < 0 else GM_PROGRAMS[self.program]
+        return program_name(self.program)
 
 
 def instrument_program(name, where: str) -> int:
-    """General MIDI program of an instrument name or number (-1: the percussion kit)."""
-    if isinstance(name, int) and not isinstance(name, bool):
-        if 0 <= name <= 127:
-            return name
-        raise _fail(where, f"General MIDI program {name} is outside 0..127")
-    key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
-    if key in DRUM_NAMES:
-        return -1
-    if key in INSTRUMENT_ALIASES:
-        return INSTRUMENT_ALIASES[key]
-    if key in GM_PROGRAMS:
-        return GM_PROGRAMS.index(key)
-    close = [n for n in GM_PROGRAMS + tuple(INSTRUMENT_ALIASES) if key[:4] and key[:4] in n][:6]
-    hint = f"; did you mean {', '.join(close)}?" if close else ""
-    raise _fail(where, f"unknown instrument {name!r}: use a General MIDI name (e.g. acoustic_grand_piano, "
-                       f"electric_bass_finger, string_ensemble_2), a program number 0..127 or drums{hint}")
-
-
-def _default_part(program: int) -> str:
-    if program < 0:
-        return "drums"
-    if 32 <= program <= 39:
-        return "bass"
-    if 40 <= program <= 55 or 88 <= program <= 95:
-        return "strings"
-    return "piano"
+    """General MIDI program of an instrument name or number (-1: the percussion kit), or AgentsimError."""
+    try:
+        return gm_program(name)
+    except ValueError as exc:
+        raise _fail(where, str(exc)) from None
 
 
 # ---------------------------------------------------------------------------------------------- scenario
@@ -525,7 +475,7 @@ class ScenarioConfig:
 
 def default_musicians(model: ModelParams) -> tuple[MusicianConfig, ...]:
     """Drums, finger bass, piano and slow strings, each on its own channel."""
-    return (MusicianConfig("drums", -1, DRUM_CHANNEL, "drums", model),
+    return (MusicianConfig("drums", DRUM_KIT, DRUM_CHANNEL, "drums", model),
             MusicianConfig("bass", 33, 1, "bass", model),
             MusicianConfig("piano", 0, 0, "piano", model),
             MusicianConfig("strings", 49, 2, "strings", model))
@@ -579,7 +529,7 @@ def config_from_dict(data: dict, where: str = "config", base_dir: Path | None = 
             if "instrument" not in spec:
                 raise _fail(mw, "needs an instrument")
             program = instrument_program(spec["instrument"], mw)
-            part = str(spec.get("part", _default_part(program))).lower()
+            part = str(spec.get("part", default_part(program))).lower()
             if part not in PARTS:
                 raise _fail(mw, f"unknown part {part!r}; use one of {', '.join(PARTS)}")
             if (program < 0) != (part == "drums"):

@@ -19,8 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 import simpy
 
-from agentsim.music.ensemble import build_score, make_tempo_map
-from agentsim.scenarios.conductor.config import DRUM_CHANNEL, ModelParams, MusicianConfig, Piece, ScenarioConfig
+from agentsim.music.instruments import DRUM_CHANNEL
+from agentsim.music.score import build_score, velocity_scale
+from agentsim.scenarios.conductor.config import ModelParams, MusicianConfig, Piece, ScenarioConfig
 
 #: Conducting gestures are named ``b<beat>``; other gestures the musicians react to by their ids.
 BEAT_ID = re.compile(r"^b(\d+)$")
@@ -118,8 +119,7 @@ class PartNote:
 
 def part_notes(piece: Piece, parts) -> dict[str, list[list[PartNote]]]:
     """The generated score's notes of each part, grouped by beat (index 0 is beat 1)."""
-    tm = make_tempo_map(piece.tempo, f"{piece.meter[0]}/{piece.meter[1]}")
-    score = build_score(tm, piece.bars, parts=sorted(set(parts)), seed=piece.music_seed)
+    score = build_score(piece.tempo_map, piece.bars, parts=sorted(set(parts)), seed=piece.music_seed)
     out = {p: [[] for _ in range(piece.n_beats)] for p in set(parts)}
     for note in score.notes:
         k = int(np.floor(note.start + 1e-9))
@@ -230,7 +230,7 @@ class Ensemble:
 
     def _schedule(self, musician: Musician, beat: int, onset: float, period: float) -> None:
         cfg = musician.config
-        scale = 10.0 ** (self._level_db(musician, beat) / 40.0)
+        scale = velocity_scale(self._level_db(musician, beat))
         for note in musician.notes[beat - 1]:
             velocity = int(np.clip(round(note.velocity * scale), 1, 127))
             self.renderer.note(onset + note.offset * period, cfg.channel if cfg.program >= 0 else DRUM_CHANNEL,

@@ -21,7 +21,8 @@ import numpy as np
 import simpy
 
 from agentsim.core.errors import AgentsimError
-from agentsim.scenarios.conductor.config import DYNAMICS_DB, Piece, ScenarioConfig
+from agentsim.music.score import DYNAMICS_DB, velocity_scale
+from agentsim.scenarios.conductor.config import Piece, ScenarioConfig
 from agentsim.scenarios.conductor.conductor import Conductor
 from agentsim.scenarios.conductor.hearing import Ears
 from agentsim.scenarios.conductor.strategies import make_strategy
@@ -48,21 +49,17 @@ class Run:
 
 
 def _soundfont(config: ScenarioConfig) -> str:
-    from agentsim.music.ensemble import DEFAULT_SOUNDFONT
+    from agentsim.music.rendering import DEFAULT_SOUNDFONT
 
     return config.audio.soundfont or DEFAULT_SOUNDFONT
 
 
 def _renderer(config: ScenarioConfig):
-    from agentsim.music.ensemble import FluidSynthRenderer
-    from agentsim.core.errors import AnticipatorError
+    from agentsim.music.rendering import FluidSynthRenderer
 
     programs = {m.channel: m.program for m in config.ensemble.musicians if m.program >= 0}
-    try:
-        return FluidSynthRenderer(config.audio.sample_rate, _soundfont(config), config.audio.gain,
-                                  reverb=config.audio.reverb, programs=programs)
-    except AnticipatorError as exc:
-        raise AgentsimError(str(exc)) from None
+    return FluidSynthRenderer(config.audio.sample_rate, _soundfont(config), config.audio.gain,
+                              reverb=config.audio.reverb, programs=programs)
 
 
 def sound_check(config: ScenarioConfig) -> dict[str, float]:
@@ -85,7 +82,7 @@ def sound_check(config: ScenarioConfig) -> dict[str, float]:
     try:
         for k, marking in enumerate(markings):
             t0 = 0.2 + k * (seg + gap)
-            scale = 10.0 ** (DYNAMICS_DB[marking] / 40.0)
+            scale = velocity_scale(DYNAMICS_DB[marking])
             for m in config.ensemble.musicians:
                 for beat in range(bars * piece.beats_per_bar):
                     for note in notes[m.part][beat]:
@@ -161,7 +158,8 @@ def live_piece(piece: Piece, seconds: float) -> Piece:
     import dataclasses
 
     bars = int(seconds * piece.tempo / 60.0 / piece.beats_per_bar) + 8
-    return dataclasses.replace(piece, bars=bars, tempo_changes=(), dynamics=((1, "mf"),))
+    tempo_map = dataclasses.replace(piece.tempo_map, changes=())
+    return dataclasses.replace(piece, bars=bars, tempo_map=tempo_map, dynamics=((1, "mf"),))
 
 
 def listen_live(config: ScenarioConfig, strategy_name: str | None = None, seconds: float | None = None,
@@ -203,7 +201,7 @@ def listen_live(config: ScenarioConfig, strategy_name: str | None = None, second
 # ---------------------------------------------------------------------------------------------- metrics
 def collect_metrics(run: Run) -> dict:
     """The figures of a finished run (deterministic: no wall-clock times)."""
-    from agentsim.music.ensemble import beat_onset_offset
+    from agentsim.music.onsets import beat_onset_offset
     from agentsim.scenarios.conductor import metrics as M
 
     config = run.config
@@ -218,7 +216,7 @@ def collect_metrics(run: Run) -> dict:
         "live": run.live,
         "config": config.source,
         "piece": piece.title,
-        "meter": f"{piece.meter[0]}/{piece.meter[1]}",
+        "meter": str(piece.meter),
         "bars": piece.bars,
         "target_bpm": piece.tempo,
         "start_bpm": None if run.live else config.ensemble.start_bpm,

@@ -1,0 +1,310 @@
+"""Rendering through FluidSynth: MIDI events block by block as a simulation advances (pyfluidsynth), and
+MIDI files with the ``fluidsynth`` program."""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import os
+import shutil
+import subprocess
+import tempfile
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from agentsim.core.errors import AgentsimError, Unavailable
+from agentsim.music.events import EVENT_ORDER, SynthEvent
+from agentsim.music.instruments import DRUM_CHANNEL
+
+__all__ = [
+    "DEFAULT_SOUNDFONT",
+    "INSTALL_HINT",
+    "FLUID_BLOCK",
+    "check_soundfont",
+    "FluidSynthRenderer",
+    "render_events",
+    "render_midi_file",
+]
+
+DEFAULT_SOUNDFONT = "/usr/share/sounds/sf2/FluidR3_GM.sf2"
+"""Path of the General MIDI soundfont installed by Debian's ``fluid-soundfont-gm``."""
+
+INSTALL_HINT = "apt-get install fluidsynth fluid-soundfont-gm"
+"""The command that installs FluidSynth and the General MIDI soundfont on Debian."""
+
+FLUID_BLOCK = 64
+"""FluidSynth's internal block length in samples; MIDI events take effect on its boundaries."""
+
+
+def check_soundfont(soundfont: "str | os.PathLike") -> str:
+    """The path of a soundfont file that exists.
+
+    Parameters
+    ----------
+    soundfont : str or path-like
+        The SoundFont file.
+
+    Returns
+    -------
+    str
+        Its path.
+
+    Raises
+    ------
+    Unavailable
+        When there is no such file, saying how to install the General MIDI soundfont.
+    """
+    path = os.fspath(soundfont)
+    if not os.path.isfile(path):
+        raise Unavailable(
+            f"General MIDI soundfont not found at {path!r}; install it with `{INSTALL_HINT}`"
+        )
+    return path
+
+
+def _import_fluidsynth():
+    try:
+        import fluidsynth  # pyfluidsynth; raises ImportError when libfluidsynth is missing
+    except (ImportError, OSError) as exc:
+        raise Unavailable(
+            f"the FluidSynth library could not be loaded ({exc}); install it with `{INSTALL_HINT}` "
+            "and the Python binding with `pip install pyfluidsynth`"
+        ) from exc
+    return fluidsynth
+
+
+class FluidSynthRenderer:
+    """Render MIDI events to mono audio block by block with FluidSynth, as a simulation advances.
+
+    Events are queued with :meth:`schedule` (or :meth:`note`) and sound when :meth:`render_until`
+    passes their time. FluidSynth applies MIDI events at the start of its next internal block of
+    :data:`FLUID_BLOCK` (64) samples, so each event is placed on the 64-sample boundary nearest to its
+    time and it is known exactly on which sample each note starts (:meth:`event_sample`). A note's
+    sound then begins a constant, instrument-specific time after that sample, because the soundfont's
+    samples and envelopes start quietly (see :func:`~agentsim.music.onsets.measure_onset_offsets`).
+    Events scheduled in the past are applied at once (on the next boundary).
+
+    Parameters
+    ----------
+    sample_rate : int
+        Output sample rate in Hz.
+    soundfont : str or path-like
+        SoundFont file; the General MIDI soundfont by default.
+    gain : float
+        FluidSynth master gain (``synth.gain``).
+    reverb, chorus : bool
+        Whether FluidSynth's reverb and chorus are on.
+    programs : dict, optional
+        Initial General MIDI program per channel; channel 9 always plays the standard drum kit.
+
+    Raises
+    ------
+    Unavailable
+        When the FluidSynth library or the soundfont is missing.
+    """
+
+    def __init__(
+        self,
+        sample_rate: int = 44100,
+        soundfont: "str | os.PathLike" = DEFAULT_SOUNDFONT,
+        gain: float = 0.3,
+        reverb: bool = True,
+        chorus: bool = False,
+        programs: "dict[int, int] | None" = None,
+    ) -> None:
+        if sample_rate < 8000 or sample_rate > 192000:
+            raise ValueError("sample_rate must be within 8000..192000 Hz")
+        path = check_soundfont(soundfont)
+        fluidsynth = _import_fluidsynth()
+        self.sample_rate = int(sample_rate)
+        self._synth = fluidsynth.Synth(gain=float(gain), samplerate=float(sample_rate))
+        self._synth.setting("synth.reverb.active", int(bool(reverb)))
+        self._synth.setting("synth.chorus.active", int(bool(chorus)))
+        self._sfid = self._synth.sfload(path)
+        if self._sfid < 0:
+            raise Unavailable(f"FluidSynth could not load the soundfont {path!r}; reinstall it with `{INSTALL_HINT}`")
+        self._synth.program_select(DRUM_CHANNEL, self._sfid, 128, 0)
+        for ch, prog in (programs or {}).items():
+            self.set_program(ch, prog)
+        self._queue: list[tuple[int, int, int, SynthEvent]] = []
+        self._counter = itertools.count()
+        self._pos = 0  # samples rendered so far, always a multiple of FLUID_BLOCK at event boundaries
+
+    @property
+    def time(self) -> float:
+        """Seconds of audio rendered so far."""
+        return self._pos / self.sample_rate
+
+    @property
+    def samples_rendered(self) -> int:
+        """Number of samples rendered so far."""
+        return self._pos
+
+    def event_sample(self, time: float) -> int:
+        """Sample index at which an event at ``time`` seconds takes effect (nearest 64-sample boundary)."""
+        return int(np.round(time * self.sample_rate / FLUID_BLOCK)) * FLUID_BLOCK
+
+    def set_program(self, channel: int, program: int) -> None:
+        """Select a General MIDI program on a melodic channel now."""
+        if channel == DRUM_CHANNEL:
+            self._synth.program_select(DRUM_CHANNEL, self._sfid, 128, int(program))
+        else:
+            self._synth.program_select(int(channel), self._sfid, 0, int(program))
+
+    def schedule(self, events: "SynthEvent | Iterable[SynthEvent]") -> None:
+        """Queue one event or several; they sound when rendering passes their time."""
+        if isinstance(events, SynthEvent):
+            events = (events,)
+        for ev in events:
+            heapq.heappush(self._queue, (self.event_sample(ev.time), EVENT_ORDER[ev.kind], next(self._counter), ev))
+
+    def note(self, time: float, channel: int, key: int, velocity: int, duration: float) -> None:
+        """Queue a note: a note-on at ``time`` and a note-off ``duration`` seconds later."""
+        self.schedule(
+            [SynthEvent(time, "note_on", channel, key, velocity), SynthEvent(time + duration, "note_off", channel, key, 0)]
+        )
+
+    def _apply(self, ev: SynthEvent) -> None:
+        s = self._synth
+        if ev.kind == "note_on":
+            s.noteon(ev.channel, ev.data1, ev.data2)
+        elif ev.kind == "note_off":
+            s.noteoff(ev.channel, ev.data1)
+        elif ev.kind == "program":
+            self.set_program(ev.channel, ev.data1)
+        else:
+            s.cc(ev.channel, ev.data1, ev.data2)
+
+    def _render(self, n: int, out: list) -> None:
+        if n > 0:
+            out.append(self._synth.get_samples(n))
+            self._pos += n
+
+    def render_until(self, t: float) -> np.ndarray:
+        """Render from the current position up to ``t`` seconds.
+
+        Parameters
+        ----------
+        t : float
+            End time in seconds; nothing is rendered if it is not past :attr:`time`.
+
+        Returns
+        -------
+        numpy.ndarray
+            Float32 mono samples in [-1, 1], ``round(t * sample_rate) - samples_rendered`` of them.
+        """
+        end = int(round(t * self.sample_rate))
+        chunks: list[np.ndarray] = []
+        while self._queue and self._queue[0][0] <= end:
+            at = self._queue[0][0]
+            # Render up to the event's boundary (event samples are multiples of FLUID_BLOCK, so
+            # FluidSynth's block position is aligned there). A late event is applied at once and
+            # takes effect on FluidSynth's next block boundary.
+            self._render(at - self._pos, chunks)
+            self._apply(heapq.heappop(self._queue)[3])
+        self._render(end - self._pos, chunks)
+        if not chunks:
+            return np.zeros(0, np.float32)
+        stereo = np.concatenate(chunks).astype(np.float32).reshape(-1, 2)
+        return (stereo.sum(axis=1) * (0.5 / 32768.0)).astype(np.float32)
+
+    def close(self) -> None:
+        """Free the synthesizer."""
+        if getattr(self, "_synth", None) is not None:
+            self._synth.delete()
+            self._synth = None
+
+    def __enter__(self) -> "FluidSynthRenderer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def render_events(
+    events: Sequence[SynthEvent],
+    duration: float,
+    sample_rate: int = 44100,
+    soundfont: "str | os.PathLike" = DEFAULT_SOUNDFONT,
+    gain: float = 0.3,
+) -> np.ndarray:
+    """Render a whole list of events with :class:`FluidSynthRenderer`.
+
+    Parameters
+    ----------
+    events : sequence of SynthEvent
+        Timed events.
+    duration : float
+        Length of the output in seconds.
+    sample_rate : int
+        Output sample rate in Hz.
+    soundfont : str or path-like
+        SoundFont file.
+    gain : float
+        FluidSynth master gain.
+
+    Returns
+    -------
+    numpy.ndarray
+        Float32 mono audio.
+    """
+    with FluidSynthRenderer(sample_rate, soundfont, gain) as r:
+        r.schedule(events)
+        return r.render_until(duration)
+
+
+def render_midi_file(
+    midi_path: "str | os.PathLike",
+    wav_path: "str | os.PathLike | None" = None,
+    sample_rate: int = 44100,
+    soundfont: "str | os.PathLike" = DEFAULT_SOUNDFONT,
+    gain: float = 0.6,
+) -> tuple[np.ndarray, int]:
+    """Render a MIDI file with the FluidSynth command line program (``fluidsynth -ni -F``).
+
+    The command line player applies events on FluidSynth's 64-sample blocks as well, but places
+    note-ons less exactly than :class:`FluidSynthRenderer`: 0.7 to 4.6 ms (mean 2.7 ms) after the MIDI
+    time at 44.1 kHz.
+
+    Parameters
+    ----------
+    midi_path : str or path-like
+        The ``.mid`` file.
+    wav_path : str or path-like, optional
+        Where to keep the rendered WAV file; a temporary file is used when None.
+    sample_rate : int
+        Output sample rate in Hz.
+    soundfont : str or path-like
+        SoundFont file.
+    gain : float
+        FluidSynth gain (``-g``).
+
+    Returns
+    -------
+    audio : numpy.ndarray
+        Float32 mono audio.
+    sample_rate : int
+        Its sample rate.
+
+    Raises
+    ------
+    Unavailable
+        When the ``fluidsynth`` program or the soundfont is missing.
+    AgentsimError
+        When the program fails.
+    """
+    import soundfile as sf
+
+    sf_path = check_soundfont(soundfont)
+    exe = shutil.which("fluidsynth")
+    if exe is None:
+        raise Unavailable(f"the fluidsynth program is not installed; install it with `{INSTALL_HINT}`")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.fspath(wav_path) if wav_path is not None else os.path.join(tmp, "render.wav")
+        cmd = [exe, "-ni", "-g", str(gain), "-r", str(int(sample_rate)), "-F", out, sf_path, os.fspath(midi_path)]
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0 or not os.path.isfile(out):
+            raise AgentsimError(f"fluidsynth failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
+        audio, sr = sf.read(out, dtype="float32", always_2d=True)
+    return audio.mean(axis=1).astype(np.float32), int(sr)
