@@ -170,3 +170,37 @@ def test_module_says_what_it_is(module):
     """Every module opens with a docstring (one sentence at least) saying what lives there."""
     tree = ast.parse(MODULES[module].read_text(encoding="utf-8"))
     assert ast.get_docstring(tree), f"{module} has no docstring"
+
+
+def _private_names_defined(tree: ast.AST) -> set[str]:
+    """Private names a module defines: attributes it assigns, slots, methods, functions and classes."""
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            names.add(node.attr)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            names.add(node.id)
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.startswith("_"):
+            names.add(node.value)  # __slots__ entries
+    return {n for n in names if n.startswith("_") and not n.startswith("__")}
+
+
+TREES = {m: ast.parse(p.read_text(encoding="utf-8")) for m, p in MODULES.items()}
+OURS = set().union(*(_private_names_defined(t) for t in TREES.values()))
+
+
+def test_no_module_touches_another_modules_private_names():
+    """``obj._name`` only where this module defines ``_name``, and no ``from module import _name``."""
+    found = []
+    for module, tree in TREES.items():
+        own = _private_names_defined(tree)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("agentsim"):
+                found += [f"{module}: from {node.module} import {a.name}" for a in node.names
+                          if a.name.startswith("_") and not a.name.startswith("__")]
+            elif (isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")
+                  and node.attr in OURS and node.attr not in own):
+                found.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
+    assert found == []

@@ -267,7 +267,7 @@ def parse_story(source: str, name: str = "<story>", title: str = "") -> Story:
         k = next((i for i, s in enumerate(starts) if s >= at), None)
         if k is None:
             raise StoryError(f"{name}:{line_no}:{col}: the tag [{tag}] stands in front of no word")
-        gestures.append(_gesture(tag, k, targets, f"{name}:{line_no}:{col}", line_no, col))
+        gestures.append(gesture_from_tag(tag, k, targets, f"{name}:{line_no}:{col}", line_no, col))
     gestures.sort(key=lambda g: g.word)  # stable: tags on one word keep their order
     return Story(meta.pop("title", title or Path(name).stem), text, gestures, scene, meta, name)
 
@@ -298,7 +298,7 @@ def _directive(line: str, number: int, name: str, meta: dict, scene: dict) -> No
         meta[key] = value
 
 
-def _gesture(tag: str, word: int, targets: set[str], where: str, line: int, column: int) -> Gesture:
+def gesture_from_tag(tag: str, word: int, targets: set[str], where: str, line: int, column: int) -> Gesture:
     """The gesture a tag (without brackets) stands for."""
     parts = [p.strip() for p in tag.split(":")]
     kind = parts[0].lower()

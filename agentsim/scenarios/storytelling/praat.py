@@ -17,7 +17,7 @@ from typing import Sequence
 import numpy as np
 
 from agentsim.animation.scene import DEFAULT_SCENE
-from agentsim.scenarios.storytelling.markup import Story, StoryError, _gesture, parse_story
+from agentsim.scenarios.storytelling.markup import Story, StoryError, gesture_from_tag, parse_story
 from agentsim.speech.backend import Utterance
 
 __all__ = ["import_textgrid", "export_textgrid", "split_tags", "written_labels"]
@@ -92,7 +92,7 @@ def import_textgrid(path: str | Path, words_tier: str = "words", gestures_tier: 
         if k >= len(words):
             raise StoryError(f"{path}: gesture {entry.label!r} at {t:.3f} s comes after the last word")
         for tag in split_tags(entry.label):
-            _gesture(tag, k, targets, f"{path}: tier {gestures_tier!r} at {t:.3f} s", 0, 0)  # checks the tag
+            gesture_from_tag(tag, k, targets, f"{path}: tier {gestures_tier!r} at {t:.3f} s", 0, 0)  # checks the tag
             tags[k].append(tag)
     lines = [f"@scene {name} {x!r} {y!r} {z!r}" for name, (x, y, z) in scene.items()]
     lines.append(" ".join("".join(f"[{tag}]" for tag in tags[k]) + label for k, (_, _, label) in enumerate(words)))
