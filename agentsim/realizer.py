@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Iterable
 
 import simpy
@@ -12,6 +13,7 @@ from agentsim.core.clock import make_environment
 from agentsim.core.errors import BMLError
 from agentsim.core.feedback import FeedbackLog
 from agentsim.core.pegboard import PegBoard
+from agentsim.core.recording import Recording
 from agentsim.core.scheduler import FRAME, Scheduler
 from agentsim.core.timed import BlockRun
 from agentsim.engines.animation import AnimationEngine
@@ -94,6 +96,11 @@ class Realizer:
         process = self.env.process(later())
         self._submissions.append(process)
         return process
+
+    def recording(self) -> Recording:
+        """What the run has done so far, as values: behaviours with their actual key times, blocks, drops,
+        anticipator pegs, feedback and the speech as heard."""
+        return replace(self.scheduler.recording(), speech=tuple(self.speech.heard()))
 
     def all_ended(self) -> simpy.Process:
         """An event that happens when every block submitted (or due to be submitted) so far has ended,

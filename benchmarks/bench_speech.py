@@ -11,9 +11,9 @@ import time
 
 from agentsim.bml.parser import normalize_space
 from agentsim.speech.backend import SpeechText
-from agentsim.speech.delivery import DeliveryModel
+from agentsim.speech.delivery import CONDITIONS
 from agentsim.speech.espeak import EspeakBackend
-from agentsim.scenarios.speech_sync import PLAYBACK, speech_sync
+from agentsim.scenarios.speech_sync import speech_sync
 from agentsim.speech.linear_model import TEXTS_DIR
 
 
@@ -24,7 +24,7 @@ def main() -> None:
     started = time.perf_counter()
     utterance = backend.synthesize(SpeechText(text))
     synthesis = time.perf_counter() - started
-    delivery = DeliveryModel(**PLAYBACK, delay=0.05, jitter=0.03, burst_probability=0.03, burst_hold=0.25)
+    delivery = CONDITIONS["A"]
     rows = {}
     for strategy in ("best", "open-loop", "chang-naive"):
         result = speech_sync(text, backend, strategy, delivery, seed=1)

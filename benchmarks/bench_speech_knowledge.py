@@ -30,15 +30,16 @@ import platform
 import sys
 import time
 from collections import OrderedDict
+from dataclasses import asdict
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from bench_speech_sync import CONDITIONS, PLAYBACK, bench_texts  # noqa: E402
+from bench_speech_sync import bench_texts  # noqa: E402
 
-from agentsim.speech.delivery import DeliveryModel  # noqa: E402
+from agentsim.speech.delivery import CONDITIONS  # noqa: E402
 from agentsim.speech.duration_model import (PhonemeDurationModel, calibration_corpus, noisy_durations,  # noqa: E402
                                           true_durations)
 from agentsim.speech.harness import default_linear_model, run_sync_eval, synthesize_cached  # noqa: E402
@@ -73,7 +74,7 @@ def main(argv=None) -> dict:
     model_errors = np.concatenate(model_errors)
     model_rms = float(np.sqrt(np.mean(model_errors ** 2)))
 
-    delivery = DeliveryModel(**PLAYBACK, **CONDITIONS["d50_j30_bursts"])
+    delivery = CONDITIONS["A"]
     knowledge = OrderedDict([("linear only", None)])
     for error in ERRORS:
         knowledge[f"truth + {1000 * error:g} ms"] = (lambda e: lambda u, rng: noisy_durations(u, e, rng))(error)
@@ -97,7 +98,7 @@ def main(argv=None) -> dict:
         backend="espeak-ng",
         texts={name: len(text.split()) for name, text in texts.items()},
         seeds_per_text=args.seeds,
-        condition=OrderedDict(**PLAYBACK, **CONDITIONS["d50_j30_bursts"]),
+        condition=asdict(delivery),
         target_p95_ms=TARGET_MS,
         phonetic_model=OrderedDict(calibration_phonemes=model.n, calibration_s=round(calibrated_at, 1),
                                    rms_error_ms=round(1000 * model_rms, 2),

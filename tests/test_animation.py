@@ -270,11 +270,13 @@ def test_npz_holds_angles_times_and_channel_names(long_realizer, tmp_path):
     assert float(data["fps"]) == 30.0
 
 
-def test_a_list_of_timed_behaviours_plays_like_the_realizer(long_realizer):
-    timed = [t for run in long_realizer.scheduler.all_runs for t in run.timed]
+def test_the_recording_or_its_behaviour_records_play_like_the_realizer(long_realizer):
+    recording = long_realizer.recording()
     a = evaluate_poses(long_realizer, fps=30, duration=10)
-    b = evaluate_poses(timed, fps=30, duration=10)
-    assert np.array_equal(a.values, b.values)
+    b = evaluate_poses(list(recording.behaviours), fps=30, duration=10)
+    c = evaluate_poses(recording, fps=30, duration=10)
+    assert np.array_equal(a.values, b.values) and np.array_equal(a.values, c.values)
+    assert a.units and a.units == c.units
 
 
 def test_the_same_seed_gives_the_same_poses(long_realizer):

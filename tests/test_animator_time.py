@@ -29,7 +29,7 @@ from agentsim.speech.animator_time import (
 )
 from agentsim.speech.backend import SpeechText
 from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.delivery import DeliveryModel, ProgressEvent, deliver, true_events
+from agentsim.speech.delivery import CONDITIONS, DeliveryModel, ProgressEvent, deliver, true_events
 from agentsim.speech.harness import run_sync_eval, stroke_targets
 from agentsim.speech.linear_model import (
     LinearModel,
@@ -232,8 +232,7 @@ def test_best_in_the_harness_noise_free_has_zero_error_and_no_snaps():
 
 
 def test_best_beats_the_baselines_with_jitter_and_bursts():
-    model = DeliveryModel(latency=0.08, start_jitter=0.04, drift_ppm=500.0, delay=0.05, jitter=0.03,
-                          burst_probability=0.03, burst_hold=0.25)
+    model = CONDITIONS["A"]
     backend = BuiltinBackend()
     results = {name: run_sync_eval(TEXT, backend, name, model, seed=1) for name in STRATEGIES}
     best = results["best"]

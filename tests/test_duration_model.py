@@ -8,7 +8,7 @@ import pytest
 
 from agentsim.speech.backend import SpeechText
 from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.delivery import DeliveryModel
+from agentsim.speech.delivery import CONDITIONS, DeliveryModel
 from agentsim.speech.duration_model import (PhonemeDurationModel, calibration_corpus, for_plan, noisy_durations,
                                           true_durations)
 from agentsim.speech.harness import run_sync_eval
@@ -93,8 +93,7 @@ def test_best_uses_phoneme_durations_on_a_linear_plan():
     # Chang's linear plan, events delayed 50 ms plus jitter and bursts: the durations the plan carries
     # decide how well the best strategy predicts each word. Exact durations do far better than learning
     # word durations online, and rough ones worse than exact ones.
-    model = DeliveryModel(latency=0.08, start_jitter=0.04, drift_ppm=500.0, delay=0.05, jitter=0.03,
-                          burst_probability=0.03, burst_hold=0.25)
+    model = CONDITIONS["A"]
     backend = BuiltinBackend()
     linear = calibrate(backend, [TEXT[:150], TEXT[150:]])
     text = " ".join([TEXT] * 3)

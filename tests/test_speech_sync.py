@@ -15,12 +15,12 @@ from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer
 from agentsim.speech.animator_time import make_strategy
 from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.delivery import DeliveryModel
-from agentsim.scenarios.speech_sync import PLAYBACK, beats_on_content_words, speech_sync
+from agentsim.speech.delivery import CONDITIONS, DeliveryModel
+from agentsim.scenarios.speech_sync import beats_on_content_words, speech_sync
 from agentsim.speech.linear_model import TEXTS_DIR
 
 TEXT = normalize_space((TEXTS_DIR / "orchard.txt").read_text())[0]
-CONDITION_A = DeliveryModel(**PLAYBACK, delay=0.05, jitter=0.03, burst_probability=0.03, burst_hold=0.25)
+CONDITION_A = CONDITIONS["A"]
 
 
 def test_best_strategy_meets_the_target_and_beats_chang_naive():

@@ -257,8 +257,9 @@ def test_a_short_story_meets_the_sync_target_and_is_deterministic(voice):
     assert m["gestures"] == len(story.gestures) >= 60 and m["missed"] == 0 and m["warnings"] == 0
     assert m["sync_error_ms"]["p95"] <= 15.0 and m["snaps"] == 0
     # Gesture ends follow the speech too: every beat's stroke-to-end is its preferred 0.5 s.
-    beats = [t for t in telling.realizer.scheduler.all_runs[0].timed if t.id.startswith("beat")]
-    assert all(abs(t.passed[-1] - t.passed[3] - 0.5) < 0.01 for t in beats)
+    beats = [b for b in telling.recording.behaviours if b.id.startswith("beat")]
+    assert beats and all(b.state == "finished" for b in beats)
+    assert all(abs(b.time("end") - b.time("stroke") - 0.5) < 0.01 for b in beats)
     again = tell(story, "best", DEFAULT_DELIVERY, seed=3, voice=voice)
     other = tell(story, "best", DEFAULT_DELIVERY, seed=4, voice=voice)
     assert np.array_equal(again.passed, telling.passed)

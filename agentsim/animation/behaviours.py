@@ -1,6 +1,6 @@
-"""Motion drivers from timed BML behaviours: which driver plays each behaviour, on which hand, until when.
+"""Motion drivers from recorded BML behaviours: which driver plays each behaviour, on which hand, until when.
 
-:func:`build_drivers` turns the TimedBehaviours a realizer played into drivers on a
+:func:`build_drivers` turns what a realizer played (its recording) into drivers on a
 :class:`~agentsim.animation.manager.DriverManager`; gestures and pointing get their hands chosen,
 conducting beats numbered and coarticulation on each hand.
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Iterable
 
 import numpy as np
 
@@ -26,7 +26,7 @@ from agentsim.animation.units import repetition
 
 @dataclass
 class UnitInfo:
-    """What became of one timed behaviour: its keys, the drivers playing it, hands, and when it stopped."""
+    """What became of one recorded behaviour: its keys, the drivers playing it, hands, and when it stopped."""
 
     block: str
     id: str
@@ -45,29 +45,6 @@ class UnitInfo:
                 "stop": self.stop, "target": self.target, "note": self.note}
 
 
-def _stop_times(feedback_items: Sequence[dict] | None) -> tuple[dict[str, float], dict[str, float]]:
-    """Drop times by ``block:behaviour`` (from warnings) and end times of blocks (from block progress)."""
-    drops: dict[str, float] = {}
-    ends: dict[str, float] = {}
-    for f in feedback_items or ():
-        if f.get("type") == "warningFeedback":
-            target = str(f.get("id", ""))
-            block = target.split(":", 1)[0]
-            for b in f.get("modifiedBehaviours", []) or []:
-                drops.setdefault(f"{block}:{b}", float(f.get("globalTime", 0.0)))
-        elif f.get("type") == "blockProgress" and str(f.get("id", "")).endswith(":end"):
-            ends[str(f["id"])[:-4]] = float(f.get("globalTime", 0.0))
-    return drops, ends
-
-
-def _speech_pegged(timed, speech_ids: set[tuple[str, str]]) -> bool:
-    for ref in timed.behaviour.refs.values():
-        if ref.kind == "sync" and ref.behaviour is not None:
-            if ((ref.block or timed.block_id), ref.behaviour) in speech_ids:
-                return True
-    return False
-
-
 def _beat_index(behaviour) -> int | None:
     meter = conducting_meter(behaviour.attributes.get("lexeme", ""))
     if meter and meter[1]:
@@ -81,46 +58,43 @@ def _beat_index(behaviour) -> int | None:
     return None
 
 
-def build_drivers(manager: DriverManager, timed_list: Sequence, feedback_items: Sequence[dict] | None = None,
-                  animator_time: TimeSource | None = None) -> list[UnitInfo]:
-    """Create the motion drivers that play ``timed_list`` (TimedBehaviours) and add them to ``manager``.
+def build_drivers(manager: DriverManager, records: Iterable, animator_time: TimeSource | None = None) -> list[UnitInfo]:
+    """Create the motion drivers that play ``records`` and add them to ``manager``.
 
-    A behaviour that never started is left out; one that was dropped or interrupted after it started
-    plays until then (the time comes from warning or block feedback, else its last passed sync point).
-    Behaviours tied to speech are advanced by ``animator_time`` when given.
+    ``records``: what each behaviour did (:class:`~agentsim.core.recording.BehaviourRecord`, as in a
+    realizer's recording). A behaviour that never started is left out; one that was dropped or cut after
+    it started plays until then. Behaviours tied to speech are advanced by ``animator_time`` when given.
     """
-    drops, block_ends = _stop_times(feedback_items)
+    records = list(records)
     scene = manager.scene
-    speech_ids = {(t.block_id, t.id) for t in timed_list if t.behaviour.type == "speech"}
+    speech_ids = {r.name for r in records if r.type == "speech"}
     groups = {"gaze": ReplacementGroup("gaze")}
     infos: list[UnitInfo] = []
     arm_items: list[tuple] = []
 
-    for timed in sorted(timed_list, key=lambda x: (x.times()[0] if x.times()[0] is not None else math.inf, x.order)):
-        b = timed.behaviour
+    for record in sorted(records, key=lambda x: (x.start if x.start is not None else math.inf, x.order)):
+        b = record.behaviour
         if b.type == "wait":
             continue
-        started = timed.passed[0] is not None
-        if timed.state == "dropped" and not started:
+        if record.state == "dropped" and not record.started:
             continue
         stop = None
-        if timed.state == "dropped":
-            key = f"{timed.block_id}:{timed.id}"
-            passed = [p for p in timed.passed if p is not None]
-            stop = drops.get(key, block_ends.get(timed.block_id, passed[-1] if passed else None))
+        if record.state == "dropped":
+            passed = [t for t, p in zip(record.times, record.passed) if p]
+            stop = record.stopped if record.stopped is not None else (passed[-1] if passed else None)
         try:
-            keys = KeyTimes.from_timed(timed, fill=stop)
+            keys = KeyTimes.from_record(record, fill=stop)
         except ValueError:
             continue
         lexeme = b.attributes.get("lexeme", "")
-        info = UnitInfo(timed.block_id, timed.id, b.type, lexeme, keys.as_dict(), stop=stop)
+        info = UnitInfo(record.block, record.id, b.type, lexeme, keys.as_dict(), stop=stop)
         infos.append(info)
-        ts = animator_time if (animator_time is not None and (b.type == "speech" or _speech_pegged(timed, speech_ids))) \
+        ts = animator_time if (animator_time is not None and (b.type == "speech" or speech_ids & set(record.tied_to))) \
             else None
-        name = f"{timed.block_id}:{timed.id}"
+        name = f"{record.block}:{record.id}"
         common = {"stop": stop, "time_source": ts}
         if b.type in ("gesture", "pointing"):
-            arm_items.append((timed, keys, info, common))
+            arm_items.append((record, keys, info, common))
             continue
         if b.type == "speech":
             drv = manager.add(SpeechJawDriver(name, keys, **common))
@@ -188,8 +162,8 @@ def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> Non
                       "BOTH_HANDS": ["l", "r"], "BOTH": ["l", "r"]}
     ordered = sorted(items, key=lambda it: it[0].behaviour.attributes.get("mode", "").upper() not in explicit_modes)
     for item in ordered:
-        timed, keys, info, common = item
-        b = timed.behaviour
+        record, keys, info, common = item
+        b = record.behaviour
         sides = explicit_modes.get(b.attributes.get("mode", "").upper())
         if sides is None:
             if b.type == "pointing":
@@ -219,8 +193,8 @@ def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> Non
     # once (dropping that one's retraction); one arriving during the previous stroke waits for its end.
     last: dict[str, tuple] = {}
     for s, item in sorted(planned, key=lambda x: (x[1][1].start, x[1][0].order)):
-        timed, keys, info, common = item
-        b = timed.behaviour
+        record, keys, info, common = item
+        b = record.behaviour
         acquire = keys.start
         prev = last.get(s)
         if prev is not None and prev[1].end > keys.start:
@@ -229,7 +203,7 @@ def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> Non
                 acquire = max(keys.start, prev_end)
                 info.note = (info.note + " coarticulated").strip()
         last[s] = item
-        name = f"{timed.block_id}:{timed.id}" + (f" ({'left' if s == 'l' else 'right'})" if len(
+        name = f"{record.block}:{record.id}" + (f" ({'left' if s == 'l' else 'right'})" if len(
             [p for p in planned if p[1] is item]) > 1 else "")
         if b.type == "pointing":
             target = _bml_target(scene, b)

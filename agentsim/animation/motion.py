@@ -57,9 +57,10 @@ class KeyTimes:
         self._index = {s: i for i, s in enumerate(self.sync_ids)}
 
     @classmethod
-    def from_timed(cls, timed, fill: float | None = None) -> "KeyTimes":
-        """Keys of a TimedBehaviour (its actual times once passed); unknown times become ``fill``."""
-        times = list(timed.times())
+    def from_record(cls, timed, fill: float | None = None) -> "KeyTimes":
+        """Keys of what a behaviour did (a :class:`~agentsim.core.recording.BehaviourRecord`: its actual
+        times once passed); unknown times become ``fill``."""
+        times = list(timed.times)
         known = [t for t in times if t is not None]
         if not known:
             raise ValueError(f"{timed.id} has no known time")

@@ -1,7 +1,8 @@
 """Poses out: evaluate a realised plan into a PoseStream, and write it as BVH or npz.
 
-``evaluate_poses`` takes a :class:`~agentsim.realizer.Realizer` after ``run()`` (or a list of
-TimedBehaviours), builds the drivers that play each behaviour on top of the background drivers, and
+``evaluate_poses`` takes the recording of a run (:class:`~agentsim.core.recording.Recording`, or anything
+with a ``recording()`` method, such as a realizer after ``run()``), builds the drivers that play each
+behaviour on top of the background drivers, and
 evaluates the pose at every frame. ``write_bvh`` writes a BVH file (HIERARCHY with OFFSET/CHANNELS in
 metres and Euler degrees in ZXY order, MOTION with Frames / Frame Time) that Blender's importer reads;
 ``write_npz`` the same numbers as numpy arrays.
@@ -83,14 +84,12 @@ class PoseStream:
         return None
 
 
-def _timed_of(source) -> tuple[list, list[dict]]:
-    """TimedBehaviours and feedback of a Realizer, or a plain list of TimedBehaviours."""
-    scheduler = getattr(source, "scheduler", None)
-    if scheduler is not None:
-        timed = [t for run in scheduler.all_runs for t in run.timed]
-        return timed, list(source.feedback.items)
-    timed = list(source)
-    return timed, []
+def records_of(source) -> list:
+    """The behaviour records of a run: ``source`` is a Recording, something with a ``recording()`` method
+    (a realizer), or an iterable of :class:`~agentsim.core.recording.BehaviourRecord`."""
+    if hasattr(source, "recording"):
+        source = source.recording()
+    return list(source)
 
 
 def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | None = None, start: float = 0.0,
@@ -100,7 +99,7 @@ def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | N
 
     Parameters
     ----------
-    source : Realizer (after ``run()``) or iterable of TimedBehaviour
+    source : Recording, Realizer (after ``run()``) or iterable of BehaviourRecord
         What to play: every behaviour of every submitted block, at its actual key times.
     fps : float
         Frames per second; frame k is at ``start + k / fps``.
@@ -118,10 +117,10 @@ def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | N
     """
     if fps <= 0:
         raise ValueError("fps must be positive")
-    timed, feedback = _timed_of(source)
+    records = records_of(source)
     if manager is None:
         manager = DriverManager(body=body, seed=seed, scene=scene)
-    infos = build_drivers(manager, timed, feedback, animator_time)
+    infos = build_drivers(manager, records, animator_time)
     if duration is None:
         ends = [max(u.keys.values()) for u in infos if u.keys]
         ends += [float(max(d.keys.end, 0.0)) for d in manager.drivers if hasattr(d, "keys")]

@@ -16,9 +16,11 @@ _PHASE_COLOURS = {
 }
 
 
-def plot_timeline(realizer, out_png: str | Path, stream: PoseStream | None = None, title: str | None = None,
+def plot_timeline(source, out_png: str | Path, stream: PoseStream | None = None, title: str | None = None,
                   width: float = 12.0) -> Path:
-    """Draw what a realizer did on one time axis and save it as a PNG.
+    """Draw what a run did on one time axis and save it as a PNG.
+
+    ``source``: its :class:`~agentsim.core.recording.Recording`, or a realizer after ``run()``.
 
     One row per behaviour (block:behaviour) with its phases shaded between its sync points (dropped
     behaviours hatched up to where they stopped), a tick and label at every sync point, dashed lines
@@ -33,9 +35,9 @@ def plot_timeline(realizer, out_png: str | Path, stream: PoseStream | None = Non
     from matplotlib.patches import Patch
 
     out_png = Path(out_png)
-    runs = list(realizer.scheduler.all_runs)
-    items = list(realizer.feedback.items)
-    rows = [(run, t) for run in runs for t in run.timed]
+    recording = source.recording() if hasattr(source, "recording") else source
+    items = list(recording.feedback)
+    rows = list(recording.behaviours)
     n_rows = len(rows) + 1
     panels = 2 if stream is not None else 1
     height = max(2.5, 0.42 * n_rows + 1.5) + (2.2 if stream is not None else 0.0)
@@ -45,15 +47,15 @@ def plot_timeline(realizer, out_png: str | Path, stream: PoseStream | None = Non
     all_times: list[float] = []
     peg_points: dict[int, list[tuple[float, float]]] = {}
     labels: list[tuple[float, str]] = [(-0.45, "feedback")]
-    for row, (run, timed) in enumerate(rows):
+    for row, timed in enumerate(rows):
         y = n_rows - 1 - row
-        times = timed.times()
+        times = timed.times
         known = [(s, t) for s, t in zip(timed.sync_ids, times) if t is not None]
         if not known:
             continue
         stop = None
         if timed.state == "dropped":
-            passed = [p for p in timed.passed if p is not None]
+            passed = [t for t, p in zip(times, timed.passed) if p]
             stop = passed[-1] if passed else known[0][1]
         for (s0, t0), (s1, t1) in zip(known, known[1:]):
             phase = PHASE_NAMES.get((s0, s1), "speech" if timed.behaviour.type == "speech" else "hold")
@@ -70,10 +72,10 @@ def plot_timeline(realizer, out_png: str | Path, stream: PoseStream | None = Non
             ax.plot([t, t], [y - 0.32, y + 0.32], color="black", linewidth=0.8)
             if s == "stroke" or (timed.behaviour.type == "speech" and 0 < i < len(times) - 1):
                 ax.text(t, y + 0.33, s, fontsize=5.5, ha="center", va="bottom", color="#444444")
-            key = timed.keys[i]
-            if key is not None:
-                peg_points.setdefault(id(key.peg.root()), []).append((t, y))
-        label = f"{run.id}:{timed.id} ({timed.behaviour.type}"
+            group = timed.peg_groups[i] if i < len(timed.peg_groups) else None
+            if group is not None:
+                peg_points.setdefault(group, []).append((t, y))
+        label = f"{timed.name} ({timed.behaviour.type}"
         lex = timed.behaviour.attributes.get("lexeme")
         label += f" {lex})" if lex else ")"
         if timed.state == "dropped":

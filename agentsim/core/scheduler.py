@@ -24,6 +24,7 @@ from agentsim.core.block import Block
 from agentsim.core.engine import Engine, EngineContext
 from agentsim.core.errors import ScheduleError
 from agentsim.core.pegboard import PegBoard, TimePeg, invalidate_times
+from agentsim.core.recording import BlockRecord, DropRecord, Recording, record_behaviours
 from agentsim.core.solver import BlockSolver
 from agentsim.core.timed import EPSILON, BlockRun, SyncPeg, TimedBehaviour
 
@@ -120,6 +121,7 @@ class Scheduler:
         self.anticipators: dict[str, object] = {}
         self.runs: list[BlockRun] = []  # not yet ended, in submission order
         self.all_runs: list[BlockRun] = []
+        self.drops: list[DropRecord] = []
         #: bumped whenever behaviours are added, so that :class:`Dependants` know to look again
         self.structure_version = 0
         self._pending: dict[TimedBehaviour, None] | None = {}  # to re-time this instant; None: all
@@ -184,6 +186,8 @@ class Scheduler:
             self.warn(target, issue.warning_type, issue.description, character, issue.behaviours,
                       where.line if where else None, where.column if where else None)
         self.all_runs.append(run)
+        self.drops.extend(DropRecord(block.id, behaviour_id, now, kind, reason)
+                          for behaviour_id, (kind, reason) in solver.dropped.items())
         if solver.failed:
             run.state = "refused"
             run.ended.succeed()
@@ -258,6 +262,7 @@ class Scheduler:
             timed.state = "dropped"
             timed.stopped = now
             timed.engine.remove(timed)
+            self.drops.append(DropRecord(run.id, timed.id, now, "INTERRUPTED", "its block was replaced"))
         if run.state == "pending":
             self.log.send(fb.block_progress(run.id, "start", now, run.block.character_id))
             run.state = "running"
@@ -268,8 +273,19 @@ class Scheduler:
         timed.stopped = self.env.now
         timed.engine.remove(timed)
         run = timed.run
+        self.drops.append(DropRecord(run.id, timed.id, self.env.now, "IMPOSSIBLE_TO_SCHEDULE", reason))
         self.warn(f"{run.id}:{timed.id}", "IMPOSSIBLE_TO_SCHEDULE", f"{timed.id}: {reason}; behaviour dropped",
                   run.block.character_id, [timed.id])
+
+    def recording(self) -> Recording:
+        """What the run has done so far, as values (see :class:`~agentsim.core.recording.Recording`)."""
+        runs = [r for r in self.all_runs if r.state != "refused"]
+        blocks = tuple(BlockRecord(r.id, r.block.character_id, r.block.composition, r.state, r.block_peg.time
+                                   if r.state != "pending" else None, r.ended_at) for r in self.all_runs)
+        pegs = {name: {sync: peg.time for sync, peg in a.pegs.items()} for name, a in self.anticipators.items()}
+        return Recording(behaviours=tuple(record_behaviours(t for r in runs for t in r.timed)), blocks=blocks,
+                         drops=tuple(self.drops), anticipators=pegs, feedback=tuple(self.log.items),
+                         now=self.env.now)
 
     # ------------------------------------------------------------------ re-timing
     def dependants_of(self, pegs: Iterable[TimePeg], planned_now=None) -> Dependants:

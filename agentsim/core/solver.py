@@ -106,7 +106,7 @@ class BlockSolver:
         self.ties = _Ties()
         self.block_node = self.ties.add((self.block_peg, 0.0))
         self.nodes: dict[tuple, int] = {}
-        self.dropped: dict[str, str] = {}
+        self.dropped: dict[str, tuple[str, str]] = {}  # behaviour id -> (warning type, reason)
         self.group_peg: dict[int, OffsetPeg] = {}
         self.anchors: list[OffsetPeg] = []
         self.timed: dict[str, TimedBehaviour] = {}
@@ -116,7 +116,7 @@ class BlockSolver:
     def drop(self, behaviour_id: str, reason: str, kind: str = "IMPOSSIBLE_TO_SCHEDULE") -> None:
         if behaviour_id in self.dropped:
             return
-        self.dropped[behaviour_id] = reason
+        self.dropped[behaviour_id] = (kind, reason)
         self.issues.append(Issue(kind, f"{behaviour_id}: {reason}; behaviour dropped", [behaviour_id]))
         beh = self.block.behaviour(behaviour_id)
         if beh is not None and beh.required:

@@ -222,6 +222,52 @@ class Playback:
         return t
 
 
+@dataclass(frozen=True)
+class HeardSpeech:
+    """One speech as a listener of the run heard it.
+
+    Attributes
+    ----------
+    block, behaviour : str
+        Its block's id and its own.
+    utterance : Utterance
+        What the backend made of its text (its timeline and, if the backend makes sound, its audio).
+    t_request : float
+        When its audio was asked for (global s): the speech's start.
+    t0 : float
+        When its first sample was heard (global s): later by the playback latency under a strategy.
+    drift_ppm : float
+        Its audio clock's drift: speech time ``s`` is heard at ``t0 + s * (1 + drift_ppm * 1e-6)``.
+    strategy : str or None
+        The animator-time strategy its sync points followed (None: they kept the plan).
+    delivered : tuple of ProgressEvent
+        Its progress events as they reached the realizer (empty without a strategy).
+    trace : tuple of (float, float)
+        ``(clock time, t_A)`` samples while it played, if asked for (:attr:`SpeechConfig.trace_frame`).
+    plan : SpeechPlan or None
+        What the strategy was told in advance.
+    """
+
+    block: str
+    behaviour: str
+    utterance: Utterance
+    t_request: float
+    t0: float
+    drift_ppm: float = 0.0
+    strategy: str | None = None
+    delivered: tuple = ()
+    trace: tuple = ()
+    plan: object = None
+
+    @property
+    def scale(self) -> float:
+        return 1.0 + self.drift_ppm * 1e-6
+
+    def true_time(self, s: float) -> float:
+        """Global time at which speech time ``s`` (s from the utterance's start) was heard."""
+        return self.t0 + s * self.scale
+
+
 class SpeechEngine(Engine):
     """Plays speech behaviours; with a strategy, their sync points follow the audio through animator time."""
 
@@ -234,15 +280,30 @@ class SpeechEngine(Engine):
     def __init__(self, context: EngineContext, backend: TTSBackend, config: SpeechConfig | None = None):
         super().__init__(context, SpeechPlanner(backend, config))
         self.config = self.planner.config
-        self.playbacks: list[Playback] = []
+        self.playbacks: list[Playback] = []  # the speeches that played under a strategy, in order
+        self._started: list[HeardSpeech | Playback] = []  # every speech that started, in order
 
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
         if index == 0:
             if self.config.strategy is None:
                 self.take_timing(timed, time)
+                utterance = self.planner.utterance(timed.behaviour)
+                self._started.append(HeardSpeech(timed.block_id, timed.id, utterance, time, time))
             else:
                 self.play(timed, time)
+                self._started.append(self.playbacks[-1])
         super().sync_passed(timed, index, time)
+
+    def heard(self) -> list[HeardSpeech]:
+        """Every speech that started so far, as it was heard."""
+        found = []
+        for item in self._started:
+            if isinstance(item, Playback):
+                item = HeardSpeech(item.timed.block_id, item.timed.id, item.utterance, item.t_request, item.t0,
+                                   item.drift_ppm, self.config.strategy, tuple(item.delivered), tuple(item.trace),
+                                   item.plan)
+            found.append(item)
+        return found
 
     def take_timing(self, timed: TimedBehaviour, start: float) -> None:
         """From its start on, the speech runs on its own audio timeline: detach its pegs from whatever

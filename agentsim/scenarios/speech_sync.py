@@ -14,15 +14,14 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from agentsim.bml.parser import normalize_space
+from agentsim.core.errors import AgentsimError
 from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer
 from agentsim.speech.delivery import DeliveryModel
 from agentsim.speech.harness import is_content_word
 from agentsim.speech.linear_model import written_words
-from agentsim.speech.metrics import error_summary, rate_range, snaps, stall_time, sync_errors
+from agentsim.speech.metrics import evaluate, sync_errors
 
-#: Playback model used unless told otherwise: nominal latency, unknown extra start latency, drift.
-PLAYBACK = dict(latency=0.08, start_jitter=0.04, drift_ppm=500.0)
 #: The speech starts this long after the block (seconds).
 SPEECH_START = 1.0
 FRAME = 1.0 / 60.0
@@ -66,27 +65,24 @@ def speech_sync(text: str, backend, strategy: str, delivery: DeliveryModel, timi
     realizer.submit(bml)
     realizer.run()
     wall = time.perf_counter() - started
-    speech_engine = realizer.engines[0]
-    if not speech_engine.playbacks:
-        raise ValueError("the speech did not play: " + "; ".join(
+    recording = realizer.recording()
+    if not recording.speech:
+        raise AgentsimError("the speech did not play: " + "; ".join(
             w["description"] for w in realizer.feedback.warnings()))
-    playback = speech_engine.playbacks[0]
-    utterance = playback.utterance
-    strokes = realizer.feedback.sync_times()
+    speech = recording.speech[0]
+    utterance = speech.utterance
+    strokes = recording.sync_times()
     passed, truth = [], []
     for k in targets:
         stroke = strokes.get(f"sync:g{k}:stroke")
         if stroke is None:
             continue
         passed.append(stroke)
-        truth.append(playback.true_time(utterance.mark_time(f"w{k}")))
-    errors = sync_errors(np.array(passed), np.array(truth))
-    t = np.array([f for f, _ in playback.trace])
-    t_a = np.array([p for _, p in playback.trace])
-    low, high = rate_range(t, t_a)
+        truth.append(speech.true_time(utterance.mark_time(f"w{k}")))
+    t = np.array([f for f, _ in speech.trace])
+    t_a = np.array([p for _, p in speech.trace])
     return OrderedDict(
         strategy=strategy, timing=timing, seed=seed, words=len(utterance.words), gestures=len(targets),
-        missed=len(targets) - len(passed), error_ms=error_summary(errors), snaps=snaps(t, t_a, FRAME),
-        stall_s=stall_time(t, t_a), rate=OrderedDict(min=low, max=high), wall_seconds=wall,
-        speech_seconds=utterance.duration, errors_s=errors,
+        missed=len(targets) - len(passed), **evaluate(passed, truth, t, t_a, FRAME), wall_seconds=wall,
+        speech_seconds=utterance.duration, errors_s=sync_errors(passed, truth),
     )

@@ -25,8 +25,8 @@ import numpy as np
 
 from agentsim.speech.backend import Utterance
 
-__all__ = ["EVENT_KINDS", "JITTER_DISTRIBUTIONS", "ProgressEvent", "DeliveryModel", "true_events",
-           "deliver", "draw_jitter", "delivery_process"]
+__all__ = ["EVENT_KINDS", "JITTER_DISTRIBUTIONS", "ProgressEvent", "DeliveryModel", "PLAYBACK", "CONDITIONS",
+           "true_events", "deliver", "draw_jitter", "delivery_process"]
 
 #: Kinds of progress events, in the order in which events at the same instant are produced.
 EVENT_KINDS = ("sentence", "mark", "word", "phoneme", "end")
@@ -135,6 +135,20 @@ class DeliveryModel:
     def with_(self, **changes: Any) -> "DeliveryModel":
         """A copy with some fields changed."""
         return replace(self, **changes)
+
+
+#: The playback every named condition shares: nominal latency 80 ms plus an unknown 0 to 40 ms, audio clock
+#: drift 500 ppm.
+PLAYBACK = {"latency": 0.08, "start_jitter": 0.04, "drift_ppm": 500.0}
+
+#: The delivery conditions of the speech-sync tables, by name: **A** events delayed 50 ms plus exponential
+#: jitter of mean 30 ms, with stalls (p = 0.03, held up to 0.25 s); **B** as A with jitter 100 ms; **C**
+#: delay 150 ms, jitter 50 ms, stalls and 2 % loss. A is the default wherever a condition is not given.
+CONDITIONS: dict[str, DeliveryModel] = {
+    "A": DeliveryModel(**PLAYBACK, delay=0.05, jitter=0.03, burst_probability=0.03, burst_hold=0.25),
+    "B": DeliveryModel(**PLAYBACK, delay=0.05, jitter=0.10, burst_probability=0.03, burst_hold=0.25),
+    "C": DeliveryModel(**PLAYBACK, delay=0.15, jitter=0.05, burst_probability=0.03, burst_hold=0.25, loss=0.02),
+}
 
 
 def true_events(utterance: Utterance, t0: float, drift_ppm: float = 0.0) -> list[ProgressEvent]:

@@ -23,7 +23,7 @@ from agentsim.speech.builtin import FUNCTION_WORDS
 from agentsim.speech.delivery import DeliveryModel, deliver, delivery_process, true_events
 from agentsim.speech.duration_model import for_plan
 from agentsim.speech.linear_model import LinearModel, calibrate, plan_from_linear, plan_from_utterance
-from agentsim.speech.metrics import DEFAULT_FRAME, error_summary, rate_range, snaps, stall_time, sync_errors
+from agentsim.speech.metrics import DEFAULT_FRAME, evaluate, sync_errors
 from agentsim.speech.plan import SpeechPlan
 
 __all__ = ["run_sync_eval", "synthesize_cached", "default_linear_model", "stroke_targets", "is_content_word",
@@ -237,15 +237,12 @@ def run_sync_eval(text: str, backend: TTSBackend, strategy_name: str, delivery: 
     env.run(until=env.all_of(processes))  # every stroke struck (or can never strike), every frame sampled
 
     hit = np.isfinite(strokes)
-    errors = sync_errors(strokes[hit], truth_t[hit])
-    low, high = rate_range(frames, samples)
     result: dict[str, Any] = OrderedDict(
         strategy=strategy_name, timing=timing, seed=seed,
         words=len(utterance.words), gestures=int(len(planned)), missed=int((~hit).sum()),
-        error_ms=error_summary(errors), snaps=snaps(frames, samples, frame),
-        stall_s=stall_time(frames, samples), rate=OrderedDict(min=low, max=high),
+        **evaluate(strokes[hit], truth_t[hit], frames, samples, frame),
     )
     if traces:
-        result.update(errors_s=errors, t=frames, t_A=samples, strokes=strokes, true_onsets=truth_t,
-                      delivery=asdict(delivery))
+        result.update(errors_s=sync_errors(strokes[hit], truth_t[hit]), t=frames, t_A=samples, strokes=strokes,
+                      true_onsets=truth_t, delivery=asdict(delivery))
     return result

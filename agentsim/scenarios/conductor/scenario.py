@@ -139,9 +139,7 @@ def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int
 
     def finish():
         yield env.process(hear())
-        pending = [r.ended for r in realizer.scheduler.all_runs if not r.ended.triggered]
-        if pending:
-            yield simpy.AllOf(env, pending) | env.timeout(5.0)
+        yield realizer.all_ended() | env.timeout(5.0)
 
     try:
         env.run(until=env.process(finish()))
@@ -293,12 +291,13 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    recording = run.realizer.recording()
     with open(out / "feedback.jsonl", "w") as f:
-        for item in run.realizer.feedback.items:
+        for item in recording.feedback:
             f.write(to_json(item) + "\n")
     sr = run.ears.sample_rate
     soundfile.write(str(out / "ensemble.wav"), run.ears.recording(), sr, subtype="PCM_16")
-    stream = evaluate_poses(run.realizer, fps=run.config.conductor.fps, seed=run.seed)
+    stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
     write_bvh(out / "conductor.bvh", stream)
     if "tempo" not in run.extra:
         collect_metrics(run)
@@ -310,6 +309,6 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     plot_tempo(out / "tempo.png", run.extra["beats"], run.extra["tempo"], run.extra["target"],
                run.conductor.ictus, title, events)
     if pictures:
-        plot_timeline(run.realizer, out / "timeline.png", stream=stream,
+        plot_timeline(recording, out / "timeline.png", stream=stream,
                       title=f"conductor ({run.strategy_name}): behaviours, pegs and feedback")
     return out

@@ -31,7 +31,6 @@ import time
 from collections import OrderedDict
 from dataclasses import replace
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -276,10 +275,10 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     t = time.perf_counter()
     (out / "story.bml").write_text(telling.bml)
     with open(out / "feedback.jsonl", "w") as f:
-        for item in telling.realizer.feedback.items:
+        for item in telling.recording.feedback:
             f.write(to_json(item) + "\n")
     t = stage("feedback", t)
-    stream = evaluate_poses(telling.realizer, fps=fps, seed=seed, scene=telling.story.scene)
+    stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene)
     t = stage("poses", t)
     write_bvh(out / "story.bvh", stream)
     t = stage("bvh", t)
@@ -289,9 +288,9 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     if utterance.audio is not None:
         write_wav(out / "narration.wav", utterance)
     t = stage("wav", t)
-    playback = telling.playback
+    speech = telling.speech
     _, planned, _ = syllable_times(telling.story, utterance)
-    realised = (telling.passed - playback.t0) / playback.scale  # audio axis
+    realised = (telling.passed - speech.t0) / speech.scale  # audio axis
     export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, realised, telling.ids)
     t = stage("textgrid", t)
     plot_window(telling, out / "timeline.png", stream, window)
@@ -307,7 +306,7 @@ def motion_strokes(telling: Telling, stream) -> "OrderedDict":
     absolute difference of the intact ones in ms (between frames where the extreme can be interpolated)."""
     from agentsim.animation.analysis import measure_strokes
 
-    measures = measure_strokes(stream, telling.realizer.feedback.sync_times())
+    measures = measure_strokes(stream, telling.recording.sync_times())
     intact = [m for m in measures if m.intact]
     error = np.abs([m.refined_error for m in intact]) * 1000.0
     summary = OrderedDict(measured=len(measures), intact=len(intact),
@@ -318,37 +317,16 @@ def motion_strokes(telling: Telling, stream) -> "OrderedDict":
     return summary
 
 
-class _ClippedTimed:
-    """A timed behaviour seen up to a time: later sync points are unknown (not drawn)."""
-
-    def __init__(self, timed, t_end: float):
-        self._timed = timed
-        self._t_end = t_end
-
-    def __getattr__(self, name):
-        return getattr(self._timed, name)
-
-    def times(self):
-        return [t if t is not None and t <= self._t_end else None for t in self._timed.times()]
-
-
 def plot_window(telling: Telling, png: Path, stream, window: float = 30.0) -> Path:
     """``plot_timeline`` of the behaviours that start in the first ``window`` seconds, with the poses of
     that window (a whole story would need one row per gesture, hundreds of rows)."""
     from agentsim.animation import plot_timeline
 
-    realizer = telling.realizer
-    runs = [SimpleNamespace(id=run.id, timed=[_ClippedTimed(tb, window) for tb in run.timed
-                                              if tb.times()[0] is not None and tb.times()[0] < window])
-            for run in realizer.scheduler.all_runs]
-    view = SimpleNamespace(scheduler=SimpleNamespace(all_runs=runs),
-                           feedback=SimpleNamespace(items=[f for f in realizer.feedback.items
-                                                           if f.get("globalTime", math.inf) <= window]))
     n = int(np.searchsorted(stream.times, window, side="right"))
     part = replace(stream, times=stream.times[:n], values=stream.values[:n], positions=stream.positions[:n],
                    writers=stream.writers[:n] if stream.writers is not None else None)
     total = float(telling.utterance.duration)
-    return plot_timeline(view, png, stream=part, width=16.0,
+    return plot_timeline(telling.recording.until(window), png, stream=part, width=16.0,
                          title=f"{telling.story.title}: the first {window:g} s of {total:.0f} s "
                                f"(strategy {telling.strategy})")
 

@@ -18,23 +18,21 @@ from typing import Any
 
 import numpy as np
 
-from agentsim.engines.speech import SpeechConfig
+from agentsim.core.recording import Recording
+from agentsim.engines.speech import HeardSpeech, SpeechConfig
 from agentsim.core.errors import AgentsimError
 from agentsim.realizer import Realizer
 from agentsim.scenarios.storytelling.markup import Story, anchor_sync, compile_bml, gesture_ids
 from agentsim.scenarios.storytelling.voice import CachedBackend, PhonemeMarks, stressed_onset, word_after
 from agentsim.speech.backend import SpeechText, Utterance
-from agentsim.speech.delivery import DeliveryModel
-from agentsim.speech.metrics import error_summary, rate_range, snaps, stall_time
+from agentsim.speech.delivery import CONDITIONS, DeliveryModel
+from agentsim.speech.metrics import error_summary, evaluate
 
 __all__ = ["DEFAULT_DELIVERY", "FRAME", "SPEECH_START", "BLOCK_ID", "Telling", "tell", "make_voice",
            "stress_offsets", "syllable_times"]
 
-#: The default event-delivery condition: playback latency 80 ms plus an unknown 0-40 ms, audio clock
-#: drift 500 ppm, events delayed 50 ms plus exponential jitter of mean 30 ms, stalls (p = 0.03, held up
-#: to 0.25 s).
-DEFAULT_DELIVERY = DeliveryModel(latency=0.08, start_jitter=0.04, drift_ppm=500.0, delay=0.05, jitter=0.03,
-                                 burst_probability=0.03, burst_hold=0.25)
+#: The default event-delivery condition: condition A of :data:`agentsim.speech.delivery.CONDITIONS`.
+DEFAULT_DELIVERY = CONDITIONS["A"]
 #: Frame period (s) at which animator time is sampled for the snap and stall metrics.
 FRAME = 1.0 / 60.0
 #: The speech starts this long (s) after the block: room for the first gestures' preparation.
@@ -101,8 +99,10 @@ class Telling:
         The block that was realised.
     realizer : Realizer
         After ``run()``.
-    playback : Playback
-        The speech as it played (true start, drift, delivered events, animator-time trace).
+    recording : Recording
+        What the realizer did (behaviours with their actual key times, drops, feedback, the speech).
+    speech : HeardSpeech
+        The speech as it was heard (true start, drift, delivered events, animator-time trace).
     ids : list of str
         BML id of each gesture.
     passed : numpy.ndarray
@@ -123,7 +123,8 @@ class Telling:
     delivery: DeliveryModel
     bml: str
     realizer: Realizer
-    playback: Any
+    recording: Recording
+    speech: HeardSpeech
     ids: list[str]
     passed: np.ndarray
     heard: np.ndarray
@@ -135,7 +136,7 @@ class Telling:
 
     @property
     def utterance(self) -> Utterance:
-        return self.playback.utterance
+        return self.speech.utterance
 
     @property
     def errors(self) -> np.ndarray:
@@ -145,27 +146,26 @@ class Telling:
 
     @property
     def warnings(self) -> list[dict]:
-        return self.realizer.feedback.warnings()
+        return [f for f in self.recording.feedback if f["type"] == "warningFeedback"]
 
     def trace(self) -> tuple[np.ndarray, np.ndarray]:
         """Animator time ``t_A`` sampled every :data:`FRAME` while the speech played: ``(t, t_A)``."""
-        tr = self.playback.trace
+        tr = self.speech.trace
         return np.array([t for t, _ in tr]), np.array([a for _, a in tr])
 
     def metrics(self) -> "OrderedDict[str, Any]":
         """The figures of this telling (times in seconds, sync errors in milliseconds)."""
         t, t_a = self.trace()
-        low, high = rate_range(t, t_a)
-        errors = self.errors
-        by_kind = OrderedDict()
         ok = np.isfinite(self.passed)
+        overall = evaluate(self.passed[ok], self.heard[ok], t, t_a, FRAME)
+        by_kind = OrderedDict()
         kinds = np.array([g.kind for g in self.story.gestures])
         for kind in dict.fromkeys(kinds):
             sel = (kinds == kind) & ok
             summary = error_summary(self.passed[sel] - self.heard[sel])
             by_kind[str(kind)] = OrderedDict(n=int((kinds == kind).sum()), p50=summary["p50"],
                                              p95=summary["p95"], max=summary["max"])
-        dropped = [t.id for run in self.realizer.scheduler.all_runs for t in run.timed if t.state == "dropped"]
+        dropped = [b.id for b in self.recording.behaviours if b.state == "dropped"]
         return OrderedDict(
             story=self.story.title,
             source=self.story.source,
@@ -178,17 +178,17 @@ class Telling:
             anchor=self.anchor,
             timing=self.timing,
             seed=self.seed,
-            sync_error_ms=error_summary(errors),
+            sync_error_ms=overall["error_ms"],
             sync_error_by_kind_ms=by_kind,
             missed=int((~ok).sum()),
             warnings=len(self.warnings),
             dropped=dropped,
             words_without_stress=int((~self.stressed).sum()),
-            snaps=snaps(t, t_a, FRAME) if len(t) else 0,
-            stall_s=stall_time(t, t_a) if len(t) else 0.0,
-            rate=OrderedDict(min=low, max=high),
-            audio_start_s=float(self.playback.t0),
-            drift_ppm=float(self.playback.drift_ppm),
+            snaps=overall["snaps"],
+            stall_s=overall["stall_s"],
+            rate=overall["rate"],
+            audio_start_s=float(self.speech.t0),
+            drift_ppm=float(self.speech.drift_ppm),
             delivery=OrderedDict((k, getattr(self.delivery, k)) for k in (
                 "latency", "start_jitter", "drift_ppm", "delay", "jitter", "jitter_distribution",
                 "burst_probability", "burst_hold", "loss")),
@@ -241,19 +241,19 @@ def tell(story: Story, strategy: str = "best", delivery: DeliveryModel = DEFAULT
     realizer = Realizer(tts=voice, speech=config)
     realizer.submit(bml, source=story.source)
     realizer.run()
-    engine = realizer.engines[0]
-    if not engine.playbacks:
+    recording = realizer.recording()
+    if not recording.speech:
         raise AgentsimError("the story's speech did not play: " + "; ".join(
             w["description"] for w in realizer.feedback.warnings()))
-    playback = engine.playbacks[0]
-    _, stressed_s, has = syllable_times(story, playback.utterance)
-    heard = np.array([playback.true_time(s) for s in stressed_s])
-    times = realizer.feedback.sync_times()
+    speech = recording.speech[0]
+    _, stressed_s, has = syllable_times(story, speech.utterance)
+    heard = np.array([speech.true_time(s) for s in stressed_s])
+    times = recording.sync_times()
     ids = gesture_ids(story)
     passed = np.array([times.get(f"{BLOCK_ID}:{gid}:{anchor_sync(g)}", np.nan)
                        for gid, g in zip(ids, story.gestures)], dtype=float)
     synthesis = (cache.synthesis_seconds - synthesis_before) if cache is not None else 0.0
     wall = time.perf_counter() - started - synthesis
     cached = cache is None or fresh_before or cache.key(story.text) not in cache.synthesised
-    return Telling(story, strategy, anchor, timing, seed, delivery, bml, realizer, playback, ids, passed, heard,
-                   has, wall, synthesis, cached)
+    return Telling(story, strategy, anchor, timing, seed, delivery, bml, realizer, recording, speech, ids, passed,
+                   heard, has, wall, synthesis, cached)
