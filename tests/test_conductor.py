@@ -14,6 +14,7 @@ import pytest
 import soundfile
 
 from agentsim.core.errors import AgentsimError
+from agentsim.cli import build_parser
 from agentsim.scenarios.conductor import run as conductor_cli
 from agentsim.scenarios.conductor.config import ModelParams, config_from_dict, load_config, parse_meter
 from agentsim.scenarios.conductor.ensemble import Timekeeper
@@ -25,8 +26,7 @@ QUIET = dict(timekeeper_sd=0.0, motor_sd=0.0, ictus_sd=0.0, drag=0.0)
 
 
 def args(**kw) -> argparse.Namespace:
-    parser = conductor_cli.configure(argparse.ArgumentParser())
-    ns = parser.parse_args([])
+    ns = build_parser().parse_args(["run", "conductor"])
     for k, v in kw.items():
         setattr(ns, k, v)
     return ns

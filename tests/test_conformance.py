@@ -163,3 +163,16 @@ def test_cli_writes_bvh_poses_and_timeline(tmp_path):
     assert cli("plot", "timeline", str(BML / "point.xml"), "--out", str(png)).returncode == 0
     assert png.stat().st_size > 20_000
     assert cli("realize", str(BML / "point.xml"), "--bvh", str(bvh), "--fps", "0").returncode == 2
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly(tmp_path):
+    doc = tmp_path / "long.xml"
+    doc.write_text('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="b">' + "".join(
+        f'<gesture id="g{i}" lexeme="BEAT" start="{i}"/>' for i in range(400)) + "</bml>")
+    proc = subprocess.Popen([sys.executable, "-m", "agentsim.cli", "realize", str(doc)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    first = proc.stdout.readline()
+    proc.stdout.close()  # like `| head -1`
+    _, err = proc.communicate(timeout=60)
+    assert json.loads(first)["type"] == "predictionFeedback"
+    assert proc.returncode == 0 and err == b""

@@ -73,7 +73,8 @@ def imports_of(module: str) -> set[str]:
                 origin = ".".join(base + ([node.module] if node.module else []))
             else:
                 origin = node.module or ""
-            names = [origin] + [f"{origin}.{a.name}" for a in node.names]
+            # ``from package import submodule`` depends on the submodule; any other name, on the package
+            names = [f"{origin}.{a.name}" if f"{origin}.{a.name}" in MODULES else origin for a in node.names]
         else:
             continue
         for name in names:

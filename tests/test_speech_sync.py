@@ -15,7 +15,7 @@ from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer
 from agentsim.speech.animator_time import make_strategy
 from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.delivery import CONDITIONS, DeliveryModel
+from agentsim.speech.delivery import CONDITIONS
 from agentsim.scenarios.speech_sync import beats_on_content_words, speech_sync
 from agentsim.speech.linear_model import TEXTS_DIR
 

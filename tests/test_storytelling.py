@@ -13,6 +13,8 @@ import pytest
 from agentsim.bml.parser import parse_bml
 from agentsim.core.errors import AgentsimError
 from agentsim.realizer import Realizer
+from agentsim.cli import build_parser
+from agentsim.cli import main as cli_main
 from agentsim.scenarios.storytelling import run as story_run
 from agentsim.scenarios.storytelling.markup import StoryError, compile_bml, parse_story, read_story
 from agentsim.scenarios.storytelling.praat import export_textgrid, import_textgrid
@@ -271,13 +273,9 @@ def test_a_short_story_meets_the_sync_target_and_is_deterministic(voice):
 
 
 def _args(tmp_path, cache_dir, **changes) -> argparse.Namespace:
-    parser = argparse.ArgumentParser()
-    commands = parser.add_subparsers(dest="command")
-    run = commands.add_parser("run").add_subparsers(dest="scenario")
-    story_run.add_parser(run)
-    args = parser.parse_args(["run", "storytelling", "--story", SHORT, "--out", str(tmp_path),
-                              "--cache", str(cache_dir), "--fps", "30", "--window", "8"])
-    assert args.handler is story_run.main
+    args = build_parser().parse_args(["run", "storytelling", "--story", SHORT, "--out", str(tmp_path),
+                                      "--cache", str(cache_dir), "--fps", "30", "--window", "8"])
+    args.delivery = DEFAULT_DELIVERY
     for key, value in changes.items():
         setattr(args, key, value)
     return args
@@ -325,7 +323,7 @@ def test_a_missing_story_fails_before_anything_runs(tmp_path, cache_dir):
     with pytest.raises(AgentsimError, match="no story file or shipped story"):
         story_run.main(_args(out, cache_dir, story=str(tmp_path / "gone.story")))
     assert not out.exists()
-    assert story_run._standalone(["--story", "no_such_story", "--out", str(out)]) == 1
+    assert cli_main(["run", "storytelling", "--story", "no_such_story", "--out", str(out)]) == 1
     assert not out.exists()
 
 

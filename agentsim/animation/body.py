@@ -275,7 +275,6 @@ class Body:
         With ``joints`` given, only those joints and their ancestors are computed (and returned).
         """
         pose = np.atleast_2d(np.asarray(pose, dtype=float))
-        n = pose.shape[0]
         if joints is None:
             needed = range(len(self.joints))
         else:

@@ -9,7 +9,7 @@ import sys
 from agentsim.core.errors import AgentsimError
 
 
-def add_parser(commands) -> None:
+def add_parsers(commands) -> None:
     anticipate = commands.add_parser("anticipate", help="run anticipators over recorded or live input")
     kinds = anticipate.add_subparsers(dest="kind", required=True)
     beats = kinds.add_parser(
@@ -27,9 +27,10 @@ def add_parser(commands) -> None:
     beats.add_argument("--input", metavar="DEVICE", help="track a live input device instead of a file")
     beats.add_argument("--seconds", type=float, default=10.0, help="how long to listen with --input")
     beats.add_argument("--sample-rate", type=int, default=44100, help="sample rate for --input")
+    beats.set_defaults(handler=track_beats)
 
 
-def beats(args: argparse.Namespace) -> int:
+def track_beats(args: argparse.Namespace) -> int:
     from agentsim.beats.evaluation import evaluate_predictions, track_file
     from agentsim.beats.tracking import TRACKER_NAMES
 

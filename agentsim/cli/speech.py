@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from agentsim.cli import options
 from agentsim.core.errors import AgentsimError
 
 DEFAULT_MODEL = Path("linear_model.json")
@@ -21,51 +22,32 @@ def add_parsers(commands) -> None:
                     "animator-time strategy while progress events arrive late, scattered and in bursts, and "
                     "report the sync error (stroke minus word onset as heard), snaps, stalls and rates.")
     sync.add_argument("--text", metavar="FILE", help="text to speak (default: a bundled text)")
-    sync.add_argument("--tts", choices=["espeak", "builtin"], default="espeak", help="speech backend (espeak)")
-    sync.add_argument("--strategy", default="best", help="strategy name, or 'all' (default: best)")
+    options.add_tts(sync)
+    options.add_strategy(sync, ", or 'all'")
     sync.add_argument("--list-strategies", action="store_true", help="name the strategies and exit")
-    sync.add_argument("--timing", choices=["tts", "linear"], default="tts",
-                      help="what the planner knows: the backend's timeline (tts) or Chang's linear model")
-    sync.add_argument("--delay", type=float, default=0.05, help="base event delay, s (0.05)")
-    sync.add_argument("--jitter", type=float, default=0.03, help="mean extra event delay, s (0.03)")
-    sync.add_argument("--burst", type=float, default=0.03, help="probability an event stalls the channel (0.03)")
-    sync.add_argument("--burst-hold", type=float, default=0.25, help="longest stall, s (0.25)")
-    sync.add_argument("--loss", type=float, default=0.0, help="probability an event is lost (0)")
-    sync.add_argument("--latency", type=float, default=0.08, help="nominal playback latency, s (0.08)")
-    sync.add_argument("--start-jitter", type=float, default=0.04, help="unknown extra latency, s (0.04)")
-    sync.add_argument("--drift", type=float, default=500.0, help="audio clock drift, ppm (500)")
-    sync.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    options.add_timing(sync)
+    options.add_delivery(sync)
+    options.add_seed(sync, "the playback start and the event channel")
     sync.add_argument("--model", metavar="FILE", help="linear model from 'agentsim speech calibrate'")
     sync.add_argument("--json", action="store_true", help="print JSON")
     sync.add_argument("--plot", metavar="FILE.png", help="draw the error distribution of each strategy")
+    sync.set_defaults(handler=speech_sync)
 
     speech = commands.add_parser("speech", help="speech tools")
     tools = speech.add_subparsers(dest="tool", required=True)
-    calibrate = tools.add_parser("calibrate", help="fit Chang's linear characters-to-time model",
-                                 description="Speak calibration texts and fit seconds = multiplier * characters "
-                                             "+ offset by least squares over every word's onset.")
-    calibrate.add_argument("--tts", choices=["espeak", "builtin"], default="espeak")
-    calibrate.add_argument("--texts", metavar="FILE", help="calibration texts, one per line (default: bundled)")
-    calibrate.add_argument("--out", metavar="FILE", default=str(DEFAULT_MODEL), help="where to save the model")
-    export = tools.add_parser("export", help="speak a text; write its audio (WAV) and timeline (Praat TextGrid)")
-    export.add_argument("text", metavar="FILE")
-    export.add_argument("--tts", choices=["espeak", "builtin"], default="espeak")
-    export.add_argument("--wav", metavar="FILE.wav")
-    export.add_argument("--textgrid", metavar="FILE.TextGrid")
-
-
-def backend(name: str):
-    if name == "espeak":
-        from agentsim.speech.espeak import EspeakBackend
-        from agentsim.core.errors import SpeechBackendUnavailable
-
-        try:
-            return EspeakBackend()
-        except SpeechBackendUnavailable as exc:
-            raise AgentsimError(str(exc)) from None
-    from agentsim.speech.builtin import BuiltinBackend
-
-    return BuiltinBackend()
+    calibrate_parser = tools.add_parser("calibrate", help="fit Chang's linear characters-to-time model",
+                                        description="Speak calibration texts and fit seconds = multiplier * "
+                                                    "characters + offset by least squares over every word's onset.")
+    options.add_tts(calibrate_parser)
+    calibrate_parser.add_argument("--texts", metavar="FILE", help="calibration texts, one per line (default: bundled)")
+    options.add_out(calibrate_parser, str(DEFAULT_MODEL), "where to save the model", metavar="FILE")
+    calibrate_parser.set_defaults(handler=calibrate)
+    export_parser = tools.add_parser("export", help="speak a text; write its audio (WAV) and timeline (Praat TextGrid)")
+    export_parser.add_argument("text", metavar="FILE")
+    options.add_tts(export_parser)
+    export_parser.add_argument("--wav", metavar="FILE.wav")
+    export_parser.add_argument("--textgrid", metavar="FILE.TextGrid")
+    export_parser.set_defaults(handler=export)
 
 
 def read_text(path: str | None) -> str:
@@ -83,31 +65,22 @@ def read_text(path: str | None) -> str:
 
 
 def speech_sync(args: argparse.Namespace) -> int:
-    from agentsim.speech.animator_time import STRATEGIES
-    from agentsim.speech.delivery import DeliveryModel
     from agentsim.scenarios.speech_sync import speech_sync as run
+    from agentsim.speech.animator_time import STRATEGIES, check_strategy
     from agentsim.speech.linear_model import LinearModel
 
     if args.list_strategies:
         for name in STRATEGIES:
             print(name)
         return 0
-    names = list(STRATEGIES) if args.strategy == "all" else [args.strategy]
-    unknown = [n for n in names if n not in STRATEGIES]
-    if unknown:
-        raise AgentsimError(f"unknown strategy {unknown[0]!r}: choose from {', '.join(STRATEGIES)} or all")
-    try:
-        delivery = DeliveryModel(latency=args.latency, start_jitter=args.start_jitter, drift_ppm=args.drift,
-                                 delay=args.delay, jitter=args.jitter, burst_probability=args.burst,
-                                 burst_hold=args.burst_hold, loss=args.loss)
-    except ValueError as exc:
-        raise AgentsimError(str(exc)) from None
+    names = list(STRATEGIES) if args.strategy == "all" else [check_strategy(args.strategy)]
+    delivery = options.delivery(args)
     model = None
     if args.model:
         if not Path(args.model).is_file():
             raise AgentsimError(f"no linear model {args.model!r}: make one with 'agentsim speech calibrate'")
         model = LinearModel.load(args.model)
-    text, tts = read_text(args.text), backend(args.tts)
+    text, tts = read_text(args.text), options.backend(args.tts)
     results = []
     for name in names:
         result = run(text, tts, name, delivery, timing=args.timing, seed=args.seed, linear_model=model)
@@ -153,7 +126,7 @@ def calibrate(args: argparse.Namespace) -> int:
     texts = None
     if args.texts:
         texts = [line.strip() for line in read_text(args.texts).splitlines() if line.strip()]
-    model = fit(backend(args.tts), texts)
+    model = fit(options.backend(args.tts), texts)
     model.save(args.out)
     print(json.dumps({"multiplier": model.multiplier, "offset": model.offset, "points": model.n_points,
                       "rms_s": model.rms, "saved": args.out}))
@@ -167,7 +140,7 @@ def export(args: argparse.Namespace) -> int:
     if not (args.wav or args.textgrid):
         raise AgentsimError("say what to write: --wav FILE.wav and/or --textgrid FILE.TextGrid")
     text = " ".join(read_text(args.text).split())
-    utterance = backend(args.tts).synthesize(SpeechText(text))
+    utterance = options.backend(args.tts).synthesize(SpeechText(text))
     if args.wav:
         write_wav(args.wav, utterance)
     if args.textgrid:

@@ -17,7 +17,7 @@ import simpy
 
 from agentsim.core.block import Behaviour
 from agentsim.core.errors import ScheduleError
-from agentsim.core.pegboard import PegBoard, TimePeg
+from agentsim.core.pegboard import PegBoard
 from agentsim.core.timed import EPSILON, TimedBehaviour
 
 

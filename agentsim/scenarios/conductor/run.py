@@ -1,18 +1,15 @@
-"""The ``agentsim run conductor`` command.
+"""The ``agentsim run conductor`` command's run: simulate (or listen live), measure, write the files.
 
-``agentsim run conductor [--config FILE] [--strategy S | --compare] [--seed N] [--out DIR] [--live]``
-runs the conductor scenario (the default configuration: a 4/4 piece with a 120 BPM target and an
-ensemble that starts and drags 10 % below it) and writes ``metrics.json``, ``tempo.png``,
-``timeline.png``, ``ensemble.wav``, ``conductor.bvh`` and ``feedback.jsonl`` to ``--out``. Without
-``--strategy`` the configuration's strategy runs (``best`` unless it says otherwise). ``--compare`` runs
-every strategy on the same seed, writes each into ``--out/<strategy>/`` (all files but the timeline) and
-prints a table. ``--live`` conducts what an input device plays, in real time, instead of the simulated
-ensemble.
-
-:func:`add_parser` adds the command to the ``run`` command's subparsers; :func:`main` runs it.
+:func:`main` takes the parsed options of ``agentsim run conductor [--config FILE] [--strategy S |
+--compare] [--seed N] [--out DIR] [--live]`` (declared in :mod:`agentsim.cli.scenarios`): it runs the
+conductor scenario (the default configuration: a 4/4 piece with a 120 BPM target and an ensemble that
+starts and drags 10 % below it) and writes ``metrics.json``, ``tempo.png``, ``timeline.png``,
+``ensemble.wav``, ``conductor.bvh`` and ``feedback.jsonl`` to ``--out``. Without ``--strategy`` the
+configuration's strategy runs (``best`` unless it says otherwise). ``--compare`` runs every strategy on
+the same seed, writes each into ``--out/<strategy>/`` (all files but the timeline) and prints a table.
+``--live`` conducts what an input device plays, in real time, instead of the simulated ensemble.
 Shipped configurations: ``configs/default.toml``, ``configs/waltz_3_4.toml``, ``configs/march_2_4.toml``
-and ``configs/falls_apart.toml`` (the conductor stops the piece). The module
-also runs on its own: ``python -m agentsim.scenarios.conductor.run --strategy best --seed 1``.
+and ``configs/falls_apart.toml`` (the conductor stops the piece).
 """
 
 from __future__ import annotations
@@ -24,41 +21,9 @@ import time
 from pathlib import Path
 
 from agentsim.core.errors import AgentsimError
+from agentsim.scenarios.conductor.config import STRATEGIES
 
-STRATEGY_NAMES = ("follow", "target", "lead", "best")
 DEFAULT_OUT = "out/conductor"
-
-
-def configure(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Add the conductor command's arguments to ``parser``."""
-    parser.add_argument("--config", metavar="FILE",
-                        help="scenario configuration (TOML); default: scenarios/conductor/configs/default.toml")
-    which = parser.add_mutually_exclusive_group()
-    which.add_argument("--strategy", choices=STRATEGY_NAMES,
-                       help="where the strokes go: follow, target, lead or best (default: the configuration's, "
-                            "best)")
-    which.add_argument("--compare", action="store_true", help="run every strategy on the same seed and print a table")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the musicians' noise (default 0)")
-    parser.add_argument("--out", metavar="DIR", default=DEFAULT_OUT, help=f"output folder (default {DEFAULT_OUT})")
-    parser.add_argument("--live", action="store_true",
-                        help="conduct a live input device in real time instead of the simulated ensemble")
-    parser.add_argument("--device", metavar="DEVICE", help="--live: the input device (name or number; default: "
-                                                          "the system's default input)")
-    parser.add_argument("--seconds", type=float, metavar="S",
-                        help="--live: how long to listen (default: the piece's length at its tempo)")
-    return parser
-
-
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add ``conductor`` to the subparsers of the ``run`` command; returns its parser."""
-    parser = subparsers.add_parser(
-        "conductor", help="the virtual orchestra conductor leads a simulated ensemble back to tempo",
-        description="A virtual conductor beats time with BML conducting gestures pegged to anticipator beats, "
-                    "hears a simulated ensemble (FluidSynth audio through a causal beat tracker) and re-times "
-                    "its beats to lead the ensemble to the score's tempo. Writes metrics.json, tempo.png, "
-                    "timeline.png, ensemble.wav, conductor.bvh and feedback.jsonl to --out.")
-    parser.set_defaults(handler=main)
-    return configure(parser)
 
 
 def _summary_row(m: dict) -> str:
@@ -102,7 +67,7 @@ def main(args: argparse.Namespace) -> int:
         return 0
     if args.device is not None:
         raise AgentsimError("--device only applies to --live")
-    strategies = STRATEGY_NAMES if args.compare else (args.strategy or config.conductor.strategy,)
+    strategies = STRATEGIES if args.compare else (args.strategy or config.conductor.strategy,)
     rows = []
     for name in strategies:
         started = time.perf_counter()
@@ -138,18 +103,3 @@ def _report(metrics: dict, folder: Path, seconds: float) -> None:
     if extra:
         print("; ".join(extra))
     print(f"written to {folder} in {seconds:.1f} s")
-
-
-def _standalone(argv=None) -> int:
-    parser = configure(argparse.ArgumentParser(
-        prog="python -m agentsim.scenarios.conductor.run", description="The virtual orchestra conductor scenario."))
-    args = parser.parse_args(argv)
-    try:
-        return main(args)
-    except AgentsimError as exc:
-        print(f"agentsim: {exc}", file=sys.stderr)
-        return 1
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(_standalone())

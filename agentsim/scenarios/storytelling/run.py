@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import time
 from collections import OrderedDict
 from dataclasses import replace
@@ -35,14 +34,16 @@ from pathlib import Path
 import numpy as np
 
 from agentsim.core.errors import AgentsimError
-from agentsim.scenarios.storytelling.markup import ANCHORS, Story, StoryError, read_story
-from agentsim.scenarios.storytelling.telling import DEFAULT_DELIVERY, Telling, make_voice, syllable_times, tell
+from agentsim.scenarios.storytelling.markup import Story, StoryError, read_story
+from agentsim.scenarios.storytelling.telling import Telling, make_voice, syllable_times, tell
 
-__all__ = ["STORIES_DIR", "add_parser", "main", "resolve_story", "load_story", "shipped_stories",
-           "delivery_from_args", "write_outputs", "comparison_table"]
+__all__ = ["STORIES_DIR", "DEFAULT_OUT", "main", "resolve_story", "load_story", "shipped_stories", "write_outputs",
+           "comparison_table"]
 
 #: Where the shipped stories live.
 STORIES_DIR = Path(__file__).resolve().parent / "stories"
+#: Where ``agentsim run storytelling`` writes unless told otherwise.
+DEFAULT_OUT = "storytelling_out"
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -90,87 +91,22 @@ def load_story(path: Path, scene: dict | None = None) -> Story:
     return story
 
 
-# ----------------------------------------------------------------------------------------------------
-# The command.
-
-
-def _add_arguments(parser: argparse.ArgumentParser) -> None:
-    d = DEFAULT_DELIVERY
-    parser.add_argument("--story", metavar="NAME|FILE",
-                        help="a shipped story's name, a .story file or a TextGrid (default: the longest shipped story)")
-    parser.add_argument("--scene", metavar="NAME|FILE",
-                        help="take extra pointing and gaze targets from this story's @scene lines (for a TextGrid)")
-    which = parser.add_mutually_exclusive_group()
-    which.add_argument("--strategy", default="best", metavar="S", help="animator-time strategy (default: best)")
-    which.add_argument("--compare", action="store_true",
-                       help="tell the story with every strategy on the same seed, print a table and write "
-                            "compare.json (the other outputs are those of best)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the playback start and event channel (0)")
-    parser.add_argument("--out", metavar="DIR", default="storytelling_out", help="output directory (storytelling_out)")
-    parser.add_argument("--anchor", choices=ANCHORS, default="stress",
-                        help="how strokes reach the stressed syllable: a phoneme-level mark (stress), the word's mark "
-                             "plus the planned offset (offset), or the word onset alone (word); default stress")
-    parser.add_argument("--timing", choices=["tts", "linear"], default="tts",
-                        help="what the planner knows: the synthesiser's timeline (tts) or Chang's linear model")
-    parser.add_argument("--tts", choices=["espeak", "builtin"], default="espeak", help="speech backend (espeak)")
-    parser.add_argument("--cache", metavar="DIR", help="cache of synthesised speech (default ~/.cache/agentsim/tts)")
-    parser.add_argument("--no-cache", action="store_true", help="synthesise again; write no cache")
-    parser.add_argument("--fps", type=float, default=60.0, help="frame rate of story.bvh (60)")
-    parser.add_argument("--window", type=float, default=30.0, help="seconds drawn in timeline.png (30)")
-    condition = parser.add_argument_group("event delivery (default: the condition of the speech-sync table)")
-    condition.add_argument("--latency", type=float, default=d.latency, help=f"playback latency, s ({d.latency:g})")
-    condition.add_argument("--start-jitter", type=float, default=d.start_jitter,
-                           help=f"unknown extra latency, s ({d.start_jitter:g})")
-    condition.add_argument("--drift", type=float, default=d.drift_ppm, help=f"audio clock drift, ppm ({d.drift_ppm:g})")
-    condition.add_argument("--delay", type=float, default=d.delay, help=f"base event delay, s ({d.delay:g})")
-    condition.add_argument("--jitter", type=float, default=d.jitter, help=f"mean extra event delay, s ({d.jitter:g})")
-    condition.add_argument("--burst", type=float, default=d.burst_probability,
-                           help=f"probability an event stalls the channel ({d.burst_probability:g})")
-    condition.add_argument("--burst-hold", type=float, default=d.burst_hold,
-                           help=f"longest stall, s ({d.burst_hold:g})")
-    condition.add_argument("--loss", type=float, default=d.loss, help=f"probability an event is lost ({d.loss:g})")
-
-
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add ``storytelling`` to the subcommands of ``agentsim run``; its handler is :func:`main`."""
-    parser = subparsers.add_parser(
-        "storytelling", help="tell a story with gestures on the stressed syllables and measure the sync",
-        description="Tell an annotated story (beats, pointing, iconic gestures, nods, gaze shifts, eyebrow "
-                    "raises on the stressed syllables of their words) through the realizer while the speech's "
-                    "progress events arrive late, scattered and in bursts; write metrics.json, narration.wav, "
-                    "story.TextGrid, story.bvh, timeline.png and feedback.jsonl to --out.")
-    _add_arguments(parser)
-    parser.set_defaults(handler=main)
-    return parser
-
-
-def delivery_from_args(args: argparse.Namespace):
-    """The event-delivery condition the options ask for (:class:`AgentsimError` if it makes no sense)."""
-    try:
-        return DEFAULT_DELIVERY.with_(latency=args.latency, start_jitter=args.start_jitter, drift_ppm=args.drift,
-                                      delay=args.delay, jitter=args.jitter, burst_probability=args.burst,
-                                      burst_hold=args.burst_hold, loss=args.loss)
-    except ValueError as exc:
-        raise AgentsimError(f"bad event-delivery condition: {exc}") from None
-
-
 def main(args: argparse.Namespace) -> int:
-    """Run ``agentsim run storytelling`` with parsed ``args``; returns the exit status.
+    """Run ``agentsim run storytelling`` with the options :mod:`agentsim.cli.scenarios` declares (and
+    ``args.delivery``, the event-delivery condition they make); returns the exit status.
 
-    Raises :class:`AgentsimError` (a missing story, a bad tag, an unknown strategy, a bad condition)
-    before anything is synthesised or realised.
+    Raises :class:`AgentsimError` (a missing story, a bad tag, an unknown strategy) before anything is
+    synthesised or realised.
     """
-    from agentsim.speech.animator_time import STRATEGIES
+    from agentsim.speech.animator_time import STRATEGIES, check_strategy
 
     started = time.perf_counter()
-    strategy = getattr(args, "strategy", "best") or "best"
-    if strategy not in STRATEGIES:
-        raise AgentsimError(f"unknown strategy {strategy!r}; known: {', '.join(sorted(STRATEGIES))}")
+    strategy = check_strategy(getattr(args, "strategy", "best") or "best")
     if not args.fps > 0:
         raise AgentsimError("--fps must be positive")
     if not args.window > 0:
         raise AgentsimError("--window must be positive")
-    delivery = delivery_from_args(args)
+    delivery = args.delivery
     scene = read_story(resolve_story(args.scene)).scene if getattr(args, "scene", None) else None
     story = load_story(resolve_story(args.story), scene)
     out = Path(args.out)
@@ -358,22 +294,3 @@ def plot_errors(telling: Telling, png: Path) -> Path:
     fig.savefig(png, dpi=110)
     plt.close(fig)
     return png
-
-
-# ----------------------------------------------------------------------------------------------------
-
-
-def _standalone(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m agentsim.scenarios.storytelling.run",
-                                     description="Tell a story with gestures on the stressed syllables.")
-    _add_arguments(parser)
-    args = parser.parse_args(argv)
-    try:
-        return main(args)
-    except AgentsimError as exc:
-        print(f"agentsim: {exc}", file=sys.stderr)
-        return 1
-
-
-if __name__ == "__main__":
-    sys.exit(_standalone())

@@ -45,13 +45,9 @@ def make_voice(tts: str = "espeak", cache_dir=None, cache: bool = True, voice: s
     """The storyteller's backend: ``tts`` ("espeak" or "builtin") behind the disk cache, with
     phoneme-level marks (:class:`~agentsim.scenarios.storytelling.voice.PhonemeMarks`)."""
     if tts == "espeak":
-        from agentsim.core.errors import SpeechBackendUnavailable
         from agentsim.speech.espeak import EspeakBackend
 
-        try:
-            backend = EspeakBackend(voice=voice, rate=rate)
-        except SpeechBackendUnavailable as exc:
-            raise AgentsimError(str(exc)) from None
+        backend = EspeakBackend(voice=voice, rate=rate)
     elif tts == "builtin":
         from agentsim.speech.builtin import BuiltinBackend
 

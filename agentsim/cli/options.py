@@ -1,0 +1,120 @@
+"""The options several commands share, declared once: speech backend, event delivery, animator-time
+strategy and timing, seed, output, frame rate and anticipators, with what turns them into objects."""
+
+from __future__ import annotations
+
+import argparse
+
+from agentsim.core.errors import AgentsimError, UsageError
+from agentsim.speech.delivery import CONDITIONS
+
+#: Speech backends by command-line name.
+TTS_NAMES = ("espeak", "builtin")
+
+
+def add_tts(parser: argparse.ArgumentParser, default: str = "espeak") -> None:
+    parser.add_argument("--tts", choices=TTS_NAMES, default=default,
+                        help=f"speech backend: espeak-ng through its C library, or the deterministic built-in "
+                             f"one ({default})")
+
+
+def backend(name: str):
+    """The speech backend named on the command line (an :class:`~agentsim.core.errors.Unavailable` if it
+    cannot run here)."""
+    if name == "espeak":
+        from agentsim.speech.espeak import EspeakBackend
+
+        return EspeakBackend()
+    from agentsim.speech.builtin import BuiltinBackend
+
+    return BuiltinBackend()
+
+
+def add_strategy(parser: argparse.ArgumentParser, extra: str = "") -> argparse.Action:
+    return parser.add_argument("--strategy", default="best", metavar="S",
+                               help=f"animator-time strategy{extra} (best)")
+
+
+def add_timing(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--timing", choices=["tts", "linear"], default="tts",
+                        help="what the planner knows: the backend's timeline (tts) or Chang's linear model")
+
+
+def add_delivery(parser: argparse.ArgumentParser) -> None:
+    """The event-delivery options; their defaults are condition A of the speech-sync tables."""
+    d = CONDITIONS["A"]
+    group = parser.add_argument_group("event delivery (default: condition A of the speech-sync tables)")
+    group.add_argument("--delay", type=float, default=d.delay, help=f"base event delay, s ({d.delay:g})")
+    group.add_argument("--jitter", type=float, default=d.jitter, help=f"mean extra event delay, s ({d.jitter:g})")
+    group.add_argument("--burst", type=float, default=d.burst_probability,
+                       help=f"probability an event stalls the channel ({d.burst_probability:g})")
+    group.add_argument("--burst-hold", type=float, default=d.burst_hold, help=f"longest stall, s ({d.burst_hold:g})")
+    group.add_argument("--loss", type=float, default=d.loss, help=f"probability an event is lost ({d.loss:g})")
+    group.add_argument("--latency", type=float, default=d.latency, help=f"nominal playback latency, s ({d.latency:g})")
+    group.add_argument("--start-jitter", type=float, default=d.start_jitter,
+                       help=f"unknown extra latency, s ({d.start_jitter:g})")
+    group.add_argument("--drift", type=float, default=d.drift_ppm, help=f"audio clock drift, ppm ({d.drift_ppm:g})")
+
+
+def delivery(args: argparse.Namespace):
+    """The :class:`~agentsim.speech.delivery.DeliveryModel` the delivery options ask for."""
+    try:
+        return CONDITIONS["A"].with_(latency=args.latency, start_jitter=args.start_jitter, drift_ppm=args.drift,
+                                     delay=args.delay, jitter=args.jitter, burst_probability=args.burst,
+                                     burst_hold=args.burst_hold, loss=args.loss)
+    except ValueError as exc:
+        raise AgentsimError(f"bad event-delivery condition: {exc}") from None
+
+
+def add_seed(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument("--seed", type=int, default=0, help=f"seed of {what} (0)")
+
+
+def add_out(parser: argparse.ArgumentParser, default: str | None, what: str = "output folder",
+            metavar: str = "DIR") -> None:
+    parser.add_argument("--out", metavar=metavar, default=default, required=default is None,
+                        help=what + (f" ({default})" if default else ""))
+
+
+def add_fps(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument("--fps", type=float, default=60.0, help=f"frame rate of {what} (60)")
+
+
+def check_fps(args: argparse.Namespace) -> None:
+    if not args.fps > 0:
+        raise UsageError("--fps must be positive")
+
+
+def _metronome(text: str) -> tuple[float, float]:
+    parts = text.split(",")
+    try:
+        bpm = float(parts[0])
+        start = float(parts[1]) if len(parts) > 1 else 0.0
+    except (ValueError, IndexError):
+        raise argparse.ArgumentTypeError(f"expected BPM[,START], got {text!r}") from None
+    if not bpm > 0:
+        raise argparse.ArgumentTypeError("the metronome tempo must be positive")
+    return bpm, start
+
+
+def add_anticipators(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--metronome", type=_metronome, metavar="BPM[,START]",
+                        help="provide a metronome anticipator (anticipators:metronome:beatN)")
+    parser.add_argument("--anticipator", action="append", default=[], metavar="NAME[:ID][,KEY=VALUE...]",
+                        help="provide an installed anticipator, e.g. tap:taps,taps=taps.txt or "
+                             "metronome:m2,bpm=90 (repeatable; see 'agentsim anticipators list')")
+
+
+def anticipators(args: argparse.Namespace) -> list:
+    """The anticipators that ``--metronome`` and ``--anticipator`` ask for."""
+    from agentsim.anticipators import registry
+    from agentsim.anticipators.metronome import Metronome
+
+    found = []
+    if args.metronome:
+        bpm, start = args.metronome
+        found.append(Metronome("metronome", bpm=bpm, start=start))
+    for spec in args.anticipator:
+        name, anticipator_id, params = registry.parse_spec(spec)
+        found.append(registry.create(name, anticipator_id, **params))
+    return found

@@ -1,0 +1,114 @@
+"""``agentsim realize``, ``agentsim plot timeline`` and ``agentsim anticipators list``: BML files in,
+feedback, motion and pictures out."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from agentsim.cli import options
+from agentsim.core.errors import UsageError
+
+
+def _times(text: str) -> list[float]:
+    try:
+        values = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated seconds, got {text!r}") from None
+    if any(v < 0 or v != v for v in values):
+        raise argparse.ArgumentTypeError("times must be non-negative seconds")
+    return values
+
+
+def add_parsers(commands) -> None:
+    realize = commands.add_parser(
+        "realize", help="realise BML files and print their feedback as JSON lines",
+        description="Send each FILE as a BML block (at the --at times, default all at 0, in order), run until "
+                    "every block has ended (or --until), and print the feedback to stdout, one JSON object "
+                    "per line. Diagnostics go to stderr.")
+    realize.add_argument("files", nargs="+", metavar="FILE", help="BML 1.0 files ('-' reads standard input)")
+    realize.add_argument("--at", type=_times, metavar="T1,T2,...", help="submission time of each file (seconds)")
+    realize.add_argument("--until", type=float, metavar="SECONDS", help="stop the run at this simulated time")
+    realize.add_argument("--realtime", action="store_true", help="run in real time instead of simulated time")
+    options.add_anticipators(realize)
+    realize.add_argument("--bvh", metavar="OUT.bvh", help="write the motion as BVH (Blender imports it)")
+    realize.add_argument("--poses", metavar="OUT.npz", help="write joint angles per frame (numpy .npz)")
+    options.add_fps(realize, "--bvh/--poses")
+    options.add_seed(realize, "the background motion (blinks, sway)")
+    realize.set_defaults(handler=realize_files)
+
+    plot = commands.add_parser("plot", help="pictures of a realisation")
+    plot.add_argument("what", choices=["timeline"])
+    plot.add_argument("file", metavar="FILE", help="a BML file")
+    options.add_out(plot, None, "the picture to write", metavar="OUT.png")
+    options.add_anticipators(plot)
+    plot.set_defaults(handler=plot_timeline)
+
+    anticipators = commands.add_parser("anticipators", help="installed anticipators")
+    anticipators.add_argument("action", choices=["list"])
+    anticipators.set_defaults(handler=list_anticipators)
+
+
+def read_document(path: str) -> str | bytes:
+    """A BML document from a file, or from standard input for ``-``."""
+    if path == "-":
+        return sys.stdin.buffer.read()
+    p = Path(path)
+    if not p.is_file():
+        raise UsageError(f"no such file: {path}")
+    return p.read_bytes()
+
+
+def realize_files(args: argparse.Namespace) -> int:
+    from agentsim.core.feedback import to_json
+    from agentsim.realizer import Realizer
+
+    documents = [(path, read_document(path)) for path in args.files]
+    at = args.at if args.at is not None else [0.0] * len(documents)
+    if len(at) != len(documents):
+        raise UsageError(f"--at gives {len(at)} times for {len(documents)} files")
+    if args.until is not None and not args.until >= 0:
+        raise UsageError("--until must be a non-negative number of seconds")
+    options.check_fps(args)
+    realizer = Realizer(realtime=args.realtime, anticipators=options.anticipators(args))
+    out = sys.stdout
+
+    def emit(feedback):
+        out.write(to_json(feedback) + "\n")
+        out.flush()
+
+    realizer.feedback.listen(emit)
+    order = sorted(range(len(documents)), key=lambda i: (at[i], i))
+    for i in order:
+        realizer.submit_at(at[i], documents[i][1], source=documents[i][0])
+    realizer.run(until=args.until)
+    if args.bvh or args.poses:
+        from agentsim.animation import evaluate_poses, write_bvh, write_npz
+
+        stream = evaluate_poses(realizer.recording(), fps=args.fps, seed=args.seed)
+        if args.bvh:
+            write_bvh(args.bvh, stream)
+        if args.poses:
+            write_npz(args.poses, stream)
+    return 0
+
+
+def plot_timeline(args: argparse.Namespace) -> int:
+    from agentsim.animation import evaluate_poses, plot_timeline as draw
+    from agentsim.realizer import Realizer
+
+    realizer = Realizer(anticipators=options.anticipators(args))
+    realizer.submit(read_document(args.file), source=args.file)
+    realizer.run()
+    recording = realizer.recording()
+    draw(recording, args.out, stream=evaluate_poses(recording), title=Path(args.file).name)
+    return 0
+
+
+def list_anticipators(args: argparse.Namespace) -> int:
+    from agentsim.anticipators import registry
+
+    for name, target in sorted(registry.available().items()):
+        print(f"{name}\t{target}")
+    return 0

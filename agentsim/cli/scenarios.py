@@ -1,0 +1,114 @@
+"""``agentsim run conductor``, ``agentsim run storytelling`` and ``agentsim demo``: the scenarios' options,
+handed to the scenarios' own runs."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from agentsim.cli import options
+
+#: Where ``agentsim demo`` writes, one folder per scenario inside.
+DEMO_OUT = "out/demo"
+
+
+def add_parsers(commands) -> None:
+    run = commands.add_parser("run", help="run a scenario (conductor, storytelling)")
+    scenarios = run.add_subparsers(dest="scenario", required=True)
+    add_conductor(scenarios)
+    add_storytelling(scenarios)
+    demo = commands.add_parser("demo", help="the conductor and the storyteller, end to end in simulated time")
+    options.add_out(demo, DEMO_OUT, "where to write the results")
+    demo.set_defaults(handler=lambda args: demo_handler(commands, args))
+
+
+def add_conductor(scenarios) -> argparse.ArgumentParser:
+    from agentsim.scenarios.conductor.config import STRATEGIES
+    from agentsim.scenarios.conductor.run import DEFAULT_OUT
+
+    parser = scenarios.add_parser(
+        "conductor", help="the virtual orchestra conductor leads a simulated ensemble back to tempo",
+        description="A virtual conductor beats time with BML conducting gestures pegged to anticipator beats, "
+                    "hears a simulated ensemble (FluidSynth audio through a causal beat tracker) and re-times "
+                    "its beats to lead the ensemble to the score's tempo. Writes metrics.json, tempo.png, "
+                    "timeline.png, ensemble.wav, conductor.bvh and feedback.jsonl to --out.")
+    parser.add_argument("--config", metavar="FILE",
+                        help="scenario configuration (TOML); default: agentsim/scenarios/conductor/configs/"
+                             "default.toml")
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("--strategy", choices=STRATEGIES,
+                       help="where the strokes go: follow, target, lead or best (default: the configuration's, "
+                            "best)")
+    which.add_argument("--compare", action="store_true", help="run every strategy on the same seed and print a table")
+    options.add_seed(parser, "the musicians' noise")
+    options.add_out(parser, DEFAULT_OUT)
+    parser.add_argument("--live", action="store_true",
+                        help="conduct a live input device in real time instead of the simulated ensemble")
+    parser.add_argument("--device", metavar="DEVICE", help="--live: the input device (name or number; default: "
+                                                          "the system's default input)")
+    parser.add_argument("--seconds", type=float, metavar="S",
+                        help="--live: how long to listen (default: the piece's length at its tempo)")
+    parser.set_defaults(handler=run_conductor)
+    return parser
+
+
+def run_conductor(args: argparse.Namespace) -> int:
+    from agentsim.scenarios.conductor.run import main
+
+    return main(args)
+
+
+def add_storytelling(scenarios) -> argparse.ArgumentParser:
+    from agentsim.scenarios.storytelling.markup import ANCHORS
+    from agentsim.scenarios.storytelling.run import DEFAULT_OUT
+
+    parser = scenarios.add_parser(
+        "storytelling", help="tell a story with gestures on the stressed syllables and measure the sync",
+        description="Tell an annotated story (beats, pointing, iconic gestures, nods, gaze shifts, eyebrow "
+                    "raises on the stressed syllables of their words) through the realizer while the speech's "
+                    "progress events arrive late, scattered and in bursts; write metrics.json, narration.wav, "
+                    "story.TextGrid, story.bvh, timeline.png and feedback.jsonl to --out.")
+    parser.add_argument("--story", metavar="NAME|FILE",
+                        help="a shipped story's name, a .story file or a TextGrid (default: the longest shipped story)")
+    parser.add_argument("--scene", metavar="NAME|FILE",
+                        help="take extra pointing and gaze targets from this story's @scene lines (for a TextGrid)")
+    which = parser.add_mutually_exclusive_group()
+    options.add_strategy(which)
+    which.add_argument("--compare", action="store_true",
+                       help="tell the story with every strategy on the same seed, print a table and write "
+                            "compare.json (the other outputs are those of best)")
+    options.add_seed(parser, "the playback start and event channel")
+    options.add_out(parser, DEFAULT_OUT)
+    parser.add_argument("--anchor", choices=ANCHORS, default="stress",
+                        help="how strokes reach the stressed syllable: a phoneme-level mark (stress), the word's mark "
+                             "plus the planned offset (offset), or the word onset alone (word); default stress")
+    options.add_timing(parser)
+    options.add_tts(parser)
+    parser.add_argument("--cache", metavar="DIR", help="cache of synthesised speech (default ~/.cache/agentsim/tts)")
+    parser.add_argument("--no-cache", action="store_true", help="synthesise again; write no cache")
+    options.add_fps(parser, "story.bvh")
+    parser.add_argument("--window", type=float, default=30.0, help="seconds drawn in timeline.png (30)")
+    options.add_delivery(parser)
+    parser.set_defaults(handler=run_storytelling)
+    return parser
+
+
+def run_storytelling(args: argparse.Namespace) -> int:
+    from agentsim.scenarios.storytelling.run import main
+
+    options.check_fps(args)
+    args.delivery = options.delivery(args)
+    return main(args)
+
+
+def demo_handler(commands, args: argparse.Namespace) -> int:
+    """Run the conductor, then the storyteller, each with its defaults, into ``--out/<scenario>``."""
+    for scenario in ("conductor", "storytelling"):
+        out = Path(args.out) / scenario
+        parser = commands.choices["run"]
+        scenario_args = parser.parse_args([scenario, "--out", str(out)])
+        print(f"== agentsim run {scenario} --out {out}", flush=True)
+        status = scenario_args.handler(scenario_args)
+        if status:
+            return status
+    return 0
