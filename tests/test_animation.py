@@ -13,7 +13,7 @@ from agentsim.animation.analysis import head_orientation, measure_strokes
 from agentsim.animation.arbitrator import ArbitrationError, Arbitrator
 from agentsim.animation.drivers import Driver
 from agentsim.realizer import Realizer
-from conftest import EXAMPLES
+from helpers import EXAMPLES
 
 BML_NS = "http://www.bml-initiative.org/bml/bml-1.0"
 

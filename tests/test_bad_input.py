@@ -10,7 +10,7 @@ from pathlib import Path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from conftest import EXAMPLES, realize
+from helpers import EXAMPLES, realize
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 

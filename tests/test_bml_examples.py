@@ -9,7 +9,7 @@ import re
 
 import pytest
 
-from conftest import realize
+from helpers import realize
 from agentsim.core.block import BEHAVIOUR_TYPES
 
 # Relations over block-relative sync times: "a = b = 3", "a < 10", "a:end+1 >= b:start".

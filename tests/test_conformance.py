@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import realize
+from helpers import realize
 
 BML = Path(__file__).parent / "bml"
 GESTURE = ["start", "ready", "strokeStart", "stroke", "strokeEnd", "relax", "end"]

@@ -11,7 +11,7 @@ from agentsim.core.clock import make_environment
 from agentsim.core.engine import stretch_times
 from agentsim.core.errors import ScheduleError
 from agentsim.realizer import Realizer
-from conftest import Result, realize
+from helpers import Result, realize
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 

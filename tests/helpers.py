@@ -1,0 +1,40 @@
+"""Helpers the tests share: realise BML and look at the feedback; where the BML 1.0 examples are."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from agentsim.realizer import Realizer
+
+# The BML 1.0 examples of the OpenBMLParser/AsapRealizer test suite (MIT licence, LICENSE-OpenBMLParser.txt),
+# with their "Required timing" headers
+EXAMPLES = Path(__file__).resolve().parent / "bml-examples"
+
+
+class Result:
+    """Feedback of one run, indexed for assertions."""
+
+    def __init__(self, realizer: Realizer):
+        self.realizer = realizer
+        self.items = list(realizer.feedback.items)
+        self.syncs = [f for f in self.items if f["type"] == "syncPointProgress"]
+        self.local = {f["id"].split(":", 1)[1]: f["time"] for f in self.syncs}
+        self.glob = {f["id"]: f["globalTime"] for f in self.syncs}
+        self.warnings = [f for f in self.items if f["type"] == "warningFeedback"]
+        self.blocks = [f for f in self.items if f["type"] == "blockProgress"]
+
+    def t(self, name: str) -> float:
+        """Block-relative time of ``behaviour:sync``."""
+        return self.local[name]
+
+    def dropped(self) -> set[str]:
+        return {b for w in self.warnings for b in w["modifiedBehaviours"]}
+
+
+def realize(*documents, at=None, until=None, **kwargs) -> Result:
+    realizer = Realizer(**kwargs)
+    times = at or [0.0] * len(documents)
+    for t, doc in zip(times, documents):
+        realizer.submit_at(t, doc)
+    realizer.run(until=until)
+    return Result(realizer)
