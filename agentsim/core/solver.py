@@ -266,6 +266,7 @@ class BlockSolver:
                         heapq.heappush(ready, priority[other])
         self.honour_inequalities(inequalities)
         self.shift_clusters(inequalities)
+        self.check_inequalities(inequalities)
         self.check_validity()
         self.check_resources()
         if self.failed:
@@ -441,6 +442,22 @@ class BlockSolver:
                                               ref if beh is not None else a_ref)
             if not changed:
                 break
+
+    def check_inequalities(self, inequalities) -> None:
+        """Report what ``before``/``after`` constraints are still not met once clusters are in the block (a
+        behaviour moved earlier than the block start and shifted back): the constrained behaviour goes."""
+        for constraint, refs, (a_node, a_offset, a_ref) in inequalities:
+            t_anchor, _ = self.ref_time(a_node, a_offset, a_ref)
+            if t_anchor is None:
+                continue
+            for node, offset, ref in refs:
+                t, beh = self.ref_time(node, offset, ref)
+                if t is None or (beh is not None and beh.id in self.dropped):
+                    continue
+                gap = (t - t_anchor) if constraint.kind == "before" else (t_anchor - t)
+                if gap > TOLERANCE:
+                    self.constraint_issue(constraint, f"{ref.text} cannot be {constraint.kind} {a_ref.text} "
+                                                      "within the block", ref if beh is not None else a_ref)
 
     def shift_clusters(self, inequalities) -> None:
         """Shift every cluster of freely placed behaviours that starts before the block start."""
