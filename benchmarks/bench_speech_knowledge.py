@@ -42,7 +42,8 @@ from bench_speech_sync import bench_texts  # noqa: E402
 from agentsim.speech.delivery import CONDITIONS  # noqa: E402
 from agentsim.speech.duration_model import (PhonemeDurationModel, calibration_corpus, noisy_durations,  # noqa: E402
                                           true_durations)
-from agentsim.speech.harness import default_linear_model, run_sync_eval, synthesize_cached  # noqa: E402
+from agentsim.speech.harness import run_sync_eval, synthesize_cached  # noqa: E402
+from agentsim.speech.linear_model import default_linear_model  # noqa: E402
 from agentsim.speech.metrics import error_summary  # noqa: E402
 
 #: Per-phoneme errors (s) of the noisy truth.

@@ -32,8 +32,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from agentsim.speech.animator_time import STRATEGIES  # noqa: E402
 from agentsim.speech.delivery import CONDITIONS, PLAYBACK  # noqa: E402
-from agentsim.speech.harness import TIMINGS, default_linear_model, run_sync_eval  # noqa: E402
-from agentsim.speech.linear_model import TEXTS_DIR  # noqa: E402
+from agentsim.speech.harness import TIMINGS, run_sync_eval  # noqa: E402
+from agentsim.speech.linear_model import TEXTS_DIR, default_linear_model  # noqa: E402
 from agentsim.speech.metrics import error_summary  # noqa: E402
 
 #: Acceptance targets: (timing, condition, strategy, p95 limit in ms, strict, snaps must be zero).

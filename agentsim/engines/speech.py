@@ -97,7 +97,7 @@ class SpeechPlanner(Planner):
 
     def linear_model(self):
         if self.config.linear_model is None:
-            from agentsim.speech.harness import default_linear_model
+            from agentsim.speech.linear_model import default_linear_model
 
             self.config.linear_model = default_linear_model(self.backend)
         return self.config.linear_model

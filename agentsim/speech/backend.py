@@ -106,3 +106,9 @@ def mark_times_from_words(speech: SpeechText, words: Sequence[Word], duration: f
                 break
         marks.append(Mark(name, time))
     return marks
+
+
+def backend_key(backend: TTSBackend) -> tuple:
+    """Identity of a backend's configuration (its class, name and simple attributes), for caches."""
+    simple = tuple(sorted((k, v) for k, v in vars(backend).items() if isinstance(v, (bool, int, float, str))))
+    return type(backend).__qualname__, getattr(backend, "name", ""), simple

@@ -18,28 +18,22 @@ import numpy as np
 import simpy
 
 from agentsim.speech.animator_time import check_strategy, make_strategy
-from agentsim.speech.backend import SpeechText, TTSBackend, Utterance
+from agentsim.speech.backend import SpeechText, TTSBackend, Utterance, backend_key
 from agentsim.speech.builtin import FUNCTION_WORDS
 from agentsim.speech.delivery import DeliveryModel, deliver, delivery_process, true_events
 from agentsim.speech.duration_model import for_plan
-from agentsim.speech.linear_model import LinearModel, calibrate, plan_from_linear, plan_from_utterance
+from agentsim.speech.linear_model import (LinearModel, default_linear_model, plan_from_linear,
+                                         plan_from_utterance)
 from agentsim.speech.metrics import DEFAULT_FRAME, evaluate, sync_errors
 from agentsim.speech.plan import SpeechPlan
 
-__all__ = ["run_sync_eval", "synthesize_cached", "default_linear_model", "stroke_targets", "is_content_word",
+__all__ = ["run_sync_eval", "synthesize_cached", "stroke_targets", "is_content_word",
            "TIMINGS"]
 
 #: Where the plan comes from: the backend's own timeline, or Chang's linear model.
 TIMINGS = ("tts", "linear")
 
 _UTTERANCES: dict[tuple, Utterance] = {}
-_MODELS: dict[tuple, LinearModel] = {}
-
-
-def _backend_key(backend: TTSBackend) -> tuple:
-    """Identity of a backend's configuration (its class, name and simple attributes)."""
-    simple = tuple(sorted((k, v) for k, v in vars(backend).items() if isinstance(v, (bool, int, float, str))))
-    return type(backend).__qualname__, getattr(backend, "name", ""), simple
 
 
 def synthesize_cached(backend: TTSBackend, text: str) -> Utterance:
@@ -48,18 +42,10 @@ def synthesize_cached(backend: TTSBackend, text: str) -> Utterance:
     espeak-ng keeps state between syntheses, so speaking a text twice can shift its times by up to
     about 20 ms; caching keeps every strategy and condition on the same timeline.
     """
-    key = (_backend_key(backend), text)
+    key = (backend_key(backend), text)
     if key not in _UTTERANCES:
         _UTTERANCES[key] = backend.synthesize(SpeechText(text))
     return _UTTERANCES[key]
-
-
-def default_linear_model(backend: TTSBackend) -> LinearModel:
-    """The linear model calibrated on the bundled calibration texts for ``backend`` (cached)."""
-    key = _backend_key(backend)
-    if key not in _MODELS:
-        _MODELS[key] = calibrate(backend)
-    return _MODELS[key]
 
 
 def is_content_word(word: str) -> bool:

@@ -20,10 +20,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from agentsim.speech.backend import SpeechText, TTSBackend, Utterance
+from agentsim.speech.backend import SpeechText, TTSBackend, Utterance, backend_key
 from agentsim.speech.plan import SpeechPlan, word_breaks
 
-__all__ = ["LinearModel", "fit_linear", "calibrate", "plan_from_linear", "plan_from_utterance",
+__all__ = ["LinearModel", "fit_linear", "calibrate", "default_linear_model", "plan_from_linear", "plan_from_utterance",
            "written_words", "estimate_phonemes", "calibration_texts", "TEXTS_DIR"]
 
 #: Directory of the bundled texts (benchmark texts and ``calibration.txt``).
@@ -184,6 +184,17 @@ def calibrate(backend: TTSBackend, texts: Iterable[str] | None = None) -> Linear
         phonemes += len(utterance.phonemes)
     ratio = phonemes / units if units and phonemes else 1.0
     return fit_linear(chars, onsets, ratio)
+
+
+_MODELS: dict[tuple, LinearModel] = {}
+
+
+def default_linear_model(backend: TTSBackend) -> LinearModel:
+    """The linear model calibrated on the bundled calibration texts for ``backend`` (once per process)."""
+    key = backend_key(backend)
+    if key not in _MODELS:
+        _MODELS[key] = calibrate(backend)
+    return _MODELS[key]
 
 
 def _stress_fraction(word: str) -> float:

@@ -24,7 +24,7 @@ module             what lives there
 ``conductor``      the conductor: conducting BML bar by bar, "play louder", stopping the piece.
 ``metrics``        tempo curves, recovery, asynchrony, beat-prediction scores and the tempo plot.
 ``scenario``       one run (simulated or live) and its output files.
-``run``            the ``agentsim run conductor`` command.
+``run``            the ``agentsim run conductor`` command's run (its options are in :mod:`agentsim.cli.scenarios`).
 =================  ========================================================================================
 
 Times are seconds, tempi beats per minute, levels decibels.

@@ -6,7 +6,7 @@ tied to the cue is re-timed.
 
 import re
 
-from agentsim.core.anticipator import Anticipator
+from agentsim.anticipators import Anticipator
 
 
 class CountIn(Anticipator):
