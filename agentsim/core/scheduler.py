@@ -351,7 +351,7 @@ class Scheduler:
                     dropped[timed.run] = None
         if behaviours is None:
             for run in list(self.runs):
-                self.predict(run)
+                self.predict(run, timed_now=timed_now)
                 self.end_if_done(run, self.env.now)
             for engine in self.engine_list:
                 engine.plan.kick()

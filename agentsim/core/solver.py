@@ -265,8 +265,8 @@ class BlockSolver:
                     if not placed[other]:
                         heapq.heappush(ready, priority[other])
         self.honour_inequalities(inequalities)
-        self.shift_clusters(inequalities)
-        self.check_inequalities(inequalities)
+        if self.shift_clusters(inequalities):
+            self.check_inequalities(inequalities)
         self.check_validity()
         self.check_resources()
         if self.failed:
@@ -459,8 +459,9 @@ class BlockSolver:
                     self.constraint_issue(constraint, f"{ref.text} cannot be {constraint.kind} {a_ref.text} "
                                                       "within the block", ref if beh is not None else a_ref)
 
-    def shift_clusters(self, inequalities) -> None:
-        """Shift every cluster of freely placed behaviours that starts before the block start."""
+    def shift_clusters(self, inequalities) -> bool:
+        """Shift every cluster of freely placed behaviours that starts before the block start; returns
+        whether any was shifted."""
         parent: dict[int, int] = {}
 
         def find(x: int) -> int:
@@ -470,6 +471,7 @@ class BlockSolver:
             return x
 
         fixed_clusters: set[int] = set()
+        shifted = False
         info = []
         for timed in self.timed.values():
             anchors, fixed = self.anchors_of(timed)
@@ -504,6 +506,8 @@ class BlockSolver:
             deficit = -earliest.get(root, 0.0)
             if deficit > EPSILON:
                 anchor.shift(deficit)
+                shifted = True
+        return shifted
 
     def check_validity(self) -> None:
         for beh_id, timed in list(self.timed.items()):
