@@ -64,11 +64,10 @@ class SpeechConfig:
         if self.timing not in ("tts", "linear"):
             raise ValueError(f"timing must be 'tts' or 'linear', not {self.timing!r}")
         if self.strategy is not None:
-            from agentsim.speech.animator_time import STRATEGIES
+            from agentsim.speech.animator_time import check_strategy
             from agentsim.speech.delivery import DeliveryModel
 
-            if self.strategy not in STRATEGIES:
-                raise ValueError(f"unknown strategy {self.strategy!r}; known: {', '.join(sorted(STRATEGIES))}")
+            check_strategy(self.strategy)
             if self.delivery is None:
                 self.delivery = DeliveryModel()
 
