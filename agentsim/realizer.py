@@ -17,6 +17,8 @@ from agentsim.core.recording import Recording
 from agentsim.core.scheduler import FRAME, Scheduler
 from agentsim.core.timed import BlockRun
 from agentsim.engines.animation import AnimationEngine
+from agentsim.engines.audio import AudioEngine
+from agentsim.engines.control import ControlEngine
 from agentsim.engines.speech import SpeechConfig, SpeechEngine
 from agentsim.engines.wait import WaitEngine
 from agentsim.speech.backend import TTSBackend
@@ -56,7 +58,9 @@ class Realizer:
         self.speech = SpeechEngine(context, tts, speech)
         self.animation = AnimationEngine(context)
         self.wait = WaitEngine(context)
-        self.engines = [self.speech, self.animation, self.wait]
+        self.control = ControlEngine(context)
+        self.audio = AudioEngine(context)
+        self.engines = [self.speech, self.animation, self.wait, self.control, self.audio]
         for engine in self.engines:
             self.scheduler.add_engine(engine)
         self._submissions: list[simpy.Event] = []
@@ -82,7 +86,20 @@ class Realizer:
                 self.scheduler.warn(guess_block_id(bml), "PARSING_FAILURE", f"block refused{where}: {exc}", "agent",
                                     line=exc.line, column=exc.column)
                 return None
+        if source:
+            block.source = source
+            for behaviour in block.behaviours:
+                behaviour.source = source
         return self.scheduler.submit(block, source)
+
+    def interrupt(self, block_id: str, include: Iterable[str] = (), exclude: Iterable[str] = ()) -> bool:
+        """Interrupt a block now, gracefully (speech stops, gestures retract), or only the behaviours in
+        ``include``, or all but those in ``exclude``. False, with a warning, if there is no such block."""
+        return self.scheduler.context.blocks.interrupt(block_id, tuple(include), tuple(exclude))
+
+    def activate(self, block_id: str) -> bool:
+        """Start a preplanned block now. False, with a warning, if there is no such pending block."""
+        return self.scheduler.activate(block_id)
 
     def submit_at(self, time: float, bml: str | bytes | Block, source: str = "") -> simpy.Process:
         """Submit a BML block at simulated time ``time`` (seconds)."""
@@ -100,7 +117,8 @@ class Realizer:
     def recording(self) -> Recording:
         """What the run has done so far, as values: behaviours with their actual key times, blocks, drops,
         anticipator pegs, feedback and the speech as heard."""
-        return replace(self.scheduler.recording(), speech=tuple(self.speech.heard()))
+        return replace(self.scheduler.recording(), speech=tuple(self.speech.heard()),
+                       audio=tuple(self.audio.played))
 
     def all_ended(self) -> simpy.Process:
         """An event that happens when every block submitted (or due to be submitted) so far has ended,
@@ -110,14 +128,23 @@ class Realizer:
     def _all_done(self):
         yield simpy.AllOf(self.env, self._submissions)
         while True:
-            pending = [r.ended for r in self.scheduler.all_runs if not r.ended.triggered]
+            pending = [r.ended for r in self.scheduler.all_runs
+                       if not r.ended.triggered and not self.scheduler.dormant(r)]
             if not pending:
                 return
             yield simpy.AllOf(self.env, pending)
 
     def run(self, until: float | None = None) -> None:
-        """Run until every submitted block has ended, or until simulated time ``until``."""
+        """Run until every submitted block has ended (preplanned blocks nothing activated stay pending), or
+        until simulated time ``until``."""
         done = self.all_ended()
         if until is not None:
             done = done | self.env.timeout(max(0.0, until - self.env.now))
-        self.env.run(until=done)
+        try:
+            self.env.run(until=done)
+        except RuntimeError as exc:
+            if "No scheduled events left" not in str(exc):
+                raise
+            for run in self.scheduler.runs:  # nothing can happen any more: say what is stuck
+                self.scheduler.warn(run.id, "IMPOSSIBLE_TO_SCHEDULE", f"block {run.id} is still {run.state} "
+                                    "and nothing left in the run can move it on", run.block.character_id)

@@ -64,8 +64,7 @@ class Moving(ComputedPeg):
         super().__init__(None, name="moving")
         self.source = source
 
-    @property
-    def time(self):
+    def compute(self):
         return self.source[0]
 
 

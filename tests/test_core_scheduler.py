@@ -125,8 +125,7 @@ class Source(ComputedPeg):
         super().__init__(None, name=f"source{s}")
         self.base, self.s = base, s
 
-    @property
-    def time(self):
+    def compute(self):
         return self.base[0] + self.s
 
 

@@ -64,8 +64,14 @@ class KeyTimes:
         known = [t for t in times if t is not None]
         if not known:
             raise ValueError(f"{timed.id} has no known time")
-        last = fill if fill is not None else known[-1]
-        times = [last if t is None else t for t in times]
+        # unknown times after the last known one become ``fill``; one between known times (a sync point
+        # an interruption skipped) takes the next known time: that phase is left out
+        following = fill if fill is not None else known[-1]
+        for i in range(len(times) - 1, -1, -1):
+            if times[i] is None:
+                times[i] = following
+            else:
+                following = times[i]
         try:
             pref = motion_unit(timed.behaviour).preferred(repetition(timed.behaviour))
         except KeyError:

@@ -57,11 +57,13 @@ FACE = MotionUnit("face", (0.0, 0.20, 1.00, 1.30), min_duration=0.05)
 SHIFT = MotionUnit("shift", (0.0, 0.60), min_duration=0.05)
 POSTURE_SHIFT = MotionUnit("postureShift", (0.0, 1.50), min_duration=0.2)
 LOCOMOTION = MotionUnit("locomotion", (0.0, 2.00), min_duration=0.2)
+#: BMLT's transition: named joints move from the pose they are in to the rest pose
+TRANSITION = MotionUnit("transition", (0.0, 0.50), min_duration=0.0)
 
 _BY_TYPE = {
     "pointing": POINTING, "gaze": GAZE, "posture": POSTURE, "faceLexeme": FACE, "faceFacs": FACE,
     "face": FACE, "gazeShift": SHIFT, "headDirectionShift": SHIFT, "faceShift": SHIFT,
-    "postureShift": POSTURE_SHIFT, "locomotion": LOCOMOTION,
+    "postureShift": POSTURE_SHIFT, "locomotion": LOCOMOTION, "transition": TRANSITION,
 }
 
 

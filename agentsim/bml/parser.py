@@ -18,7 +18,8 @@ from defusedxml.common import DefusedXmlException
 from defusedxml.expatreader import create_parser
 
 from agentsim.core.block import Behaviour, Block, Constraint, ParseWarning, SyncRef
-from agentsim.bml.vocabulary import BML_NAMESPACE, PARAMETER_CHILDREN
+from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, EXTENSION_BEHAVIOURS,
+                                     PARAMETER_CHILDREN)
 from agentsim.core.block import BEHAVIOUR_TYPES
 from agentsim.core.errors import BMLError
 
@@ -26,6 +27,17 @@ from agentsim.core.errors import BMLError
 MAX_TIME = 1.0e6
 
 ALL_SYNC_NAMES = {s for t in BEHAVIOUR_TYPES.values() for s in t.syncs}
+#: The BML 1.0 core behaviour elements (the extension ones live in their own namespaces).
+CORE_BEHAVIOURS = set(BEHAVIOUR_TYPES) - set().union(*EXTENSION_BEHAVIOURS.values())
+#: Attributes an extension behaviour cannot do without.
+REQUIRED_ATTRIBUTES = {"interrupt": ("target",), "activate": ("target",), "parametervaluechange": ("target", "paramId"),
+                       "audiofile": ("fileName",)}
+_COMPOSITION_LIST = re.compile(r"^(APPEND-AFTER|CHUNK-AFTER)\s*\((?P<ids>[^()]*)\)$", re.I)
+
+
+def id_list(text: str) -> tuple[str, ...]:
+    """Block ids in a BMLA list: separated by spaces or commas."""
+    return tuple(dict.fromkeys(x for x in re.split(r"[\s,]+", text.strip()) if x))
 _NAME = r"[A-Za-z_][\w.\-]*"
 _NUMBER = r"(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?"
 _LAZY_NAME = r"[A-Za-z_][\w.\-]*?"
@@ -203,16 +215,38 @@ def parse_bml(text: str | bytes) -> Block:
     if ":" in block_id:
         raise BMLError(f"the block id {block_id!r} contains ':', which feedback ids use to join block, behaviour "
                        "and sync ids", root.line, root.column)
-    composition = root.attrs.get("composition", "MERGE").strip().upper() or "MERGE"
+    composition = root.attrs.get("composition", "MERGE").strip() or "MERGE"
+    lists: dict[str, tuple[str, ...]] = {}
+    listed = _COMPOSITION_LIST.match(composition)
+    if listed:
+        field = "append_after" if listed.group(1).upper() == "APPEND-AFTER" else "chunk_after"
+        lists[field] = id_list(listed.group("ids"))
+        composition = "MERGE"
+    composition = composition.upper()
     if composition not in ("MERGE", "APPEND", "REPLACE"):
-        raise BMLError(f"unknown composition {root.attrs['composition']!r}: expected MERGE, APPEND or REPLACE",
-                       root.line, root.column)
+        raise BMLError(f"unknown composition {root.attrs['composition']!r}: expected MERGE, APPEND, REPLACE, "
+                       "APPEND-AFTER(ids) or CHUNK-AFTER(ids)", root.line, root.column)
     block = Block(block_id, root.attrs.get("characterId", "agent") or "agent", composition,
                   line=root.line, column=root.column)
-    for key in root.attrs:
-        if ":" in key:
+    for key, value in root.attrs.items():
+        if ":" not in key:
+            continue
+        prefix, _, name = key.partition(":")
+        if root.namespaces.get(prefix) == BMLA_NAMESPACE and name in BMLA_BLOCK_ATTRIBUTES:
+            field = BMLA_BLOCK_ATTRIBUTES[name]
+            if field == "preplan":
+                block.preplan = value.strip().lower() in ("true", "1", "yes")
+            else:
+                lists[field] = tuple(dict.fromkeys(lists.get(field, ()) + id_list(value)))
+        else:
             block.warnings.append(ParseWarning("CUSTOM_ATTRIBUTE_NOT_SUPPORTED",
                                                f"attribute {key!r} of <bml> ignored", [], root.line, root.column))
+    for field, ids in lists.items():
+        if block_id in ids:
+            block.warnings.append(ParseWarning("PARSING_FAILURE", f"block {block_id} names itself in "
+                                               f"{field}; ignored", [], root.line, root.column))
+            ids = tuple(i for i in ids if i != block_id)
+        setattr(block, field, ids)
     _Reader(block).read(root.elements(), required=False)
     return block
 
@@ -232,15 +266,21 @@ class _Reader:
         uri = node.namespaces.get(node.prefix or "", None)
         return uri in (None, "", BML_NAMESPACE) if node.prefix is None else uri == BML_NAMESPACE
 
+    @staticmethod
+    def namespace(node: _Node) -> str | None:
+        return node.namespaces.get(node.prefix or "", None)
+
     def read(self, nodes: list[_Node], required: bool) -> None:
         for node in nodes:
-            if not self.is_bml(node):
+            if node.local in EXTENSION_BEHAVIOURS.get(self.namespace(node), ()):
+                self.behaviour(node, required)
+            elif not self.is_bml(node):
                 self.warn("BEHAVIOR_TYPE_NOT_SUPPORTED", f"extension element <{node.tag}> ignored", node)
             elif node.local == "required":
                 self.read(node.elements(), required=True)
             elif node.local == "constraint":
                 self.constraint(node, required)
-            elif node.local in BEHAVIOUR_TYPES:
+            elif node.local in CORE_BEHAVIOURS:
                 self.behaviour(node, required)
             else:
                 self.warn("BEHAVIOR_TYPE_NOT_SUPPORTED", f"unknown behaviour <{node.tag}> ignored", node,
@@ -279,8 +319,18 @@ class _Reader:
                           node, [bid])
                 return
         for child in node.elements():
-            if child.local not in PARAMETER_CHILDREN and self.is_bml(child):
+            extension = self.namespace(child) in EXTENSION_BEHAVIOURS
+            if child.local not in PARAMETER_CHILDREN and (self.is_bml(child) or extension):
                 self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"{bid}: child <{child.tag}> ignored", child, [bid])
+            elif extension and child.local == "trajectory":
+                beh.params.update({f"trajectory.{k}": v for k, v in child.attrs.items()})
+            elif extension and child.local == "parameter" and "name" in child.attrs:
+                beh.params[child.attrs["name"]] = child.attrs.get("value", "")
+        missing = [name for name in REQUIRED_ATTRIBUTES.get(kind.name, ()) if not node.attrs.get(name, "").strip()]
+        if missing:
+            self.warn("PARSING_FAILURE", f"{bid}: <{node.tag}> needs {' and '.join(missing)}; behaviour ignored",
+                      node, [bid])
+            return
         self.block.behaviours.append(beh)
 
     def speech_text(self, node: _Node, beh: Behaviour) -> bool:

@@ -4,12 +4,28 @@ children that are parameters and the attributes that are never sync references."
 from __future__ import annotations
 
 BML_NAMESPACE = "http://www.bml-initiative.org/bml/bml-1.0"
+#: AsapRealizer's extensions: BMLA (continuous interaction) and BMLT (sound files, transitions).
+BMLA_NAMESPACE = "http://www.asap-project.org/bmla"
+BMLT_NAMESPACE = "http://hmi.ewi.utwente.nl/bmlt"
+
+#: The behaviour elements of each extension namespace (their types are in the core's BEHAVIOUR_TYPES).
+EXTENSION_BEHAVIOURS = {
+    BMLA_NAMESPACE: {"interrupt", "activate", "parametervaluechange"},
+    BMLT_NAMESPACE: {"audiofile", "transition"},
+}
+
+#: The BMLA attributes of a <bml> block and the Block field each fills (lists of block ids, or a flag).
+BMLA_BLOCK_ATTRIBUTES = {
+    "interrupt": "interrupt", "onStart": "on_start", "chunkAfter": "chunk_after", "chunkBefore": "chunk_before",
+    "appendAfter": "append_after", "prependBefore": "prepend_before", "preplan": "preplan",
+}
 
 # Children of behaviours that carry parameters, not behaviours of their own.
-PARAMETER_CHILDREN = {"stance", "pose", "description", "text", "sync", "lexeme"}
+PARAMETER_CHILDREN = {"stance", "pose", "description", "text", "sync", "lexeme", "trajectory", "parameter"}
 
 # Attributes that are never sync references.
 PLAIN_ATTRIBUTES = {
     "id", "lexeme", "mode", "target", "influence", "amount", "repetition", "offsetAngle",
     "offsetDirection", "au", "side", "manner", "type", "part", "priority", "start_", "xmlns",
+    "include", "exclude", "paramId", "fileName", "class",
 }

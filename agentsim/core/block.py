@@ -45,6 +45,10 @@ class Behaviour:
     refs: dict[str, SyncRef] = field(default_factory=dict)
     text: str = ""
     marks: list[tuple[int, str]] = field(default_factory=list)
+    #: parameters given by child elements (a BMLA trajectory, BMLT parameters), by name
+    params: dict[str, str] = field(default_factory=dict)
+    #: where its document came from (a file: relative file names are resolved beside it)
+    source: str = ""
     required: bool = False
     index: int = 0
     line: int | None = None
@@ -94,7 +98,26 @@ class ParseWarning:
 
 @dataclass
 class Block:
-    """A parsed BML block."""
+    """A parsed BML block.
+
+    Besides its composition, a block can say how it meets the blocks around it (the BMLA extension):
+
+    ``append_after``
+        start when these blocks have ended (``composition="APPEND-AFTER(a,b)"``, ``bmla:appendAfter``);
+    ``chunk_after``
+        start when these blocks subside (every behaviour past its relax, speech ended): the next chunk of
+        one utterance (``CHUNK-AFTER(a,b)``, ``bmla:chunkAfter``);
+    ``prepend_before``, ``chunk_before``
+        make pending blocks wait for this one, appended or chunked after it;
+    ``interrupt``
+        interrupt these blocks when this one would start, and start when they have ended;
+    ``preplan``
+        plan and predict now, start only when activated;
+    ``on_start``
+        activate these preplanned blocks when this one starts.
+
+    ``source`` names where the block came from (a file: relative file names in it are resolved beside it).
+    """
 
     id: str
     character_id: str = "agent"
@@ -104,6 +127,14 @@ class Block:
     warnings: list[ParseWarning] = field(default_factory=list)
     line: int | None = None
     column: int | None = None
+    append_after: tuple[str, ...] = ()
+    chunk_after: tuple[str, ...] = ()
+    prepend_before: tuple[str, ...] = ()
+    chunk_before: tuple[str, ...] = ()
+    interrupt: tuple[str, ...] = ()
+    preplan: bool = False
+    on_start: tuple[str, ...] = ()
+    source: str = ""
 
     _index: dict[str, Behaviour] = field(default_factory=dict, init=False, repr=False, compare=False)
 
@@ -150,5 +181,12 @@ BEHAVIOUR_TYPES: dict[str, BehaviourType] = {
         BehaviourType("postureShift", SHIFT_SYNCS, resource="postureShift"),
         BehaviourType("locomotion", SHIFT_SYNCS, resource="locomotion"),
         BehaviourType("wait", SHIFT_SYNCS),
+        # BMLA and BMLT (AsapRealizer's extensions): control of other blocks and behaviours, sound files, and
+        # transitions between poses
+        BehaviourType("interrupt", SHIFT_SYNCS),
+        BehaviourType("activate", SHIFT_SYNCS),
+        BehaviourType("parametervaluechange", SHIFT_SYNCS),
+        BehaviourType("audiofile", SHIFT_SYNCS),
+        BehaviourType("transition", SHIFT_SYNCS),
     )
 }

@@ -17,6 +17,7 @@ import simpy
 
 from agentsim.core.block import Behaviour
 from agentsim.core.errors import ScheduleError
+from agentsim.core.interruption import due_by, skip_until
 from agentsim.core.pegboard import PegBoard
 from agentsim.core.timed import EPSILON, TimedBehaviour
 
@@ -92,6 +93,11 @@ class Planner:
         if times[-1] - times[0] <= EPSILON and preferred[-1] > preferred[0]:
             raise ScheduleError("the behaviour would have no duration")
 
+    def admit(self, timed: TimedBehaviour) -> str | None:
+        """A last check once the behaviour is timed in its block: why it cannot be played (what it refers to
+        does not exist), or None."""
+        return None
+
     def add(self, timed: TimedBehaviour) -> None:
         self.plan[timed] = None
 
@@ -99,15 +105,16 @@ class Planner:
         self.plan.pop(timed, None)
 
     def judges(self, timed: TimedBehaviour) -> bool:
-        """Whether :meth:`invalid` needs ``timed``'s times to judge it (False: it is valid whatever they are)."""
-        return timed.state != "finished"
+        """Whether ``timed``'s timing is judged at all (False: it is valid whatever its times are: it has
+        finished, or it was interrupted and plays out what is left of it)."""
+        return timed.state != "finished" and not timed.interrupted
 
     def invalid(self, timed: TimedBehaviour, times: list[float | None] | None = None) -> str | None:
         """Why ``timed``'s current timing (after pegs moved) is no longer valid, or None if it is.
 
         ``times``: its current times, if the caller has them already.
         """
-        if timed.state == "finished":
+        if not self.judges(timed):
             return None
         times = timed.times() if times is None else times
         if any(t is None for t in times):
@@ -265,6 +272,9 @@ class EngineContext:
         ``dependants_of(pegs, planned_now=None)``: the live behaviours whose timing hangs from ``pegs``,
         kept up to date as blocks come and go, ordered by planned start; ``planned_now()`` says which
         planned time the owner of the pegs has reached (default: the clock), to judge which are near.
+    blocks : object
+        What behaviours that act on other blocks may ask (BMLA): ``interrupt(block_id, include, exclude,
+        by)``, ``activate(block_id, by)``, ``behaviour(block_id, behaviour_id)`` and ``state(block_id)``.
     """
 
     env: simpy.Environment
@@ -272,6 +282,7 @@ class EngineContext:
     sync_passed: Callable[[TimedBehaviour, int, float], None]
     pegs_moved: Callable[..., None]
     dependants_of: Callable[..., object]
+    blocks: object = None
 
 
 class Engine:
@@ -294,6 +305,18 @@ class Engine:
     def activate(self, timed: TimedBehaviour) -> None:
         timed.state = "active"
         self.plan.kick([timed])
+
+    def interruption(self, timed: TimedBehaviour, now: float) -> tuple[set[int], dict[int, float]] | None:
+        """What interrupting a started behaviour at ``now`` leaves of it: the sync points it skips and new
+        times for some of the rest (None: nothing to change). By default it ends at once; sync points due
+        by ``now`` still pass."""
+        last = len(timed.sync_ids) - 1
+        if timed.next_index > last or due_by(timed, last, now):
+            return None
+        return skip_until(timed, last, now), {last: now}
+
+    def stopped(self, timed: TimedBehaviour, now: float) -> None:
+        """``timed`` was interrupted at ``now``: stop what it makes (sound, say). Nothing by default."""
 
     def remove(self, timed: TimedBehaviour) -> None:
         self.planner.remove(timed)

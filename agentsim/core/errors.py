@@ -36,7 +36,14 @@ class BMLError(AgentsimError):
 
 
 class ScheduleError(AgentsimError):
-    """A behaviour cannot be given the timing asked of it."""
+    """A behaviour cannot be given the timing asked of it (or what it refers to does not exist).
+
+    ``warning_type`` is the BML warning it becomes (``IMPOSSIBLE_TO_SCHEDULE``, ``NO_SUCH_TARGET``, ...).
+    """
+
+    def __init__(self, message: str, warning_type: str = "IMPOSSIBLE_TO_SCHEDULE"):
+        super().__init__(message)
+        self.warning_type = warning_type
 
 
 class Unavailable(AgentsimError):

@@ -129,15 +129,29 @@ class OffsetPeg(TimePeg):
 class ComputedPeg(TimePeg):
     """A peg whose time is computed from something else (a behaviour's timing, a speech's animator time).
 
-    Subclasses define the ``time`` property; the peg cannot be set. Whoever changes its source calls
-    :func:`invalidate_times` and reports the move (an engine through its context).
+    Subclasses define :meth:`compute`; the peg cannot be set. Whoever changes its source calls
+    :func:`invalidate_times` and reports the move (an engine through its context). :meth:`pin` ends the
+    computing: the peg keeps one time from then on (an interrupted speech's end).
     """
 
-    __slots__ = ()
+    __slots__ = ("pinned",)
+
+    def __init__(self, time: float | None = None, name: str = "", board: "PegBoard | None" = None):
+        super().__init__(time, name, board)
+        self.pinned: float | None = None
+
+    def compute(self) -> float | None:
+        """The time as computed from the source."""
+        raise NotImplementedError
 
     @property
     def time(self) -> float | None:
-        raise NotImplementedError
+        return self.pinned if self.pinned is not None else self.compute()
+
+    def pin(self, time: float) -> None:
+        """Stop computing: the peg stays at ``time`` (global seconds) from now on."""
+        self.pinned = float(time)
+        invalidate_times()
 
     def set(self, time: float | None) -> None:
         raise ValueError(f"{self.name} is computed from its source and cannot be moved directly")
@@ -187,6 +201,18 @@ class PegBoard:
                 sync_ids, peg_for = registered
                 found = pegs[(behaviour_id, sync_id)] = (peg_for(sync_ids.index(sync_id)), 0.0)
         return found
+
+    def handed_out(self, block_id: str, behaviour_id: str) -> dict[str, TimePeg]:
+        """The pegs of a behaviour's sync points that other blocks asked for, by sync id."""
+        pegs = self._sync_pegs.get(block_id, {})
+        return {sync: peg for (beh, sync), (peg, _) in pegs.items() if beh == behaviour_id}
+
+    def forget_behaviour(self, block_id: str, behaviour_id: str) -> None:
+        """Forget where a removed behaviour's sync points are: later blocks cannot tie to it."""
+        self._behaviours.get(block_id, {}).pop(behaviour_id, None)
+        pegs = self._sync_pegs.get(block_id, {})
+        for key in [k for k in pegs if k[0] == behaviour_id]:
+            del pegs[key]
 
     def forget_block(self, block_id: str) -> None:
         """Forget where the sync points of a block are (pegs already handed out stay valid)."""

@@ -41,6 +41,10 @@ class BehaviourRecord:
         Sync points (of any behaviour of the recording) with the same number hang from one time peg.
     tied_to : tuple of str
         The behaviours (``block:behaviour``) whose sync points its BML ties it to.
+    interrupted : bool
+        Whether an interruption cut it short (its skipped sync points have no time).
+    parameters : tuple of (param, start, end, kind, initial, target)
+        BMLA parameter changes that applied to it, in the order they started.
     """
 
     block: str
@@ -55,6 +59,8 @@ class BehaviourRecord:
     order: int
     peg_groups: tuple[int | None, ...] = ()
     tied_to: tuple[str, ...] = ()
+    interrupted: bool = False
+    parameters: tuple[tuple[str, float | None, float | None, str, float, float], ...] = ()
 
     @property
     def type(self) -> str:
@@ -130,6 +136,8 @@ class Recording:
     speech : tuple
         What the speech engine played: one :class:`~agentsim.engines.speech.HeardSpeech` per speech that
         started, in order.
+    audio : tuple
+        The sound files played: one :class:`~agentsim.engines.audio.HeardAudio` each, in order.
     now : float
         Simulated time when the recording was made (s).
     """
@@ -140,6 +148,7 @@ class Recording:
     anticipators: dict[str, dict[str, float | None]] = field(default_factory=dict)
     feedback: tuple[dict[str, Any], ...] = ()
     speech: tuple = ()
+    audio: tuple = ()
     now: float = 0.0
 
     def __iter__(self) -> Iterator[BehaviourRecord]:
@@ -178,8 +187,11 @@ def record_behaviours(timed: Iterable[TimedBehaviour]) -> list[BehaviourRecord]:
         refs = t.behaviour.refs.values()
         tied = tuple(dict.fromkeys(f"{r.block or t.block_id}:{r.behaviour}" for r in refs
                                    if r.kind == "sync" and r.behaviour is not None))
+        times = [None if i in t.skipped else x for i, x in enumerate(times)]
+        parameters = tuple((c.param, c.start, c.end, c.kind, c.initial, c.target) for c in t.parameters)
         records.append(BehaviourRecord(
             block=t.block_id, id=t.id, behaviour=t.behaviour, sync_ids=tuple(t.sync_ids),
             times=tuple(times), passed=tuple(p is not None for p in t.passed), preferred=tuple(t.preferred),
-            state=t.state, stopped=t.stopped, order=t.order, peg_groups=tuple(peg_groups), tied_to=tied))
+            state=t.state, stopped=t.stopped, order=t.order, peg_groups=tuple(peg_groups), tied_to=tied,
+            interrupted=t.interrupted, parameters=parameters))
     return records

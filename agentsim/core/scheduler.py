@@ -22,11 +22,12 @@ import simpy
 from agentsim.core import feedback as fb
 from agentsim.core.block import Block
 from agentsim.core.engine import Engine, EngineContext
+from agentsim.core.interruption import hands, pegs_left_behind, set_key_time
 from agentsim.core.errors import ScheduleError
 from agentsim.core.pegboard import PegBoard, TimePeg, invalidate_times
 from agentsim.core.recording import BlockRecord, DropRecord, Recording, record_behaviours
 from agentsim.core.solver import BlockSolver
-from agentsim.core.timed import EPSILON, BlockRun, SyncPeg, TimedBehaviour
+from agentsim.core.timed import EPSILON, BlockRun, KeyRef, SyncPeg, TimedBehaviour
 
 #: Predictions are sent again for a behaviour when one of its sync points moved by more than this
 #: (seconds): one frame at 60 frames per second.
@@ -95,6 +96,38 @@ class Dependants:
         return list(self._near)
 
 
+class BlockControl:
+    """What behaviours that act on blocks (BMLA interrupt, activate, parameter changes) may ask the scheduler."""
+
+    def __init__(self, scheduler: "Scheduler"):
+        self.scheduler = scheduler
+
+    def state(self, block_id: str) -> str | None:
+        """``pending``, ``running``, ``ended`` or None (no such block)."""
+        run = self.scheduler.find_run(block_id)
+        return None if run is None else run.state
+
+    def behaviour(self, block_id: str, behaviour_id: str) -> TimedBehaviour | None:
+        run = self.scheduler.find_run(block_id)
+        return None if run is None else next((t for t in run.timed if t.id == behaviour_id), None)
+
+    def interrupt(self, block_id: str, include=(), exclude=(), by: str = "") -> bool:
+        """Interrupt a block now; False, with a warning, if there is none that runs or waits."""
+        run = self.scheduler.find_run(block_id)
+        if run is None:
+            self.scheduler.warn(by or block_id, "NO_SUCH_TARGET", f"cannot interrupt block {block_id!r}: there "
+                                "is no such block", "agent")
+            return False
+        self.scheduler.interrupt(run, include, exclude, by)
+        return True
+
+    def activate(self, block_id: str, by: str = "") -> bool:
+        return self.scheduler.activate(block_id, by)
+
+    def warn(self, target: str, kind: str, description: str, modified=()) -> None:
+        self.scheduler.warn(target, kind, description, "agent", modified)
+
+
 class Scheduler:
     """Schedules BML blocks onto engines and reports what happens as feedback.
 
@@ -129,7 +162,8 @@ class Scheduler:
         self._retime_scheduled = False
         board.on_move(self.pegs_moved)
         self.context = EngineContext(env=env, board=board, sync_passed=self.sync_passed,
-                                     pegs_moved=self.pegs_moved, dependants_of=self.dependants_of)
+                                     pegs_moved=self.pegs_moved, dependants_of=self.dependants_of,
+                                     blocks=BlockControl(self))
 
     def add_engine(self, engine: Engine) -> None:
         """Let ``engine`` realise the behaviour types its planner names (it was made with :attr:`context`)."""
@@ -170,13 +204,11 @@ class Scheduler:
             return None
         if block.composition == "REPLACE":
             for run in list(self.runs):
-                self.interrupt(run)
+                self.cut(run)
         now = self.env.now
-        start = now
-        if block.composition == "APPEND":
-            start = max([now] + [self.predicted_end(r) for r in self.runs])
-        run = BlockRun(block, self.board.new_block_peg(block.id, start), self.env.event())
-        earlier = list(self.runs)
+        run = BlockRun(block, self.board.new_block_peg(block.id, now), self.env.event())
+        self.link(run)
+        run.block_peg.set(self.predicted_start(run))
         solver = BlockSolver(block, run, self.board, self.engines, self.anticipator_peg, self.live_behaviours)
         run.timed = solver.solve()
         for issue in solver.issues:
@@ -192,6 +224,14 @@ class Scheduler:
             run.state = "refused"
             run.ended.succeed()
             return run
+        for timed in list(run.timed):
+            reason = timed.engine.planner.admit(timed)
+            if reason is not None:
+                run.timed.remove(timed)
+                timed.state = "dropped"
+                self.drops.append(DropRecord(block.id, timed.id, now, "NO_SUCH_TARGET", reason))
+                self.warn(f"{block.id}:{timed.id}", "NO_SUCH_TARGET", f"{timed.id}: {reason}; behaviour dropped",
+                          character, [timed.id], timed.behaviour.line, timed.behaviour.column)
         self.board.forget_block(block.id)
         for timed in run.timed:
             timed.planned_start = timed.start
@@ -199,30 +239,190 @@ class Scheduler:
             self.board.register_behaviour(block.id, timed.id, timed.sync_ids, functools.partial(SyncPeg, timed))
         self.structure_version += 1
         self.runs.append(run)
+        if run.chunk_after:
+            self.coarticulate(run)
         self.predict(run, force=True)
-        if block.composition == "APPEND" and earlier:
-            self.env.process(self.start_after(run, earlier))
-        else:
+        if self.waits(run) is None:
             self.start(run)
+        else:
+            self.env.process(self.await_start(run))
         return run
 
     def live_behaviours(self) -> list[TimedBehaviour]:
         return [t for r in self.runs for t in r.live()]
 
+    def find_run(self, block_id: str) -> BlockRun | None:
+        """The latest run of a block with this id (pending, running or ended), or None."""
+        return next((r for r in reversed(self.all_runs) if r.id == block_id and r.state != "refused"), None)
+
+    # ------------------------------------------------------------------ composition
+    def link(self, run: BlockRun) -> None:
+        """Find what a new block waits for (APPEND, APPEND-AFTER, CHUNK-AFTER and their BMLA forms), and make
+        the blocks its prependBefore and chunkBefore name wait for it. Unknown blocks and circles are
+        reported and left out."""
+        block = run.block
+        if block.composition == "APPEND":
+            run.after.extend(r for r in self.runs if not self.dormant(r))
+        for ids, found, what in ((block.append_after, run.after, "appendAfter"),
+                                 (block.chunk_after, run.chunk_after, "chunkAfter")):
+            for block_id in ids:
+                other = self.find_run(block_id)
+                if other is None:
+                    self.warn(block.id, "NO_SUCH_TARGET", f"{what}: there is no block {block_id!r}; ignored",
+                              block.character_id)
+                elif other not in found and other.state in ("pending", "running"):
+                    found.append(other)
+        for ids, what in ((block.prepend_before, "prependBefore"), (block.chunk_before, "chunkBefore")):
+            for block_id in ids:
+                other = self.find_run(block_id)
+                if other is None or other.state != "pending":
+                    state = "there is no such block" if other is None else f"it is {other.state}"
+                    self.warn(block.id, "NO_SUCH_TARGET", f"{what}: block {block_id!r} cannot wait for this one "
+                              f"({state}); ignored", block.character_id)
+                    continue
+                if self.waits_for(run, other):
+                    self.warn(block.id, "IMPOSSIBLE_TO_SCHEDULE", f"{what}: block {block_id!r} waits for this "
+                              "one already, directly or not; ignored", block.character_id)
+                    continue
+                (other.after if what == "prependBefore" else other.chunk_after).append(run)
+                self.wake(other)
+        for block_id in block.interrupt + block.on_start:
+            if self.find_run(block_id) is None:
+                what = "interrupt" if block_id in block.interrupt else "onStart"
+                self.warn(block.id, "NO_SUCH_TARGET", f"{what}: there is no block {block_id!r} (yet); ignored",
+                          block.character_id)
+
+    def waits_for(self, run: BlockRun, other: BlockRun) -> bool:
+        """Whether ``run`` waits, directly or through others, for ``other`` to end or subside."""
+        seen: set[int] = set()
+        todo = [run]
+        while todo:
+            current = todo.pop()
+            if current is other:
+                return True
+            if id(current) not in seen:
+                seen.add(id(current))
+                todo.extend(current.after + current.chunk_after)
+        return False
+
+    @staticmethod
+    def dormant(run: BlockRun) -> bool:
+        """A preplanned block that nothing has activated yet: nobody waits for it."""
+        return run.block.preplan and not run.activated and run.state == "pending"
+
     def predicted_end(self, run: BlockRun) -> float:
+        if run.state == "ended":
+            return run.ended_at
         ends = [t.end for t in run.live()]
-        return max([run.block_peg.time] + [e for e in ends if e is not None])
+        return max([run.block_peg.time] + [e for e in ends if e is not None and e < float("inf")])
+
+    def subsiding_time(self, run: BlockRun) -> float:
+        """When a block subsides: every behaviour past its relax (the start of its retraction), or ended."""
+        if run.state == "ended":
+            return run.ended_at
+        times = [run.block_peg.time]
+        for timed in run.live():
+            t = timed.sync_time("relax") if "relax" in timed.sync_ids else timed.end
+            if t is not None and t < float("inf"):
+                times.append(t)
+        return max(times)
+
+    def awaited(self, run: BlockRun) -> float | None:
+        """When what a pending block waits for ends or subsides, as things stand (None: it waits for none)."""
+        times = [self.predicted_end(r) for r in run.after if not self.dormant(r)]
+        times += [self.subsiding_time(r) for r in run.chunk_after if not self.dormant(r)]
+        return max(times) if times else None
+
+    def predicted_start(self, run: BlockRun) -> float:
+        """When a pending block would start as things stand: now, or when what it waits for ends or subsides."""
+        awaited = self.awaited(run)
+        return self.env.now if awaited is None else max(self.env.now, awaited)
+
+    def coarticulate(self, run: BlockRun) -> None:
+        """A chunk follows the gestures of the chunks before it without a gap: a gesture of an earlier chunk
+        whose hand a gesture of this one takes while it retracts skips its retraction and ends when the new
+        gesture starts (so that its relax, its end and the new start meet)."""
+        arm = ("gesture", "pointing")
+        new = sorted((t for t in run.timed if t.behaviour.type in arm), key=lambda t: t.start or 0.0)
+        for earlier in run.chunk_after:
+            for old in earlier.live():
+                if old.behaviour.type not in arm or "relax" not in old.sync_ids:
+                    continue
+                relax, end = old.sync_time("relax"), old.end
+                follower = next((t for t in new if hands(t) & hands(old) and t.start is not None
+                                 and relax - EPSILON <= t.start <= end + EPSILON), None)
+                if follower is not None:
+                    self.hold_relax(old)
+                    old.keys[-1] = KeyRef(SyncPeg(follower, 0))
+                    old.tied[-1] = old.fixed[-1] = True
+                    old.owns[-1] = False
+                    self.structure_version += 1
+
+    @staticmethod
+    def hold_relax(timed: TimedBehaviour) -> None:
+        """Key a behaviour's relax where it is now, relative to the nearest keyed sync point before it, so
+        that moving its end does not move it."""
+        relax = timed.sync_ids.index("relax")
+        if timed.keys[relax] is not None:
+            return
+        before = max(i for i in range(relax) if timed.keys[i] is not None)
+        key = timed.keys[before]
+        timed.keys[relax] = KeyRef(key.peg, key.offset + timed.time(relax) - timed.time(before))
 
     # ------------------------------------------------------------------ block life
-    def start_after(self, run: BlockRun, earlier: list[BlockRun]):
-        yield simpy.AllOf(self.env, [r.ended for r in earlier])
-        if run.state != "pending":
-            return
-        if abs(run.block_peg.time - self.env.now) > EPSILON:
-            with self.board.quiet():
-                run.block_peg.set(self.env.now)
-            self.retime()
-        self.start(run)
+    def waits(self, run: BlockRun) -> list[simpy.Event] | None:
+        """What a pending block still waits for (events to wait on), or None if it may start now.
+
+        A block that names blocks to interrupt interrupts them the first time it may start, and then waits
+        for them to end.
+        """
+        now = self.env.now
+        if run.block.preplan and not run.activated:
+            return [self.wake_event(run)]
+        ending = [r.ended for r in run.after if not r.ended.triggered and not self.dormant(r)]
+        if ending:
+            return ending + [self.wake_event(run)]
+        subsides = max([now] + [self.subsiding_time(r) for r in run.chunk_after if not self.dormant(r)])
+        if subsides > now + EPSILON:
+            return [self.env.timeout(subsides - now), self.wake_event(run)]
+        if run.block.interrupt and not run.interrupting:
+            run.interrupting = True
+            for block_id in run.block.interrupt:
+                target = self.find_run(block_id)
+                if target is not None and target.state in ("pending", "running"):
+                    self.interrupt(target, by=run.id)
+                    run.after.append(target)
+            return self.waits(run)
+        return None
+
+    def wake_event(self, run: BlockRun) -> simpy.Event:
+        if run.wake is None or run.wake.triggered:
+            run.wake = self.env.event()
+        return run.wake
+
+    def wake(self, run: BlockRun) -> None:
+        """What a pending block waits for changed: look again."""
+        if run.wake is not None and not run.wake.triggered:
+            run.wake.succeed()
+
+    def await_start(self, run: BlockRun):
+        """The process of a pending block: wait until it may start, then start it now."""
+        while run.state == "pending":
+            waiting = self.waits(run)
+            if waiting is None:
+                # the time it waited for exactly (the clock reaches it only up to rounding), else now
+                start = self.awaited(run)
+                if start is None or not abs(start - self.env.now) < 1e-6:
+                    start = self.env.now
+                moved = start != run.block_peg.time
+                if moved:
+                    with self.board.quiet():
+                        run.block_peg.set(start)
+                self.start(run)
+                if moved:
+                    self.retime()
+                return
+            yield simpy.AnyOf(self.env, waiting)
 
     def start(self, run: BlockRun) -> None:
         run.state = "running"
@@ -230,7 +430,27 @@ class Scheduler:
         self.log.send(fb.block_progress(run.id, "start", run.block_peg.time, character))
         for timed in run.live():
             timed.engine.activate(timed)
+        for block_id in run.block.on_start:
+            self.activate(block_id, by=run.id)
         self.end_if_done(run, run.block_peg.time)
+
+    def activate(self, block_id: str, by: str = "") -> bool:
+        """Start a preplanned block now (or as soon as what it waits for allows). False, with a warning, if
+        there is no such pending block."""
+        target = self.find_run(block_id)
+        who = by or block_id
+        if target is None or target.state != "pending":
+            state = "there is no such block" if target is None else f"it is {target.state}"
+            self.warn(who, "NO_SUCH_TARGET", f"cannot activate block {block_id!r}: {state}", "agent")
+            return False
+        target.activated = True
+        with self.board.quiet():
+            target.block_peg.set(self.predicted_start(target))
+        self.retime()
+        if target.state == "pending" and target.wake is None:  # planned, never waited: start it now
+            self.env.process(self.await_start(target))
+        self.wake(target)
+        return True
 
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
         """Sync point ``index`` of ``timed`` was passed at ``time``: feedback, and the end of what is done."""
@@ -255,7 +475,7 @@ class Scheduler:
             self.runs.remove(run)
         run.ended.succeed()
 
-    def interrupt(self, run: BlockRun) -> None:
+    def cut(self, run: BlockRun) -> None:
         """End a block now (composition REPLACE): its behaviours stop where they are."""
         now = self.env.now
         for timed in run.live():
@@ -267,6 +487,81 @@ class Scheduler:
             self.log.send(fb.block_progress(run.id, "start", now, run.block.character_id))
             run.state = "running"
         self.end(run, now)
+
+    # ------------------------------------------------------------------ interruption
+    def interrupt(self, run: BlockRun, include: Iterable[str] = (), exclude: Iterable[str] = (),
+                  by: str = "") -> None:
+        """Interrupt a block now, gracefully: speech stops, gestures retract, what hung from what will never
+        come is removed (quietly, unless it was required). ``include``: only these behaviours; ``exclude``:
+        all but these. A block that has not started is not started at all (it still gets its start and end,
+        now); every behaviour of it goes."""
+        include, exclude = set(include), set(exclude)
+        if run.state not in ("pending", "running"):
+            return
+        cause = f"interrupted by {by}" if by else "interrupted"
+        scope = [t for t in run.live() if (not include or t.id in include) and t.id not in exclude]
+        whole = len(scope) == len(run.live())
+        for timed in scope:
+            self.interrupt_behaviour(timed, cause)
+        if run.state == "pending" and whole:
+            now = self.env.now
+            self.log.send(fb.block_progress(run.id, "start", now, run.block.character_id))
+            run.state = "running"
+            self.wake(run)
+        self.pegs_moved()
+
+    def interrupt_behaviour(self, timed: TimedBehaviour, cause: str) -> None:
+        """Interrupt one behaviour now: a started one does what its engine says an interruption leaves of it,
+        one that has not started is removed; what hangs from the sync points that will not come goes too."""
+        if not timed.live or timed.interrupted:
+            return
+        now = self.env.now
+        if timed.state != "active" or timed.passed[0] is None:
+            self.remove(timed, cause)
+            return
+        plan = timed.engine.interruption(timed, now)
+        if plan is None:
+            return
+        skip, times = plan
+        left = pegs_left_behind(timed, skip, self.board)
+        timed.interrupted = True
+        timed.stopped = now
+        timed.skipped |= skip
+        for i, t in times.items():
+            set_key_time(timed, i, t)
+        while timed.next_index in timed.skipped:
+            timed.next_index += 1
+        timed.engine.stopped(timed, now)
+        self.drops.append(DropRecord(timed.block_id, timed.id, now, "INTERRUPTED", cause))
+        self.remove_dependants(left, timed, cause)
+        timed.engine.plan.kick([timed])
+
+    def remove(self, timed: TimedBehaviour, cause: str) -> None:
+        """Take out a behaviour that has not started: it will not happen; neither will what hangs from it."""
+        if not timed.live:
+            return
+        run = timed.run
+        left = pegs_left_behind(timed, range(len(timed.sync_ids)), self.board)
+        timed.state = "dropped"
+        timed.stopped = self.env.now
+        timed.engine.remove(timed)
+        self.board.forget_behaviour(run.id, timed.id)
+        run.gone.append(timed)
+        self.drops.append(DropRecord(run.id, timed.id, self.env.now, "INTERRUPTED", cause))
+        if timed.behaviour.required:
+            self.warn(f"{run.id}:{timed.id}", "INTERRUPTED", f"{timed.id}: required, but {cause}; behaviour "
+                      "removed", run.block.character_id, [timed.id])
+        self.remove_dependants(left, timed, cause)
+
+    def remove_dependants(self, peg_ids: set[int], origin: TimedBehaviour, cause: str) -> None:
+        """Every live behaviour that hangs from ``peg_ids`` (sync points that will not come) is interrupted if
+        it started, removed if it did not."""
+        if not peg_ids:
+            return
+        why = f"{cause}: it was tied to {origin.block_id}:{origin.id}"
+        for timed in self.live_behaviours():
+            if timed is not origin and timed.live and timed.hangs_from(peg_ids):
+                self.interrupt_behaviour(timed, why)
 
     def drop(self, timed: TimedBehaviour, reason: str) -> None:
         timed.state = "dropped"
@@ -332,10 +627,9 @@ class Scheduler:
         """
         if behaviours is None:
             with self.board.quiet():
-                for i, run in enumerate(self.runs):
-                    if run.state == "pending" and run.block.composition == "APPEND":
-                        earlier = [self.predicted_end(r) for r in self.runs[:i]]
-                        run.block_peg.set(max([self.env.now] + earlier))
+                for run in self.runs:
+                    if run.state == "pending" and not self.dormant(run) and (run.after or run.chunk_after):
+                        run.block_peg.set(self.predicted_start(run))
             candidates = [t for engine in self.engine_list for t in engine.planner.plan]
         else:
             candidates = behaviours
@@ -404,6 +698,9 @@ class Scheduler:
             run.note_end(timed, last[-1])
             entries.append({"id": timed.id, "type": timed.behaviour.type, "globalStart": timed.start,
                             "globalEnd": last[-1], "syncs": {timed.sync_ids[i]: t for i, t in zip(indices, times)}})
+        for timed in run.gone:
+            entries.append({"id": timed.id, "type": timed.behaviour.type, "status": "removed"})
+        run.gone.clear()
         start = run.block_peg.time
         start_moved = run.predicted_start is None or (start != run.predicted_start
                                                        and not abs(start - run.predicted_start) <= tolerance)

@@ -296,7 +296,7 @@ class BlockSolver:
             if implied:
                 times = planner.resolve(beh, {**known, **implied}, preferred=preferred)
         except ScheduleError as exc:
-            self.drop(beh.id, str(exc))
+            self.drop(beh.id, str(exc), exc.warning_type)
             return []
         except Exception as exc:  # a planner or backend failed on this behaviour: report, keep going
             self.drop(beh.id, f"{type(exc).__name__}: {exc}")
@@ -313,6 +313,7 @@ class BlockSolver:
             self.anchors.append(anchor)
             refs[0] = KeyRef(anchor, 0.0)
         newly_known: list[int] = []
+        owned: set[int] = set()  # sync points whose group gets its time from this behaviour
         for i, sync_id in enumerate(beh.sync_ids):
             if keys[i] is not None:
                 continue
@@ -328,12 +329,14 @@ class BlockSolver:
                 if peg is None:
                     peg = self.group_peg[root] = OffsetPeg(ref_key.peg, offset - d, name=f"{self.block.id}:group")
                     newly_known.append(root)
+                    owned.add(i)
                 keys[i] = KeyRef(peg, d)
             else:
                 keys[i] = KeyRef(ref_key.peg, offset)
         timed = TimedBehaviour(self.run, beh, preferred, keys, engine)
         timed.tied = [sync_id in groups for sync_id in beh.sync_ids]
         timed.fixed = [sync_id in groups and groups[sync_id][0] in self.ties.fixed_node for sync_id in beh.sync_ids]
+        timed.owns = [i in owned for i in range(n)]
         self.timed[beh.id] = timed
         return newly_known
 

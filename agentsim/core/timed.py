@@ -59,11 +59,17 @@ class TimedBehaviour:
         self.tied = [False] * len(self.sync_ids)  # which keys share a peg with other sync points
         # which of those pegs are held by a time given from outside: a number, an anticipator, another block
         self.fixed = [False] * len(self.sync_ids)
+        # which of those pegs get their time from this behaviour (what else hangs from them follows it)
+        self.owns = [False] * len(self.sync_ids)
         self.heap_version = 0  # which of the player's heap entries for this behaviour is current
         self.next_index = 0
         self.state = "planned"  # planned -> active -> finished | dropped
-        self.stopped: float | None = None  # when it was dropped or cut, if it was
+        self.stopped: float | None = None  # when it was dropped, cut or interrupted, if it was
         self.planned_start: float | None = None  # its start as first planned
+        self.interrupted = False  # interrupted: what is left of it runs to its end whatever the timing
+        self.skipped: set[int] = set()  # sync points an interruption means will never come
+        #: parameter changes (BMLA parametervaluechange) that apply to it, in the order they started
+        self.parameters: list = []
 
     @property
     def id(self) -> str:
@@ -192,9 +198,49 @@ class SyncPeg(ComputedPeg):
         self.timed = timed
         self.index = index
 
-    @property
-    def time(self) -> float | None:
+    def compute(self) -> float | None:
         return self.timed.time(self.index)
+
+
+@dataclass(eq=False)
+class ParameterChange:
+    """A change of one parameter of a behaviour over the span of the behaviour that makes it (BMLA's
+    parametervaluechange): ``linear`` from ``initial`` to ``target`` between its start and end, or
+    ``instant`` (the target from its start on)."""
+
+    param: str
+    maker: TimedBehaviour
+    kind: str
+    initial: float
+    target: float
+
+    @property
+    def start(self) -> float | None:
+        return self.maker.start
+
+    @property
+    def end(self) -> float | None:
+        return self.maker.end
+
+    def value(self, t: float) -> float | None:
+        """The parameter at global time ``t`` (s): None before the change starts."""
+        start, end = self.start, self.end
+        if start is None or t < start:
+            return None
+        if self.kind == "instant" or end is None or end <= start or t >= end:
+            return self.target
+        return self.initial + (self.target - self.initial) * (t - start) / (end - start)
+
+
+def parameter_at(timed: TimedBehaviour, param: str, t: float, default: float) -> float:
+    """A behaviour's parameter at time ``t``: the latest change of it that has started, else ``default``."""
+    value = default
+    for change in timed.parameters:
+        if change.param == param:
+            v = change.value(t)
+            if v is not None:
+                value = v
+    return value
 
 
 @dataclass(eq=False)
@@ -212,6 +258,15 @@ class BlockRun:
     predicted: dict[str, list[float | None]] = field(default_factory=dict)
     predicted_start: float | None = None
     ended_at: float | None = None
+    #: runs whose end this one waits for before it starts (APPEND, APPEND-AFTER, prependBefore, interrupt)
+    after: list["BlockRun"] = field(default_factory=list)
+    #: runs whose subsiding this one waits for (CHUNK-AFTER, chunkBefore)
+    chunk_after: list["BlockRun"] = field(default_factory=list)
+    activated: bool = False  # a preplanned run that has been told to start
+    interrupting: bool = False  # it has interrupted the blocks its bmla:interrupt names
+    #: behaviours removed since the last prediction (they are said to be gone in the next one)
+    gone: list[TimedBehaviour] = field(default_factory=list)
+    wake: simpy.Event | None = None  # succeeds when what this pending run waits for changes
     # the predicted ends of its behaviours, as a max-heap with lazy deletion: (-end, version, timed)
     _ends: list[tuple[float, int, TimedBehaviour]] = field(default_factory=list, repr=False)
     _end_version: dict[TimedBehaviour, int] = field(default_factory=dict, repr=False)

@@ -6,13 +6,15 @@ from agentsim.animation.units import motion_unit, repetition
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
 from agentsim.core.errors import ScheduleError
+from agentsim.core.interruption import due_by, skip_until
+from agentsim.core.timed import TimedBehaviour
 
 
 class AnimationPlanner(Planner):
     """Binds behaviours to motion units and resolves their keys by linear stretch between constraints."""
 
     behaviour_types = ("gesture", "pointing", "head", "gaze", "gazeShift", "headDirectionShift", "faceLexeme",
-                       "faceFacs", "face", "faceShift", "posture", "postureShift", "locomotion")
+                       "faceFacs", "face", "faceShift", "posture", "postureShift", "locomotion", "transition")
 
     def preferred(self, behaviour: Behaviour) -> list[float]:
         return motion_unit(behaviour).preferred(repetition(behaviour))
@@ -30,7 +32,21 @@ class AnimationPlanner(Planner):
 
 
 class AnimationEngine(Engine):
+    """Plays motion units; an interrupted one goes into its retraction at once."""
+
     name = "animation"
 
     def __init__(self, context: EngineContext):
         super().__init__(context, AnimationPlanner())
+
+    def interruption(self, timed: TimedBehaviour, now: float) -> tuple[set[int], dict[int, float]] | None:
+        """A motion with a retraction (gestures, head movements, gaze, face, posture) relaxes now and ends
+        when its preferred retraction is done; one already retracting goes on; one without a retraction
+        (a shift) ends now."""
+        if "relax" not in timed.sync_ids:
+            return super().interruption(timed, now)
+        relax, last = timed.sync_ids.index("relax"), len(timed.sync_ids) - 1
+        if timed.next_index > relax or due_by(timed, relax, now):
+            return None
+        retraction = max(timed.preferred[last] - timed.preferred[relax], 0.0)
+        return skip_until(timed, relax, now), {relax: now, last: now + retraction}

@@ -25,7 +25,8 @@ from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
 from agentsim.core.errors import ScheduleError
 from agentsim.core.pegboard import ComputedPeg, OffsetPeg
-from agentsim.core.timed import KeyRef, TimedBehaviour
+from agentsim.core.interruption import set_key_time
+from agentsim.core.timed import KeyRef, TimedBehaviour, parameter_at
 from agentsim.speech.backend import SpeechText, TTSBackend, Utterance
 
 #: Speech keys may be off their rigid spacing by this much (seconds) before the speech is invalid.
@@ -94,6 +95,10 @@ class SpeechPlanner(Planner):
             self._utterances[key] = utt
         return utt
 
+    def set_utterance(self, behaviour: Behaviour, utterance: Utterance) -> None:
+        """Speak ``behaviour`` as ``utterance`` from now on (it was synthesised again, at another rate)."""
+        self._utterances[id(behaviour)] = utterance
+
     def linear_model(self):
         if self.config.linear_model is None:
             from agentsim.speech.linear_model import default_linear_model
@@ -132,12 +137,8 @@ class SpeechPlanner(Planner):
                 raise ScheduleError("speech cannot be stretched or skewed to meet its constraints")
 
     def judges(self, timed: TimedBehaviour) -> bool:
+        # once speaking it follows its audio: its sync points come in order, when they are heard
         return id(timed.behaviour) not in self.speaking and super().judges(timed)
-
-    def invalid(self, timed: TimedBehaviour, times: list[float | None] | None = None) -> str | None:
-        if id(timed.behaviour) in self.speaking:
-            return None  # it follows its audio: its sync points come in order, when they are heard
-        return super().invalid(timed, times)
 
     def remove(self, timed: TimedBehaviour) -> None:
         super().remove(timed)
@@ -156,8 +157,7 @@ class SpeechTimePeg(ComputedPeg):
         self.playback = playback
         self.s = s
 
-    @property
-    def time(self) -> float | None:
+    def compute(self) -> float | None:
         return self.playback.crossing(self.s)
 
 
@@ -245,6 +245,10 @@ class HeardSpeech:
         ``(clock time, t_A)`` samples while it played, if asked for (:attr:`SpeechConfig.trace_frame`).
     plan : SpeechPlan or None
         What the strategy was told in advance.
+    stopped : float or None
+        When an interruption stopped it (global s), if one did.
+    volume : tuple of (start, end, kind, initial, target)
+        Its BMLA volume changes (percent), in the order they started; see :meth:`gain`.
     """
 
     block: str
@@ -257,6 +261,8 @@ class HeardSpeech:
     delivered: tuple = ()
     trace: tuple = ()
     plan: object = None
+    stopped: float | None = None
+    volume: tuple = ()
 
     @property
     def scale(self) -> float:
@@ -265,6 +271,15 @@ class HeardSpeech:
     def true_time(self, s: float) -> float:
         """Global time at which speech time ``s`` (s from the utterance's start) was heard."""
         return self.t0 + s * self.scale
+
+    def gain(self, t: float) -> float:
+        """The loudness factor at global time ``t`` (1 as synthesised; BMLA volume changes are percent)."""
+        value = 100.0
+        for start, end, kind, initial, target in self.volume:
+            if start is not None and t >= start:
+                linear = kind == "linear" and end is not None and end > start and t < end
+                value = initial + (target - initial) * (t - start) / (end - start) if linear else target
+        return value / 100.0
 
 
 class SpeechEngine(Engine):
@@ -280,28 +295,64 @@ class SpeechEngine(Engine):
         super().__init__(context, SpeechPlanner(backend, config))
         self.config = self.planner.config
         self.playbacks: list[Playback] = []  # the speeches that played under a strategy, in order
-        self._started: list[HeardSpeech | Playback] = []  # every speech that started, in order
+        #: every speech that started, in order: the behaviour, its utterance, when it started, its playback
+        self._started: list[tuple[TimedBehaviour, Utterance, float, Playback | None]] = []
+        self._stopped: dict[int, float] = {}
 
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
         if index == 0:
+            self.apply_rate(timed, time)
             if self.config.strategy is None:
                 self.take_timing(timed, time)
-                utterance = self.planner.utterance(timed.behaviour)
-                self._started.append(HeardSpeech(timed.block_id, timed.id, utterance, time, time))
+                self._started.append((timed, self.planner.utterance(timed.behaviour), time, None))
             else:
                 self.play(timed, time)
-                self._started.append(self.playbacks[-1])
+                playback = self.playbacks[-1]
+                self._started.append((timed, playback.utterance, time, playback))
         super().sync_passed(timed, index, time)
+
+    def stopped(self, timed: TimedBehaviour, now: float) -> None:
+        """An interruption stopped the speech at ``now``: its audio ends there, its events stop."""
+        self._stopped[id(timed)] = now
+        for playback in self.playbacks:
+            if playback.timed is timed:
+                playback.finished = True
+
+    def apply_rate(self, timed: TimedBehaviour, start: float) -> None:
+        """A BMLA rate change in effect when the speech starts: speak it at that rate (the backend speaks a
+        whole utterance at one rate), and move its sync points to the new timeline."""
+        rate = parameter_at(timed, "rate", start, 1.0)
+        if rate == 1.0 or self.config.timing != "tts":
+            return
+        if not rate > 0:
+            self.context.blocks.warn(f"{timed.block_id}:{timed.id}", "IMPOSSIBLE_TO_SCHEDULE",
+                                     f"{timed.id}: speech rate {rate:g} is not positive; spoken at its own rate",
+                                     [timed.id])
+            return
+        behaviour = timed.behaviour
+        utterance = self.planner.backend.synthesize(SpeechText(behaviour.text, tuple(behaviour.marks), rate))
+        self.planner.set_utterance(behaviour, utterance)
+        marks = {m.name: m.time for m in utterance.marks}
+        timed.preferred = [0.0] + [marks[s] for s in timed.sync_ids[1:-1]] + [utterance.duration]
+        if self.config.strategy is None:
+            for i in range(1, len(timed.sync_ids)):
+                set_key_time(timed, i, start + timed.preferred[i])
+            self.context.pegs_moved()
 
     def heard(self) -> list[HeardSpeech]:
         """Every speech that started so far, as it was heard."""
         found = []
-        for item in self._started:
-            if isinstance(item, Playback):
-                item = HeardSpeech(item.timed.block_id, item.timed.id, item.utterance, item.t_request, item.t0,
-                                   item.drift_ppm, self.config.strategy, tuple(item.delivered), tuple(item.trace),
-                                   item.plan)
-            found.append(item)
+        for timed, utterance, start, playback in self._started:
+            volume = tuple((c.start, c.end, c.kind, c.initial, c.target) for c in timed.parameters
+                           if c.param == "volume")
+            stopped = self._stopped.get(id(timed))
+            if playback is None:
+                found.append(HeardSpeech(timed.block_id, timed.id, utterance, start, start, stopped=stopped,
+                                         volume=volume))
+            else:
+                found.append(HeardSpeech(timed.block_id, timed.id, utterance, playback.t_request, playback.t0,
+                                         playback.drift_ppm, self.config.strategy, tuple(playback.delivered),
+                                         tuple(playback.trace), playback.plan, stopped, volume))
         return found
 
     def take_timing(self, timed: TimedBehaviour, start: float) -> None:
@@ -312,6 +363,7 @@ class SpeechEngine(Engine):
         with self.context.board.quiet():
             for peg in set(timed.own_pegs()):
                 peg.freeze(block_peg)
+        timed.owns = [t and not f for t, f in zip(timed.tied, timed.fixed)]
 
     def play(self, timed: TimedBehaviour, t_request: float) -> None:
         """Start the audio and hand the speech's timing to the animator-time strategy."""
@@ -348,6 +400,7 @@ class SpeechEngine(Engine):
             for i, key in enumerate(timed.keys):
                 if key is not None and timed.tied[i] and not timed.fixed[i] and isinstance(key.peg, OffsetPeg):
                     key.peg.rebase(speech_pegs[i], -key.offset)
+                    timed.owns[i] = True  # what shares the peg follows the speech now
             timed.keys = [KeyRef(peg, 0.0) for peg in speech_pegs]
         planned_start = timed.planned_start if timed.planned_start is not None else t_request
         playback.dependants = self.context.dependants_of(
@@ -362,6 +415,8 @@ class SpeechEngine(Engine):
         for event in playback.delivered:
             if event.arrival_time > env.now:
                 yield env.timeout(event.arrival_time - env.now)
+            if playback.finished:  # interrupted: nothing it says matters any more
+                return
             playback.record(env.now)
             before = playback.strategy.path
             playback.strategy.on_event(event, env.now)

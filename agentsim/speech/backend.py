@@ -13,11 +13,13 @@ class SpeechText:
     """Plain text to speak, with named sync marks at character offsets.
 
     ``marks`` holds ``(offset, name)`` pairs: a mark at ``offset`` stands before the character at that
-    offset, so it is realised at the onset of the first word that starts at or after it.
+    offset, so it is realised at the onset of the first word that starts at or after it. ``rate`` speeds
+    the backend's own rate up (above 1) or slows it down.
     """
 
     text: str
     marks: tuple[tuple[int, str], ...] = ()
+    rate: float = 1.0
 
 
 @dataclass(frozen=True)

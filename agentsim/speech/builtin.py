@@ -37,7 +37,7 @@ class BuiltinBackend:
 
     def synthesize(self, speech: SpeechText) -> Utterance:
         text = speech.text
-        scale = 1.0 / self.rate
+        scale = 1.0 / (self.rate * speech.rate)
         t = self.lead * scale
         words: list[Word] = []
         phonemes: list[Phoneme] = []

@@ -576,11 +576,12 @@ class EspeakBackend:
         ssml, origin = _to_ssml(text, speech.marks)
         tokens = _tokens(text)
         engine = self._engine
+        words_per_minute = min(max(round(self.rate * speech.rate), _RATE_MINIMUM), _RATE_MAXIMUM)
         with engine.lock:
-            pcm, events = engine.synth(ssml, self.voice, self.rate)
+            pcm, events = engine.synth(ssml, self.voice, words_per_minute)
             groups = _read_events(text, origin, tokens, events, len(pcm))
             _mark_stress([p for group in groups for p in group.phonemes],
-                         engine.transcribe(text, self.voice, self.rate))
+                         engine.transcribe(text, self.voice, words_per_minute))
             spans = _word_spans(text, tokens, groups, functools.lru_cache(maxsize=None)(self._symbols))
         rate = self.sample_rate
         duration = len(pcm) / rate

@@ -234,7 +234,10 @@ class CachedBackend:
         return utt
 
     def synthesize(self, speech: SpeechText) -> Utterance:
-        """Speak ``speech``: the cached utterance of its text with its marks placed on word onsets."""
+        """Speak ``speech``: the cached utterance of its text with its marks placed on word onsets (a speech
+        at another rate is not cached)."""
+        if speech.rate != 1.0:
+            return self.backend.synthesize(speech)
         utt = self.utterance(speech.text)
         marks = [Mark(name, place_mark(utt, offset, "")) for offset, name in speech.marks]
         return replace(utt, marks=marks)
