@@ -139,12 +139,21 @@ def test_not_bml_and_bad_composition():
 
 
 # ---------------------------------------------------------------- property: never raises, never hangs
-SOURCES = sorted(EXAMPLES.glob("*.xml")) + sorted((Path(__file__).parent / "bml").glob("*.xml"))
+ASAP = Path(__file__).parent / "bml-examples-asap"
+SOURCES = (sorted(EXAMPLES.glob("*.xml")) + sorted((Path(__file__).parent / "bml").glob("*.xml"))
+           + sorted((ASAP / "asap").rglob("*.xml")) + sorted((ASAP / "bmlt").glob("*.xml")))
 TOKENS = ["<", ">", "/>", '"', ":", "+", "-", "-1e9", "1e30", "0", "-3", "start=\"a:b\"", 'end="speech1:end-99"',
           '<sync id="s9"/>', "&amp;", "&lol;", "<!ENTITY x 'y'>", 'composition="APPEND"', 'composition="REPLACE"',
           'id=""', "</bml>", "<bml>", "<head id=\"n9\" lexeme=\"NOD\" start=\"n9:end\"/>",
           '<constraint><after ref="speech1:end"><sync ref="nod1:start"/></after></constraint>',
-          '<required>', '</required>', "anticipators:metronome:beat2", "\u00e9\u4e2d", "\x00", "]]>"]
+          '<required>', '</required>', "anticipators:metronome:beat2", "\u00e9\u4e2d", "\x00", "]]>",
+          # BMLA: blocks and behaviours that act on other blocks, which the mixed documents share ids with
+          ' xmlns:bmla="http://www.asap-project.org/bmla" bmla:interrupt="bml1"', ' bmla:preplan="true"',
+          ' bmla:onStart="bml2 bml3"', ' bmla:chunkAfter="bml1"', ' bmla:appendAfter="bml2"',
+          ' bmla:prependBefore="bml1"', ' composition="APPEND-AFTER(bml1,bml2)"', ' composition="CHUNK-AFTER(bml3)"',
+          '<bmla:interrupt id="i9" target="bml1" include="speech1"/>', '<bmla:activate id="a9" target="bml2"/>',
+          '<bmla:parametervaluechange id="p9" target="bml1:speech1" paramId="volume">'
+          '<bmla:trajectory type="linear" initialValue="0" targetValue="100"/></bmla:parametervaluechange>']
 
 
 @contextmanager

@@ -18,7 +18,8 @@ from agentsim.animation.drivers import PRIORITY
 from agentsim.animation.head import GazeDriver, HeadDriver, HeadTurnDriver
 from agentsim.animation.manager import DriverManager
 from agentsim.animation.motion import KeyTimes, ReplacementGroup
-from agentsim.animation.pose import POSTURES, LocomotionDriver, PoseDriver, SpeechJawDriver, face_values
+from agentsim.animation.pose import (POSTURES, LocomotionDriver, PoseDriver, SpeechJawDriver, TransitionDriver,
+                                     face_values)
 from agentsim.animation.scene import Scene, offset_target
 from agentsim.animation.time_source import TimeSource
 from agentsim.animation.units import repetition
@@ -103,6 +104,7 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
                 amount = float(b.attributes.get("amount", "0.5"))
             except ValueError:
                 amount = 0.5
+            amount *= amplitude(record, keys)
             drv = manager.add(HeadDriver(name, keys, lexeme or "NOD", 28.0 * amount, repetition(b), **common))
         elif b.type in ("gaze", "gazeShift"):
             target = _bml_target(scene, b)
@@ -131,6 +133,13 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
                                              rest_after=True, **common))
         elif b.type == "locomotion":
             drv = manager.add(LocomotionDriver(name, keys, _bml_target(scene, b), **common))
+        elif b.type == "transition":
+            joints = set(b.params.get("joints", "").split() or ["skullbase", "vc4"])
+            dofs = [d for d in manager.body.dof_names if d.split(".")[0] in joints and ".t" not in d]
+            if not dofs:
+                info.note = "none of its joints is in this body"
+                continue
+            drv = manager.add(TransitionDriver(name, keys, dofs, **common))
         else:
             info.note = "no motion for this behaviour type"
             continue
@@ -138,6 +147,17 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
 
     _build_arms(manager, arm_items, scene)
     return infos
+
+
+def amplitude(record, keys: KeyTimes) -> float:
+    """A motion's BMLA amplitude at its stroke (or start): the latest change that had started by then."""
+    t = keys.time("stroke") if keys.has("stroke") else keys.start
+    value = 1.0
+    for param, start, end, kind, initial, target in getattr(record, "parameters", ()):
+        if param == "amplitude" and start is not None and t >= start:
+            linear = kind == "linear" and end is not None and end > start and t < end
+            value = initial + (target - initial) * (t - start) / (end - start) if linear else target
+    return value
 
 
 def _bml_target(scene: Scene, behaviour) -> np.ndarray:
@@ -221,6 +241,10 @@ def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> Non
                 info.note = (info.note + f" beat {beat_of.get((s, id(item)), 1)} of {meter[0]}").strip()
             else:
                 path = GESTURE_FORMS.get(lexeme, GESTURE_FORMS["DEFAULT"])
+            scale = amplitude(record, keys)
+            if scale != 1.0:
+                path = path.scaled(scale)
+                info.note = (info.note + f" amplitude {scale:g}").strip()
             drv = GestureDriver(name, keys, s, path, acquire=acquire, **common)
         manager.add(drv)
         info.drivers.append(drv.name)

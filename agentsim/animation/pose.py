@@ -1,4 +1,5 @@
-"""Held poses (face expressions, postures and their shifts), locomotion, and the jaw while speaking."""
+"""Held poses (face expressions, postures and their shifts), transitions, locomotion, and the jaw while
+speaking."""
 
 from __future__ import annotations
 
@@ -114,6 +115,25 @@ class PoseDriver(MotionDriver):
         for k, v in self.values.items():  # root translations are offsets from the rest position
             target[k] = np.full(n, v + (rest[self.body.dof(k)] if k.startswith("HumanoidRoot.t") else 0.0))
         self.write_held(blend_in(self, target, t, self.begun, self.keys.time(self.arrive)))
+
+
+class TransitionDriver(MotionDriver):
+    """BMLT's transition: the named joints move from the pose they are in at its start to the rest pose by
+    its end (our motion units start from the pose they find, so the next behaviour takes over from there),
+    then are handed over."""
+
+    def __init__(self, name: str, keys: KeyTimes, dofs, **kw):
+        self.moved = list(dofs)  # DOF names
+        super().__init__(name, keys, PRIORITY["behaviour"], self.moved, **kw)
+        self.release_key = "end"
+
+    def handover(self) -> float:
+        return STOP_HANDOVER
+
+    def on_tick(self, t: np.ndarray) -> None:
+        rest = self.body.rest_pose()
+        target = {d: np.full(len(t), rest[self.body.dof(d)]) for d in self.moved}
+        self.write_held(blend_in(self, target, t, self.begun, self.keys.end))
 
 
 # --------------------------------------------------------------------------------------------- locomotion, speech

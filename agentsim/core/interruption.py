@@ -1,14 +1,19 @@
-"""Cutting a playing behaviour short: which sync points an interruption skips, giving the rest new times,
-and which pegs the skipped ones leave for others to hang from.
+"""Graceful interruption: which sync points an interruption skips, giving the rest new times, which pegs the
+skipped ones leave for others to hang from, and the scheduler's part that interrupts blocks and behaviours.
 
 An engine says what an interruption leaves of a behaviour (:meth:`~agentsim.core.engine.Engine.interruption`:
-speech ends at once, a gesture goes into its retraction); the scheduler applies it with the helpers here.
+speech ends at once, a gesture goes into its retraction); :class:`Interruption` applies it and removes what
+hung from what will never come.
 """
 
 from __future__ import annotations
 
+from typing import Iterable
+
+from agentsim.core import feedback as fb
 from agentsim.core.pegboard import ComputedPeg, OffsetPeg, PegBoard, TimePeg
-from agentsim.core.timed import EPSILON, KeyRef, TimedBehaviour
+from agentsim.core.recording import DropRecord
+from agentsim.core.timed import EPSILON, BlockRun, KeyRef, TimedBehaviour
 
 
 def due_by(timed: TimedBehaviour, i: int, now: float) -> bool:
@@ -65,3 +70,83 @@ def hands(timed: TimedBehaviour) -> set[str]:
     if mode in ("LEFT_HAND", "LEFT"):
         return {"l"}
     return {"r"}
+
+
+class Interruption:
+    """Graceful interruption for the scheduler (it provides ``env``, ``board``, ``log``, ``drops``, ``warn``,
+    ``wake``, ``live_behaviours`` and ``pegs_moved``)."""
+
+    def interrupt(self, run: BlockRun, include: Iterable[str] = (), exclude: Iterable[str] = (),
+                  by: str = "") -> None:
+        """Interrupt a block now, gracefully: speech stops, gestures retract, what hung from what will never
+        come is removed (quietly, unless it was required). ``include``: only these behaviours; ``exclude``:
+        all but these. A block that has not started is not started at all (it still gets its start and end,
+        now); every behaviour of it goes."""
+        include, exclude = set(include), set(exclude)
+        if run.state not in ("pending", "running"):
+            return
+        cause = f"interrupted by {by}" if by else "interrupted"
+        scope = [t for t in run.live() if (not include or t.id in include) and t.id not in exclude]
+        whole = len(scope) == len(run.live())
+        for timed in scope:
+            self.interrupt_behaviour(timed, cause)
+        if run.state == "pending" and whole:
+            now = self.env.now
+            self.log.send(fb.block_progress(run.id, "start", now, run.block.character_id))
+            run.state = "running"
+            self.wake(run)
+        self.pegs_moved()
+
+    def interrupt_behaviour(self, timed: TimedBehaviour, cause: str) -> None:
+        """Interrupt one behaviour now: a started one does what its engine says an interruption leaves of it,
+        one that has not started is removed; what hangs from the sync points that will not come goes too."""
+        if not timed.live or timed.interrupted:
+            return
+        now = self.env.now
+        if timed.state != "active" or timed.passed[0] is None:
+            self.remove(timed, cause)
+            return
+        plan = timed.engine.interruption(timed, now)
+        if plan is None:
+            return
+        skip, times = plan
+        left = pegs_left_behind(timed, skip, self.board)
+        timed.interrupted = True
+        timed.stopped = now
+        timed.skipped |= skip
+        for i, t in times.items():
+            set_key_time(timed, i, t)
+        while timed.next_index in timed.skipped:
+            timed.next_index += 1
+        timed.engine.stopped(timed, now)
+        self.drops.append(DropRecord(timed.block_id, timed.id, now, "INTERRUPTED", cause))
+        self.remove_dependants(left, timed, cause)
+        timed.engine.plan.kick([timed])
+
+    def remove(self, timed: TimedBehaviour, cause: str) -> None:
+        """Take out a behaviour that has not started: it will not happen; neither will what hangs from it."""
+        if not timed.live:
+            return
+        run = timed.run
+        left = pegs_left_behind(timed, range(len(timed.sync_ids)), self.board)
+        timed.state = "dropped"
+        timed.stopped = self.env.now
+        timed.engine.remove(timed)
+        self.board.forget_behaviour(run.id, timed.id)
+        run.gone.append(timed)
+        self.drops.append(DropRecord(run.id, timed.id, self.env.now, "INTERRUPTED", cause))
+        if timed.behaviour.required:
+            self.warn(f"{run.id}:{timed.id}", "INTERRUPTED", f"{timed.id}: required, but {cause}; behaviour "
+                      "removed", run.block.character_id, [timed.id])
+        self.remove_dependants(left, timed, cause)
+
+    def remove_dependants(self, peg_ids: set[int], origin: TimedBehaviour, cause: str) -> None:
+        """Every live behaviour that hangs from ``peg_ids`` (sync points that will not come) is interrupted if
+        it started, removed if it did not."""
+        if not peg_ids:
+            return
+        why = f"{cause}: it was tied to {origin.block_id}:{origin.id}"
+        for timed in self.live_behaviours():
+            if timed is not origin and timed.live and timed.hangs_from(peg_ids):
+                self.interrupt_behaviour(timed, why)
+
