@@ -171,3 +171,63 @@ def test_a_parameter_change_scales_the_gesture_it_targets():
 
     normal, half = travel(None), travel("0.5")
     assert normal > 0.02 and half == pytest.approx(0.5 * normal, rel=0.15)
+
+
+def test_circles_and_unreadable_sounds_are_reported(tmp_path):
+    realizer = Realizer()
+    realizer.submit(f'<bml {NS} id="a"><wait id="w" start="0" end="2"/></bml>')
+    realizer.submit(f'<bml {NS} id="b" composition="APPEND-AFTER(a)"><wait id="w" start="0" end="1"/></bml>')
+    # c waits for b, and asks b to wait for it: a circle
+    realizer.submit(f'<bml {NS} id="c" bmla:appendAfter="b" bmla:prependBefore="b"><wait id="w" end="1"/></bml>')
+    not_audio = tmp_path / "noise.wav"
+    not_audio.write_text("this is not a sound")
+    realizer.submit(f'<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" xmlns:bmlt="http://hmi.ewi.utwente.nl/bmlt" '
+                    f'id="d"><bmlt:audiofile id="s" fileName="{not_audio}"/><head id="n" lexeme="NOD"/></bml>')
+    realizer.run()
+    warnings = {w["id"]: w["description"] for w in realizer.feedback.warnings()}
+    assert "waits for this one already" in warnings["c"]
+    assert "not a sound file" in warnings["d:s"]
+    blocks = {f["id"]: f["globalTime"] for f in realizer.feedback.items if f["type"] == "blockProgress"}
+    assert blocks["b:start"] == blocks["a:end"] == 2.0 and blocks["c:start"] == blocks["b:end"] == 3.0
+    assert "d:n:end" in realizer.feedback.sync_times()
+
+
+def test_a_rate_change_before_the_speech_makes_it_faster():
+    def spoken(rate: str | None) -> dict[str, float]:
+        change = ("" if rate is None else
+                  f'<bmla:parametervaluechange id="p" target="s" paramId="rate" start="0" end="0.5">'
+                  f'<bmla:trajectory type="instant" targetValue="{rate}"/></bmla:parametervaluechange>')
+        realizer = Realizer()
+        realizer.submit(f'<bml {NS} id="b"><speech id="s" start="1"><text>one two <sync id="m"/>three four'
+                        f'</text></speech><gesture id="g" lexeme="BEAT" stroke="s:m"/>{change}</bml>')
+        realizer.run()
+        assert not realizer.feedback.warnings()
+        return realizer.feedback.sync_times()
+
+    normal, fast = spoken(None), spoken("2")
+    for sync in ("b:s:m", "b:s:end"):
+        assert fast[sync] - 1.0 == pytest.approx((normal[sync] - 1.0) / 2, abs=1e-9)
+    assert fast["b:g:stroke"] == fast["b:s:m"]  # what is tied to the speech follows the new timeline
+
+
+def test_blocks_to_interrupt_and_activate_are_looked_up_when_the_block_starts():
+    realizer = Realizer()
+    # "late" starts when "first" ends; it names a preplanned block and a block to interrupt that are
+    # submitted after it, before it starts
+    realizer.submit(f'<bml {NS} id="first"><wait id="w" start="0" end="1"/></bml>')
+    realizer.submit(f'<bml {NS} id="late" bmla:appendAfter="first" bmla:onStart="ready" bmla:interrupt="talk ghost">'
+                    '<wait id="w" start="0" end="0.5"/></bml>')
+    realizer.submit_at(0.2, f'<bml {NS} id="ready" bmla:preplan="true"><head id="n" lexeme="NOD"/></bml>')
+    realizer.submit_at(0.5, f'<bml {NS} id="talk"><speech id="s"><text>On and on and on and on.</text></speech></bml>')
+    realizer.submit_at(0.6, f'<bml {NS} id="x" bmla:appendAfter="late" bmla:onStart="ready">'
+                            '<head id="n" lexeme="NOD"/></bml>')
+    realizer.run()
+    warnings = [(w["id"], w["description"]) for w in realizer.feedback.warnings()]
+    assert warnings[0] == ("late", "interrupt: there is no block 'ghost'; ignored")
+    assert warnings[1][0] == "x" and warnings[1][1].startswith("onStart: cannot activate block 'ready': it is ")
+    assert len(warnings) == 2
+    blocks = {f["id"]: f["globalTime"] for f in realizer.feedback.items if f["type"] == "blockProgress"}
+    syncs = realizer.feedback.sync_times()
+    assert blocks["talk:start"] == 0.5 and syncs["talk:s:end"] == 1.0  # cut short when "late" would start
+    assert blocks["talk:end"] == blocks["late:start"] == blocks["ready:start"] == 1.0
+    assert blocks["x:start"] == blocks["late:end"] == 1.5

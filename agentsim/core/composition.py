@@ -19,7 +19,7 @@ class Composition:
     def link(self, run: BlockRun) -> None:
         """Find what a new block waits for (APPEND, APPEND-AFTER, CHUNK-AFTER and their BMLA forms), and make
         the blocks its prependBefore and chunkBefore name wait for it. Unknown blocks and circles are
-        reported and left out."""
+        reported and left out. The blocks it interrupts and activates are looked up when it starts."""
         block = run.block
         if block.composition == "APPEND":
             run.after.extend(r for r in self.runs if not self.dormant(r))
@@ -46,11 +46,6 @@ class Composition:
                     continue
                 (other.after if what == "prependBefore" else other.chunk_after).append(run)
                 self.wake(other)
-        for block_id in block.interrupt + block.on_start:
-            if self.find_run(block_id) is None:
-                what = "interrupt" if block_id in block.interrupt else "onStart"
-                self.warn(block.id, "NO_SUCH_TARGET", f"{what}: there is no block {block_id!r} (yet); ignored",
-                          block.character_id)
 
     def waits_for(self, run: BlockRun, other: BlockRun) -> bool:
         """Whether ``run`` waits, directly or through others, for ``other`` to end or subside."""
@@ -148,7 +143,10 @@ class Composition:
             run.interrupting = True
             for block_id in run.block.interrupt:
                 target = self.find_run(block_id)
-                if target is not None and target.state in ("pending", "running"):
+                if target is None:
+                    self.warn(run.id, "NO_SUCH_TARGET", f"interrupt: there is no block {block_id!r}; ignored",
+                              run.block.character_id)
+                elif target.state in ("pending", "running"):
                     self.interrupt(target, by=run.id)
                     run.after.append(target)
             return self.waits(run)

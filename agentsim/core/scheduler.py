@@ -55,7 +55,7 @@ class BlockControl:
         self.scheduler.interrupt(run, include, exclude, by)
         return True
 
-    def activate(self, block_id: str, by: str = "") -> bool:
+    def activate(self, block_id: str, by: str = "", what: str = "") -> bool:
         return self.scheduler.activate(block_id, by)
 
     def warn(self, target: str, kind: str, description: str, modified=()) -> None:
@@ -216,17 +216,17 @@ class Scheduler(Composition, Interruption, Retiming):
         for timed in run.live():
             timed.engine.activate(timed)
         for block_id in run.block.on_start:
-            self.activate(block_id, by=run.id)
+            self.activate(block_id, by=run.id, what="onStart: ")
         self.end_if_done(run, run.block_peg.time)
 
-    def activate(self, block_id: str, by: str = "") -> bool:
+    def activate(self, block_id: str, by: str = "", what: str = "") -> bool:
         """Start a preplanned block now (or as soon as what it waits for allows). False, with a warning, if
         there is no such pending block."""
         target = self.find_run(block_id)
         who = by or block_id
         if target is None or target.state != "pending":
             state = "there is no such block" if target is None else f"it is {target.state}"
-            self.warn(who, "NO_SUCH_TARGET", f"cannot activate block {block_id!r}: {state}", "agent")
+            self.warn(who, "NO_SUCH_TARGET", f"{what}cannot activate block {block_id!r}: {state}", "agent")
             return False
         target.activated = True
         with self.board.quiet():
