@@ -8,18 +8,43 @@ from typing import Protocol, Sequence, runtime_checkable
 import numpy as np
 
 
+#: The kinds of :class:`Prosody` span, as in SSML.
+PROSODY_KINDS = ("emphasis", "prosody", "break", "say-as")
+
+
+@dataclass(frozen=True)
+class Prosody:
+    """How a stretch of the text is to be spoken (SSML's elements, on plain-text offsets).
+
+    ``kind`` is one of :data:`PROSODY_KINDS`; the span covers ``text[start:end]`` (a ``break`` stands at
+    ``start`` = ``end``). ``attrs`` are the SSML attributes as written, e.g. ``(("rate", "slow"),)``,
+    ``(("level", "strong"),)``, ``(("time", "300ms"),)``, ``(("interpret-as", "characters"),)``.
+    A backend applies what it can and leaves the rest; it never drops a word.
+    """
+
+    kind: str
+    start: int
+    end: int
+    attrs: tuple[tuple[str, str], ...] = ()
+
+    def attr(self, name: str, default: str = "") -> str:
+        return dict(self.attrs).get(name, default)
+
+
 @dataclass(frozen=True)
 class SpeechText:
     """Plain text to speak, with named sync marks at character offsets.
 
     ``marks`` holds ``(offset, name)`` pairs: a mark at ``offset`` stands before the character at that
     offset, so it is realised at the onset of the first word that starts at or after it. ``rate`` speeds
-    the backend's own rate up (above 1) or slows it down.
+    the backend's own rate up (above 1) or slows it down. ``prosody`` holds SSML-like spans (emphasis,
+    rate/pitch/volume, breaks, say-as), nested properly (a span ends before, or inside, the one around it).
     """
 
     text: str
     marks: tuple[tuple[int, str], ...] = ()
     rate: float = 1.0
+    prosody: tuple[Prosody, ...] = ()
 
 
 @dataclass(frozen=True)

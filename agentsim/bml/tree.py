@@ -1,0 +1,175 @@
+"""XML in, element trees out, with line and column of every element, read by a hardened expat reader.
+
+The reader is defusedxml's (no entity declarations, no external references), run without namespace
+processing, so that attributes with undeclared prefixes are extensions to warn about rather than fatal
+errors; each element keeps the namespace declarations in scope. :func:`read_tree` reads one document;
+:func:`read_forest` also reads several top-level elements one after another (several ``<bml>`` written
+into one file), which XML itself does not allow.
+"""
+
+from __future__ import annotations
+
+import re
+import xml.parsers.expat
+import xml.sax.handler
+from defusedxml.common import DefusedXmlException
+from defusedxml.expatreader import create_parser
+
+from agentsim.core.errors import BMLError
+
+
+class Node:
+    """An element: tag as written, attributes, children (elements and text) and where it starts."""
+
+    __slots__ = ("tag", "attrs", "line", "column", "children", "namespaces")
+
+    def __init__(self, tag: str, attrs: dict[str, str], line: int | None, column: int | None,
+                 namespaces: dict[str, str], children: list | None = None):
+        self.tag = tag
+        self.attrs = attrs
+        self.line = line
+        self.column = column
+        self.children: list[Node | str] = children if children is not None else []
+        self.namespaces = namespaces
+
+    @property
+    def local(self) -> str:
+        """The tag without its prefix."""
+        return self.tag.split(":", 1)[-1]
+
+    @property
+    def prefix(self) -> str | None:
+        return self.tag.split(":", 1)[0] if ":" in self.tag else None
+
+    @property
+    def namespace(self) -> str | None:
+        """The namespace URI of the element (None if its prefix, or the default, is not declared)."""
+        return self.namespaces.get(self.prefix or "", None)
+
+    def elements(self) -> list["Node"]:
+        return [c for c in self.children if isinstance(c, Node)]
+
+    def text(self) -> str:
+        """All the text inside the element, markup left out."""
+        return "".join(c if isinstance(c, str) else c.text() for c in self.children)
+
+    def where(self) -> str:
+        return f"line {self.line}, column {self.column}"
+
+    def __repr__(self) -> str:
+        return f"<{self.tag} {self.attrs!r} at {self.where()}>"
+
+
+class _TreeBuilder:
+    """Builds :class:`Node` trees from expat callbacks, recording where each element starts.
+
+    ``first_line_shift`` is subtracted from columns on line 1 (text put before the document there).
+    """
+
+    def __init__(self, expat, first_line_shift: int = 0) -> None:
+        self.expat = expat
+        self.shift = first_line_shift
+        self.root: Node | None = None
+        self.stack: list[Node] = []
+
+    def start(self, name: str, attrs: dict[str, str]) -> None:
+        parent_ns = self.stack[-1].namespaces if self.stack else {}
+        namespaces = parent_ns
+        if any(key.startswith("xmlns") for key in attrs):
+            namespaces = dict(parent_ns)
+            plain = {}
+            for key, value in attrs.items():
+                if key == "xmlns":
+                    namespaces[""] = value
+                elif key.startswith("xmlns:"):
+                    namespaces[key[6:]] = value
+                else:
+                    plain[key] = value
+            attrs = plain
+        line, column = self.expat.CurrentLineNumber, self.expat.CurrentColumnNumber + 1
+        if line == 1:
+            column -= self.shift
+        node = Node(name, attrs, line, column, namespaces)
+        if self.stack:
+            self.stack[-1].children.append(node)
+        else:
+            self.root = node
+        self.stack.append(node)
+
+    def end(self, name: str) -> None:
+        self.stack.pop()
+
+    def text(self, content: str) -> None:
+        if self.stack:
+            children = self.stack[-1].children
+            if children and isinstance(children[-1], str):
+                children[-1] += content
+            else:
+                children.append(content)
+
+
+def _parse(data: bytes, shift: int = 0) -> Node:
+    # defusedxml's reader installs the handlers that refuse entity declarations and external
+    # references on its expat parser; the tree is built straight from that parser's callbacks.
+    reader = create_parser(forbid_dtd=False, forbid_entities=True, forbid_external=True)
+    reader.setFeature(xml.sax.handler.feature_namespaces, False)
+    reader.reset()
+    expat = reader._parser
+    builder = _TreeBuilder(expat, shift)
+    expat.StartElementHandler = builder.start
+    expat.EndElementHandler = builder.end
+    expat.CharacterDataHandler = builder.text
+    expat.buffer_text = True
+    try:
+        expat.Parse(data, True)
+    except xml.parsers.expat.ExpatError as exc:
+        message = xml.parsers.expat.errors.messages.get(exc.code, str(exc))
+        column = exc.offset + 1 - (shift if exc.lineno == 1 else 0)
+        raise BMLError(f"malformed XML: {message}", exc.lineno, column) from None
+    except DefusedXmlException as exc:
+        raise BMLError(f"refused XML construct ({type(exc).__name__}): entity and external references "
+                       "are not allowed in BML", expat.CurrentLineNumber, expat.CurrentColumnNumber + 1) from None
+    if builder.root is None:
+        raise BMLError("empty document: expected a <bml> element", 1, 1)
+    return builder.root
+
+
+def read_tree(text: str | bytes) -> Node:
+    """The element tree of one XML document. Raises :class:`BMLError` (with line and column)."""
+    return _parse(text.encode("utf-8") if isinstance(text, str) else text)
+
+
+#: The element that :func:`read_forest` puts around several top-level elements.
+FOREST = "agentsim-document"
+_DECLARATION = re.compile(rb"<\?xml\b[^>]*\?>")
+_ENCODING = re.compile(rb"""encoding\s*=\s*["']([A-Za-z0-9._\-]+)["']""")
+_JUNK = xml.parsers.expat.errors.messages[xml.parsers.expat.errors.codes[xml.parsers.expat.errors.XML_ERROR_JUNK_AFTER_DOC_ELEMENT]]
+
+
+def read_forest(text: str | bytes) -> tuple[Node, bool]:
+    """The element tree of a document that may hold several top-level elements.
+
+    Returns the root, and whether it is a :data:`FOREST` element made here around several elements one
+    after another (XML declarations among them are dropped; positions stay those of the text given).
+    """
+    data = text.encode("utf-8") if isinstance(text, str) else text
+    try:
+        return _parse(data), False
+    except BMLError as exc:
+        if not exc.reason.endswith(_JUNK):
+            raise
+        first = exc
+    declared = _DECLARATION.match(data.lstrip())
+    if declared:
+        encoding = _ENCODING.search(declared.group(0))
+        if encoding and encoding.group(1).lower() not in (b"utf-8", b"utf8", b"us-ascii", b"ascii"):
+            try:
+                data = data.decode(encoding.group(1).decode("ascii")).encode("utf-8")
+            except (LookupError, UnicodeDecodeError):
+                raise first from None
+    blanked = _DECLARATION.sub(lambda m: b" " * len(m.group(0)), data)
+    opening = f"<{FOREST}>".encode()
+    try:
+        return _parse(opening + blanked + f"</{FOREST}>".encode(), shift=len(opening)), True
+    except BMLError:
+        raise first from None
