@@ -60,10 +60,17 @@ LOCOMOTION = MotionUnit("locomotion", (0.0, 2.00), min_duration=0.2)
 #: BMLT's transition: named joints move from the pose they are in to the rest pose
 TRANSITION = MotionUnit("transition", (0.0, 0.50), min_duration=0.0)
 
+#: A viseme of lip sync (other realizers' ``<lips>``): the lips reach the shape at ready, hold it to relax
+#                                 start ready relax end
+LIPS = MotionUnit("lips", (0.0, 0.05, 0.12, 0.17), min_duration=0.0)
+#: Keyframed face channels (other realizers' ``<curves>``); its keys give its duration
+CURVES = MotionUnit("curves", (0.0, 1.00), min_duration=0.0)
+
 _BY_TYPE = {
     "pointing": POINTING, "gaze": GAZE, "posture": POSTURE, "faceLexeme": FACE, "faceFacs": FACE,
     "face": FACE, "gazeShift": SHIFT, "headDirectionShift": SHIFT, "faceShift": SHIFT,
     "postureShift": POSTURE_SHIFT, "locomotion": LOCOMOTION, "transition": TRANSITION,
+    "lips": LIPS, "curves": CURVES,
 }
 
 
@@ -75,6 +82,24 @@ def motion_unit(behaviour: Behaviour) -> MotionUnit:
     if behaviour.type == "head":
         return SHAKE if lexeme == "SHAKE" else NOD
     return _BY_TYPE[behaviour.type]
+
+
+def curve_keys(behaviour: Behaviour) -> dict[str, list[tuple[float, float]]]:
+    """The channels of a ``curves`` behaviour: name -> (seconds from its start, value) keys, in time order.
+
+    The reader stores each channel as ``params["curve:<name>"] = "t1 v1 t2 v2 ..."``.
+    """
+    channels = {}
+    for key, value in behaviour.params.items():
+        if key.startswith("curve:"):
+            numbers = [float(x) for x in value.split()]
+            channels[key[6:]] = sorted(zip(numbers[0::2], numbers[1::2]))
+    return channels
+
+
+def curves_duration(behaviour: Behaviour) -> float:
+    """How long a ``curves`` behaviour lasts: to its last key."""
+    return max((keys[-1][0] for keys in curve_keys(behaviour).values() if keys), default=0.0)
 
 
 def repetition(behaviour: Behaviour) -> int:

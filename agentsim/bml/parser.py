@@ -18,8 +18,8 @@ from defusedxml.common import DefusedXmlException
 from defusedxml.expatreader import create_parser
 
 from agentsim.core.block import Behaviour, Block, Constraint, ParseWarning, SyncRef
-from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, EXTENSION_BEHAVIOURS,
-                                     PARAMETER_CHILDREN)
+from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
+                                     EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN)
 from agentsim.core.block import BEHAVIOUR_TYPES
 from agentsim.core.errors import BMLError
 
@@ -28,7 +28,7 @@ MAX_TIME = 1.0e6
 
 ALL_SYNC_NAMES = {s for t in BEHAVIOUR_TYPES.values() for s in t.syncs}
 #: The BML 1.0 core behaviour elements (the extension ones live in their own namespaces).
-CORE_BEHAVIOURS = set(BEHAVIOUR_TYPES) - set().union(*EXTENSION_BEHAVIOURS.values())
+CORE_BEHAVIOURS = set(BEHAVIOUR_TYPES) - set().union(*EXTENSION_BEHAVIOURS.values()) - DIALECT_BEHAVIOURS
 #: Attributes an extension behaviour cannot do without.
 REQUIRED_ATTRIBUTES = {"interrupt": ("target",), "activate": ("target",), "parametervaluechange": ("target", "paramId"),
                        "audiofile": ("fileName",)}

@@ -14,6 +14,10 @@ EXTENSION_BEHAVIOURS = {
     BMLT_NAMESPACE: {"audiofile", "transition"},
 }
 
+#: Behaviour types that no BML namespace defines: only the lenient reader makes them, from other realizers'
+#: elements (SmartBody's ``<lips>``, ``<curves>`` and ``<event>``).
+DIALECT_BEHAVIOURS = {"lips", "curves", "event"}
+
 #: The BMLA attributes of a <bml> block and the Block field each fills (lists of block ids, or a flag).
 BMLA_BLOCK_ATTRIBUTES = {
     "interrupt": "interrupt", "onStart": "on_start", "chunkAfter": "chunk_after", "chunkBefore": "chunk_before",

@@ -191,5 +191,10 @@ BEHAVIOUR_TYPES: dict[str, BehaviourType] = {
         BehaviourType("parametervaluechange", SHIFT_SYNCS),
         BehaviourType("audiofile", SHIFT_SYNCS),
         BehaviourType("transition", SHIFT_SYNCS),
+        # What other realizers' BML is mapped to where BML 1.0 has nothing alike (read only by the lenient
+        # reader): a viseme of lip sync, keyframed face channels, and a sync point without motion
+        BehaviourType("lips", GAZE_SYNCS),
+        BehaviourType("curves", SHIFT_SYNCS),
+        BehaviourType("event", SHIFT_SYNCS),
     )
 }

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from agentsim.animation.units import motion_unit, repetition
+from agentsim.animation.units import curves_duration, motion_unit, repetition
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
 from agentsim.core.errors import ScheduleError
@@ -14,9 +14,12 @@ class AnimationPlanner(Planner):
     """Binds behaviours to motion units and resolves their keys by linear stretch between constraints."""
 
     behaviour_types = ("gesture", "pointing", "head", "gaze", "gazeShift", "headDirectionShift", "faceLexeme",
-                       "faceFacs", "face", "faceShift", "posture", "postureShift", "locomotion", "transition")
+                       "faceFacs", "face", "faceShift", "posture", "postureShift", "locomotion", "transition",
+                       "lips", "curves")
 
     def preferred(self, behaviour: Behaviour) -> list[float]:
+        if behaviour.type == "curves":
+            return [0.0, curves_duration(behaviour)]
         return motion_unit(behaviour).preferred(repetition(behaviour))
 
     def check_times(self, behaviour, preferred, times) -> None:

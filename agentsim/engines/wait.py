@@ -1,4 +1,5 @@
-"""The wait engine: ``<wait>`` behaviours that only hold time between their start and end."""
+"""The wait engine: ``<wait>`` behaviours that only hold time between their start and end, and events (a sync
+point without motion, from other realizers' ``<event>``) that only pass."""
 
 from __future__ import annotations
 
@@ -8,16 +9,17 @@ from agentsim.core.errors import ScheduleError
 
 
 class WaitPlanner(Planner):
-    """A wait lasts one second unless its start and end are tied; any non-negative duration is valid."""
+    """A wait lasts one second unless its start and end are tied; an event takes no time unless they are;
+    any non-negative duration is valid."""
 
-    behaviour_types = ("wait",)
+    behaviour_types = ("wait", "event")
 
     def preferred(self, behaviour: Behaviour) -> list[float]:
-        return [0.0, 1.0]
+        return [0.0, 0.0] if behaviour.type == "event" else [0.0, 1.0]
 
     def check_times(self, behaviour, preferred, times) -> None:
         if times[-1] < times[0] - 1e-9:
-            raise ScheduleError("the wait would end before it starts")
+            raise ScheduleError(f"the {behaviour.type} would end before it starts")
 
 
 class WaitEngine(Engine):
