@@ -7,10 +7,9 @@ from typing import Iterable
 
 import simpy
 
-from agentsim.bml.parser import guess_block_id, parse_bml
+from agentsim.bml.parser import Refused, parse_document
 from agentsim.core.block import Block
 from agentsim.core.clock import make_environment
-from agentsim.core.errors import BMLError
 from agentsim.core.feedback import FeedbackLog
 from agentsim.core.pegboard import PegBoard
 from agentsim.core.recording import Recording
@@ -42,11 +41,17 @@ class Realizer:
         delivery, what the planner knows); by default the audio plays exactly as planned.
     prediction_tolerance : float
         A behaviour is predicted again when one of its sync points moved by more than this (seconds).
+    strict : bool
+        Read only BML 1.0 (one block a document). By default BML as other realizers write it is read too,
+        each block's adaptations said in one ``NONSTANDARD_BML`` warning; blocks without an id are named
+        ``bml1``, ``bml2``, ... in the order they come, skipping ids already used.
     """
 
     def __init__(self, env: simpy.Environment | None = None, realtime: bool = False,
                  tts: TTSBackend | None = None, anticipators: Iterable = (), speech: SpeechConfig | None = None,
-                 prediction_tolerance: float = FRAME):
+                 prediction_tolerance: float = FRAME, strict: bool = False):
+        self.strict = strict
+        self._unnamed = 0
         self.env = env if env is not None else make_environment(realtime)
         self.board = PegBoard()
         self.feedback = FeedbackLog()
@@ -72,20 +77,40 @@ class Realizer:
         self.scheduler.add_anticipator(anticipator)
 
     def submit(self, bml: str | bytes | Block, source: str = "") -> BlockRun | None:
-        """Submit a BML block now (XML text or a parsed block). Returns its run, or None if it was refused.
+        """Submit a BML document now (XML text or a parsed block). Returns the run of its block (of its last
+        block if it holds several), or None if that was refused.
 
-        A document that cannot be read is refused with one PARSING_FAILURE warning (with line and column).
+        A block that cannot be read is refused with one PARSING_FAILURE warning (with line and column).
         """
+        runs = self.submit_document(bml, source)
+        return runs[-1] if runs else None
+
+    def submit_document(self, bml: str | bytes | Block, source: str = "") -> list[BlockRun | None]:
+        """Submit every block of a BML document now, in order. Returns their runs (None where refused)."""
         if isinstance(bml, Block):
-            block = bml
-        else:
-            try:
-                block = parse_bml(bml)
-            except BMLError as exc:
+            return [self._submit_block(bml, source)]
+        runs: list[BlockRun | None] = []
+        for block in parse_document(bml, strict=self.strict, name_block=self._name_block):
+            if isinstance(block, Refused):
                 where = f" in {source}" if source else ""
-                self.scheduler.warn(guess_block_id(bml), "PARSING_FAILURE", f"block refused{where}: {exc}", "agent",
-                                    line=exc.line, column=exc.column)
-                return None
+                error = block.error
+                self.scheduler.warn(block.block_id, "PARSING_FAILURE", f"block refused{where}: {error}", "agent",
+                                    line=error.line, column=error.column)
+                runs.append(None)
+            else:
+                runs.append(self._submit_block(block, source))
+        return runs
+
+    def _name_block(self) -> str:
+        """The next free ``bml<n>`` for a block without id."""
+        used = {run.id for run in self.scheduler.all_runs}
+        while True:
+            self._unnamed += 1
+            name = f"bml{self._unnamed}"
+            if name not in used:
+                return name
+
+    def _submit_block(self, block: Block, source: str) -> BlockRun | None:
         if source:
             block.source = source
             for behaviour in block.behaviours:
@@ -102,7 +127,7 @@ class Realizer:
         return self.scheduler.activate(block_id)
 
     def submit_at(self, time: float, bml: str | bytes | Block, source: str = "") -> simpy.Process:
-        """Submit a BML block at simulated time ``time`` (seconds)."""
+        """Submit a BML document at simulated time ``time`` (seconds)."""
 
         def later():
             delay = time - self.env.now

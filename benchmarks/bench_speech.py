@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import time
 
-from agentsim.bml.parser import normalize_space
+from agentsim.bml.speech_text import normalize_space
 from agentsim.speech.backend import SpeechText
 from agentsim.speech.delivery import CONDITIONS
 from agentsim.speech.espeak import EspeakBackend

@@ -103,10 +103,17 @@ def test_required_constraint_that_cannot_hold_refuses_the_block():
 
 
 def test_duplicate_ids_and_missing_ids_are_reported():
-    r = realize(block('<head id="a" lexeme="NOD"/><head id="a" lexeme="SHAKE" start="3"/><head lexeme="NOD"/>'))
-    kinds = [(w["warningType"], w["description"][:20]) for w in r.warnings]
+    doc = block('<head id="a" lexeme="NOD"/><head id="a" lexeme="SHAKE" start="3"/><head lexeme="NOD"/>')
+    strict = realize(doc, strict=True)
+    kinds = [(w["warningType"], w["description"][:20]) for w in strict.warnings]
     assert len(kinds) == 2 and all(k == "PARSING_FAILURE" for k, _ in kinds)
-    assert r.t("a:start") == 0.0 and r.t("a:end") < 3
+    assert strict.t("a:start") == 0.0 and strict.t("a:end") < 3 and "a_2:start" not in strict.local
+    # leniently, the second "a" is renamed and the head without id named: all three play, and one warning says so
+    lenient = realize(doc)
+    (w,) = lenient.warnings
+    assert w["warningType"] == "NONSTANDARD_BML" and len(w["adaptations"]) == 2
+    assert "'a' renamed 'a_2'" in w["adaptations"][0] and w["adaptations"][1].endswith("number: head1")
+    assert lenient.t("a:start") == 0.0 and lenient.t("a_2:start") == 3.0 and lenient.t("head1:start") == 0.0
 
 
 def test_reference_to_an_unknown_block_or_anticipator():

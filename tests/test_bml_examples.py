@@ -155,17 +155,27 @@ def test_every_example_has_expectations(examples):
     assert sorted(p.name for p in examples.glob("*.xml")) == sorted(EXPECTED)
 
 
+@pytest.mark.parametrize("strict", [True, False], ids=["strict", "lenient"])
 @pytest.mark.parametrize("name", sorted(EXPECTED))
-def test_example_timing(examples, name):
-    result = realize((examples / name).read_bytes())
+def test_example_timing(examples, name, strict):
+    result = realize((examples / name).read_bytes(), strict=strict)
     for rule in EXPECTED[name]:
         check(result, rule)
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED))
-def test_example_feedback_is_well_formed(examples, name):
+def test_the_lenient_reader_reads_bml_1_0_as_the_strict_one_does(examples, name):
+    """On BML 1.0 the lenient reader adapts nothing: the feedback is the strict reader's, item for item."""
+    strict = realize((examples / name).read_bytes(), strict=True)
+    lenient = realize((examples / name).read_bytes())
+    assert lenient.items == strict.items
+
+
+@pytest.mark.parametrize("strict", [True, False], ids=["strict", "lenient"])
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_example_feedback_is_well_formed(examples, name, strict):
     """Each sync point once, in its default order, block end after every sync, time = global - block start."""
-    result = realize((examples / name).read_bytes())
+    result = realize((examples / name).read_bytes(), strict=strict)
     ids = [f["id"] for f in result.syncs]
     assert len(ids) == len(set(ids))
     if not result.blocks:

@@ -41,10 +41,17 @@ def test_gaze_overlap_gives_one_warning_and_keeps_one_gaze():
 
 
 def test_block_without_id_is_refused_with_one_warning():
-    r = realize((BML / "noid.xml").read_text())
+    r = realize((BML / "noid.xml").read_text(), strict=True)
     assert len(r.warnings) == 1 and r.warnings[0]["warningType"] == "PARSING_FAILURE"
     assert "line 1, column 1" in r.warnings[0]["description"]
     assert not r.blocks and not r.syncs
+
+
+def test_the_lenient_reader_names_a_block_without_id_and_says_so():
+    r = realize((BML / "noid.xml").read_text())
+    (w,) = r.warnings
+    assert w["warningType"] == "NONSTANDARD_BML" and w["adaptations"] == ["block without id: named bml1"]
+    assert [b["id"] for b in r.blocks] == ["bml1:start", "bml1:end"] and r.syncs
 
 
 def test_append_starts_at_the_previous_block_end():

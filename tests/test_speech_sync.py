@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from agentsim.bml.parser import normalize_space
+from agentsim.bml.speech_text import normalize_space
 from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer
 from agentsim.speech.animator_time import make_strategy

@@ -1,26 +1,28 @@
-"""BML 1.0 parser: XML text in, a :class:`~agentsim.core.block.Block` out, every problem with line and column.
+"""BML parser: XML text in, :class:`~agentsim.core.block.Block` objects out, every problem with line and column.
 
-The XML is read by a hardened expat reader (defusedxml: no entity declarations, no external references),
-without namespace processing, so that attributes with undeclared prefixes are extensions to warn about
-rather than fatal errors. Problems that spoil the whole block raise :class:`~agentsim.core.errors.BMLError`;
-problems with one behaviour or constraint become :class:`~agentsim.core.block.ParseWarning` entries and the
-rest of the block is kept.
+:func:`parse_bml` reads one BML 1.0 block, strictly. :func:`parse_document` reads what a document holds:
+strictly, one BML 1.0 block; leniently (the default), also BML as other realizers write it (see
+:mod:`agentsim.bml.dialects`), several blocks to a document, each adaptation said in one
+``NONSTANDARD_BML`` warning of its block. Problems that spoil a whole block refuse it
+(:class:`~agentsim.core.errors.BMLError`); problems with one behaviour or constraint become
+:class:`~agentsim.core.block.ParseWarning` entries and the rest of the block is kept.
 """
 
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 import re
-import xml.parsers.expat
-import xml.sax.handler
-from defusedxml.common import DefusedXmlException
-from defusedxml.expatreader import create_parser
+from dataclasses import dataclass
+from typing import Callable
 
-from agentsim.core.block import Behaviour, Block, Constraint, ParseWarning, SyncRef
+from agentsim.bml.dialects import Adapter, Notes, find_blocks
+from agentsim.bml.speech_text import read_speech
+from agentsim.bml.tree import Node, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
                                      EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN)
-from agentsim.core.block import BEHAVIOUR_TYPES
+from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
 from agentsim.core.errors import BMLError
 
 #: Largest time or offset (seconds) accepted in a reference; beyond it a behaviour is refused.
@@ -44,100 +46,13 @@ _LAZY_NAME = r"[A-Za-z_][\w.\-]*?"
 _REF = re.compile(
     rf"^(?P<path>{_LAZY_NAME}(?::{_LAZY_NAME}){{1,2}})\s*(?:(?P<sign>[+-])\s*(?P<offset>{_NUMBER}))?$"
 )
+# EMBR numbers the sync points of a speech (``<sync id="1"/>``, referred to as ``s1:1``): the lenient reader
+# takes a sync name that starts with a digit after a behaviour id.
+_LENIENT_REF = re.compile(
+    rf"^(?P<path>{_LAZY_NAME}:\d[\w.\-]*?)\s*(?:(?P<sign>[+-])\s*(?P<offset>{_NUMBER}))?$"
+)
 _ABSOLUTE = re.compile(rf"^[+-]?{_NUMBER}$")
 _BLOCK_ID = re.compile(r"<(?:\w+:)?bml\b[^>]*?\bid\s*=\s*[\"']([^\"']*)[\"']", re.S)
-
-
-class _Node:
-    """An element: tag as written, attributes, children (elements and text) and where it starts."""
-
-    __slots__ = ("tag", "attrs", "line", "column", "children", "namespaces")
-
-    def __init__(self, tag: str, attrs: dict[str, str], line: int, column: int, namespaces: dict[str, str]):
-        self.tag = tag
-        self.attrs = attrs
-        self.line = line
-        self.column = column
-        self.children: list[_Node | str] = []
-        self.namespaces = namespaces
-
-    @property
-    def local(self) -> str:
-        return self.tag.split(":", 1)[-1]
-
-    @property
-    def prefix(self) -> str | None:
-        return self.tag.split(":", 1)[0] if ":" in self.tag else None
-
-    def elements(self) -> list["_Node"]:
-        return [c for c in self.children if isinstance(c, _Node)]
-
-
-class _TreeBuilder:
-    """Builds :class:`_Node` trees from expat callbacks, recording where each element starts."""
-
-    def __init__(self, expat) -> None:
-        self.expat = expat
-        self.root: _Node | None = None
-        self.stack: list[_Node] = []
-
-    def start(self, name: str, attrs: dict[str, str]) -> None:
-        parent_ns = self.stack[-1].namespaces if self.stack else {}
-        namespaces = parent_ns
-        if any(key.startswith("xmlns") for key in attrs):
-            namespaces = dict(parent_ns)
-            plain = {}
-            for key, value in attrs.items():
-                if key == "xmlns":
-                    namespaces[""] = value
-                elif key.startswith("xmlns:"):
-                    namespaces[key[6:]] = value
-                else:
-                    plain[key] = value
-            attrs = plain
-        node = _Node(name, attrs, self.expat.CurrentLineNumber, self.expat.CurrentColumnNumber + 1, namespaces)
-        if self.stack:
-            self.stack[-1].children.append(node)
-        else:
-            self.root = node
-        self.stack.append(node)
-
-    def end(self, name: str) -> None:
-        self.stack.pop()
-
-    def text(self, content: str) -> None:
-        if self.stack:
-            children = self.stack[-1].children
-            if children and isinstance(children[-1], str):
-                children[-1] += content
-            else:
-                children.append(content)
-
-
-def _read_tree(text: str | bytes) -> _Node:
-    data = text.encode("utf-8") if isinstance(text, str) else text
-    # defusedxml's reader installs the handlers that refuse entity declarations and external
-    # references on its expat parser; the tree is built straight from that parser's callbacks.
-    reader = create_parser(forbid_dtd=False, forbid_entities=True, forbid_external=True)
-    reader.setFeature(xml.sax.handler.feature_namespaces, False)
-    reader.reset()
-    expat = reader._parser
-    builder = _TreeBuilder(expat)
-    expat.StartElementHandler = builder.start
-    expat.EndElementHandler = builder.end
-    expat.CharacterDataHandler = builder.text
-    expat.buffer_text = True
-    try:
-        expat.Parse(data, True)
-    except xml.parsers.expat.ExpatError as exc:
-        message = xml.parsers.expat.errors.messages.get(exc.code, str(exc))
-        raise BMLError(f"malformed XML: {message}", exc.lineno, exc.offset + 1) from None
-    except DefusedXmlException as exc:
-        raise BMLError(f"refused XML construct ({type(exc).__name__}): entity and external references "
-                       "are not allowed in BML", expat.CurrentLineNumber, expat.CurrentColumnNumber + 1) from None
-    if builder.root is None:
-        raise BMLError("empty document: expected a <bml> element", 1, 1)
-    return builder.root
 
 
 def guess_block_id(text: str | bytes) -> str:
@@ -148,22 +63,23 @@ def guess_block_id(text: str | bytes) -> str:
     return match.group(1) if match else ""
 
 
-def parse_ref(text: str, line: int | None = None, column: int | None = None) -> SyncRef:
+def parse_ref(text: str, line: int | None = None, column: int | None = None, lenient: bool = False) -> SyncRef:
     """Parse a sync reference: ``2.5``, ``g1:stroke``, ``g1:end+0.5``, ``bml2:g1:start-2``,
-    ``anticipators:metronome:beat3+0.1``. ``line`` and ``column`` locate it for error messages."""
+    ``anticipators:metronome:beat3+0.1``. ``line`` and ``column`` locate it for error messages; ``lenient``
+    also takes names that start with a digit (``s1:1``)."""
     try:
-        return _parse_ref(text.strip())
+        return _parse_ref(text.strip(), lenient)
     except BMLError as exc:
         raise BMLError(exc.reason, line, column) from None
 
 
 @functools.lru_cache(maxsize=65536)
-def _parse_ref(raw: str) -> SyncRef:
+def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
     if _ABSOLUTE.match(raw):
         value = float(raw)
         _check_magnitude(value, raw)
         return SyncRef("absolute", offset=value, text=raw)
-    match = _REF.match(raw)
+    match = _REF.match(raw) or (_LENIENT_REF.match(raw) if lenient else None)
     if not match:
         raise BMLError(f"invalid sync reference {raw!r}: expected a number, behaviour:sync[+-offset], "
                        "block:behaviour:sync or anticipators:id:sync")
@@ -178,35 +94,74 @@ def _parse_ref(raw: str) -> SyncRef:
     return SyncRef("sync", offset=offset, block=block, behaviour=parts[-2], sync=parts[-1], text=raw)
 
 
-def normalize_space(raw: str) -> tuple[str, list[int]]:
-    """Collapse runs of white space to one space and strip the ends.
-
-    Returns the new text and, for every offset into ``raw`` (0 to ``len(raw)``), the offset it maps to.
-    """
-    out: list[str] = []
-    positions = [0] * (len(raw) + 1)
-    after_space = True
-    for i, ch in enumerate(raw):
-        positions[i] = len(out)
-        if ch.isspace():
-            if not after_space:
-                out.append(" ")
-                after_space = True
-        else:
-            out.append(ch)
-            after_space = False
-    positions[len(raw)] = len(out)
-    return "".join(out).rstrip(), positions
-
-
 def _check_magnitude(value: float, raw: str) -> None:
     if not math.isfinite(value) or abs(value) > MAX_TIME:
         raise BMLError(f"time {raw!r} is out of range (at most {MAX_TIME:g} s)")
 
 
+@dataclass
+class Refused:
+    """A block of a document that cannot be used: its id (as far as it can be told) and why."""
+
+    block_id: str
+    error: BMLError
+
+
 def parse_bml(text: str | bytes) -> Block:
-    """Parse one BML block. Raises :class:`BMLError` if the block as a whole cannot be used."""
-    root = _read_tree(text)
+    """Parse one BML 1.0 block, strictly. Raises :class:`BMLError` if the block as a whole cannot be used."""
+    return read_block(read_tree(text), None)
+
+
+def parse_document(text: str | bytes, strict: bool = False,
+                   name_block: Callable[[], str] | None = None) -> list[Block | Refused]:
+    """The blocks of a document, in order, each parsed or refused.
+
+    ``strict``: one BML 1.0 block, read as :func:`parse_bml` reads it. Otherwise BML as other realizers
+    write it is read too (see :mod:`agentsim.bml.dialects`): a block that needed adapting carries one
+    ``NONSTANDARD_BML`` warning listing the adaptations, first among its warnings. ``name_block`` names the
+    blocks that have no id (by default ``bml1``, ``bml2``, ... skipping the ids the document uses).
+    """
+    if strict:
+        try:
+            return [parse_bml(text)]
+        except BMLError as exc:
+            return [Refused(guess_block_id(text), exc)]
+    try:
+        root, forest = read_forest(text)
+    except BMLError as exc:
+        return [Refused(guess_block_id(text), exc)]
+    envelopes = find_blocks(root, forest)
+    if not envelopes:
+        return [Refused(root.attrs.get("id", ""),
+                        BMLError(f"expected a <bml> element, found <{root.tag}>", root.line, root.column))]
+    taken = {e.node.attrs.get("id", "").strip() for e in envelopes}
+    names = iter(name_block, None) if name_block is not None else (f"bml{n}" for n in itertools.count(1))
+
+    def name_free() -> str:
+        return next(name for name in names if name not in taken)
+    results: list[Block | Refused] = []
+    for envelope in envelopes:
+        try:
+            Adapter(envelope, name_free).adapt()
+            block = read_block(envelope.node, envelope.notes)
+        except BMLError as exc:
+            results.append(Refused(envelope.node.attrs.get("id", ""), exc))
+            continue
+        if envelope.notes:
+            lines = envelope.notes.lines()
+            block.warnings.insert(0, ParseWarning(
+                "NONSTANDARD_BML", f"read as BML 1.0 with {len(lines)} adaptation{'s' if len(lines) > 1 else ''}: "
+                + "; ".join(lines), [], envelope.node.line, envelope.node.column, details=lines))
+        for message, node in envelope.losses:
+            block.warnings.append(ParseWarning("BEHAVIOR_TYPE_NOT_SUPPORTED", f"{message} ({node.where()})", [],
+                                               node.line, node.column))
+        results.append(block)
+    return results
+
+
+def read_block(root: Node, notes: Notes | None) -> Block:
+    """Read a ``<bml>`` element into a block: strictly if ``notes`` is None, else leniently (what the
+    reading adapts, such as a speech's text form, is added to ``notes``)."""
     if root.local != "bml":
         raise BMLError(f"expected a <bml> element, found <{root.tag}>", root.line, root.column)
     block_id = root.attrs.get("id", "").strip()
@@ -247,32 +202,31 @@ def parse_bml(text: str | bytes) -> Block:
                                                f"{field}; ignored", [], root.line, root.column))
             ids = tuple(i for i in ids if i != block_id)
         setattr(block, field, ids)
-    _Reader(block).read(root.elements(), required=False)
+    _Reader(block, notes).read(root.elements(), required=False)
     return block
 
 
 class _Reader:
-    """Reads the children of a <bml> (or <required>) element into a block."""
+    """Reads the children of a <bml> (or <required>) element into a block (leniently if ``notes`` is given:
+    the types only other realizers' BML maps to, and speech text in every form)."""
 
-    def __init__(self, block: Block):
+    def __init__(self, block: Block, notes: Notes | None):
         self.block = block
+        self.notes = notes
+        self.lenient = notes is not None
         self.seen: set[str] = set()
 
-    def warn(self, kind: str, text: str, node: _Node, behaviours: list[str] | None = None) -> None:
+    def warn(self, kind: str, text: str, node: Node, behaviours: list[str] | None = None) -> None:
         self.block.warnings.append(ParseWarning(kind, f"{text} (line {node.line}, column {node.column})",
                                                 behaviours or [], node.line, node.column))
 
-    def is_bml(self, node: _Node) -> bool:
-        uri = node.namespaces.get(node.prefix or "", None)
+    def is_bml(self, node: Node) -> bool:
+        uri = node.namespace
         return uri in (None, "", BML_NAMESPACE) if node.prefix is None else uri == BML_NAMESPACE
 
-    @staticmethod
-    def namespace(node: _Node) -> str | None:
-        return node.namespaces.get(node.prefix or "", None)
-
-    def read(self, nodes: list[_Node], required: bool) -> None:
+    def read(self, nodes: list[Node], required: bool) -> None:
         for node in nodes:
-            if node.local in EXTENSION_BEHAVIOURS.get(self.namespace(node), ()):
+            if node.local in EXTENSION_BEHAVIOURS.get(node.namespace, ()):
                 self.behaviour(node, required)
             elif not self.is_bml(node):
                 self.warn("BEHAVIOR_TYPE_NOT_SUPPORTED", f"extension element <{node.tag}> ignored", node)
@@ -280,13 +234,13 @@ class _Reader:
                 self.read(node.elements(), required=True)
             elif node.local == "constraint":
                 self.constraint(node, required)
-            elif node.local in CORE_BEHAVIOURS:
+            elif node.local in CORE_BEHAVIOURS or self.lenient and node.local in DIALECT_BEHAVIOURS:
                 self.behaviour(node, required)
             else:
                 self.warn("BEHAVIOR_TYPE_NOT_SUPPORTED", f"unknown behaviour <{node.tag}> ignored", node,
                           [node.attrs.get("id", "")] if node.attrs.get("id") else [])
 
-    def behaviour(self, node: _Node, required: bool) -> None:
+    def behaviour(self, node: Node, required: bool) -> None:
         kind = BEHAVIOUR_TYPES[node.local]
         bid = node.attrs.get("id", "").strip()
         if not bid:
@@ -310,7 +264,7 @@ class _Reader:
                 self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"attribute {key!r} of {bid} ignored", node, [bid])
             elif key in beh.sync_ids and key in kind.syncs:
                 try:
-                    beh.refs[key] = parse_ref(value, node.line, node.column)
+                    beh.refs[key] = parse_ref(value, node.line, node.column, self.lenient)
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{bid}: {exc.reason}; behaviour ignored", node, [bid])
                     return
@@ -319,7 +273,9 @@ class _Reader:
                           node, [bid])
                 return
         for child in node.elements():
-            extension = self.namespace(child) in EXTENSION_BEHAVIOURS
+            extension = child.namespace in EXTENSION_BEHAVIOURS
+            if kind.name == "speech" and self.lenient:
+                continue  # the speech reading took what it could, and said what it could not
             if child.local not in PARAMETER_CHILDREN and (self.is_bml(child) or extension):
                 self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"{bid}: child <{child.tag}> ignored", child, [bid])
             elif extension and child.local == "trajectory":
@@ -333,37 +289,24 @@ class _Reader:
             return
         self.block.behaviours.append(beh)
 
-    def speech_text(self, node: _Node, beh: Behaviour) -> bool:
-        texts = [c for c in node.elements() if c.local == "text"]
-        if not texts:
+    def speech_text(self, node: Node, beh: Behaviour) -> bool:
+        reading = read_speech(node, beh.id, self.lenient)
+        if reading is None:
             self.warn("PARSING_FAILURE", f"speech {beh.id} has no <text>; behaviour ignored", node, [beh.id])
             return False
-        raw = ""
-        marks: list[tuple[int, str]] = []
-        for child in texts[0].children:
-            if isinstance(child, str):
-                raw += child
-            elif child.local == "sync":
-                sid = child.attrs.get("id", "").strip()
-                if not sid:
-                    self.warn("PARSING_FAILURE", f"speech {beh.id}: <sync> without id ignored", child, [beh.id])
-                elif sid in beh.sync_ids:
-                    self.warn("PARSING_FAILURE", f"speech {beh.id}: duplicate sync id {sid!r} ignored", child,
-                              [beh.id])
-                elif ":" in sid:
-                    self.warn("PARSING_FAILURE", f"speech {beh.id}: sync id {sid!r} contains ':' and is ignored",
-                              child, [beh.id])
-                else:
-                    marks.append((len(raw), sid))
-                    beh.sync_ids.insert(len(beh.sync_ids) - 1, sid)
-        beh.text, positions = normalize_space(raw)
-        beh.marks = [(min(positions[offset], len(beh.text)), sid) for offset, sid in marks]
+        for message, where in reading.problems:
+            self.warn("PARSING_FAILURE", message, where, [beh.id])
+        if self.notes is not None:
+            self.notes.extend(reading.adapted)
+        for _, name in reading.marks:
+            beh.sync_ids.insert(len(beh.sync_ids) - 1, name)
+        beh.text, beh.marks, beh.prosody = reading.text, reading.marks, reading.prosody
         if not beh.text:
             self.warn("PARSING_FAILURE", f"speech {beh.id} has empty text; behaviour ignored", node, [beh.id])
             return False
         return True
 
-    def constraint(self, node: _Node, required: bool) -> None:
+    def constraint(self, node: Node, required: bool) -> None:
         for child in node.elements():
             kind = child.local
             if kind not in ("synchronize", "before", "after"):
@@ -375,13 +318,13 @@ class _Reader:
                     self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
                     continue
                 try:
-                    refs.append(parse_ref(sync.attrs["ref"], sync.line, sync.column))
+                    refs.append(parse_ref(sync.attrs["ref"], sync.line, sync.column, self.lenient))
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
             anchor = None
             if "ref" in child.attrs:
                 try:
-                    anchor = parse_ref(child.attrs["ref"], child.line, child.column)
+                    anchor = parse_ref(child.attrs["ref"], child.line, child.column, self.lenient)
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{exc.reason}; constraint ignored", child)
                     continue

@@ -27,7 +27,11 @@ def add_parsers(commands) -> None:
         description="Send each FILE as a BML block (at the --at times, default all at 0, in order), run until "
                     "every block has ended (or --until), and print the feedback to stdout, one JSON object "
                     "per line. Diagnostics go to stderr.")
-    realize.add_argument("files", nargs="+", metavar="FILE", help="BML 1.0 files ('-' reads standard input)")
+    realize.add_argument("files", nargs="+", metavar="FILE",
+                         help="BML files ('-' reads standard input): BML 1.0, or BML written for Greta, SmartBody, "
+                              "the Virtual Human Toolkit, EMBR or the BML drafts (each adaptation is reported)")
+    realize.add_argument("--strict", action="store_true",
+                         help="read pure BML 1.0 only (one block a file; no adaptation of other dialects)")
     realize.add_argument("--at", type=_times, metavar="T1,T2,...", help="submission time of each file (seconds)")
     realize.add_argument("--until", type=float, metavar="SECONDS", help="stop the run at this simulated time")
     realize.add_argument("--realtime", action="store_true", help="run in real time instead of simulated time")
@@ -71,7 +75,7 @@ def realize_files(args: argparse.Namespace) -> int:
     if args.until is not None and not args.until >= 0:
         raise UsageError("--until must be a non-negative number of seconds")
     options.check_fps(args)
-    realizer = Realizer(realtime=args.realtime, anticipators=options.anticipators(args))
+    realizer = Realizer(realtime=args.realtime, anticipators=options.anticipators(args), strict=args.strict)
     out = sys.stdout
 
     def emit(feedback):

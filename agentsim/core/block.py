@@ -97,6 +97,8 @@ class ParseWarning:
     behaviours: list[str] = field(default_factory=list)
     line: int | None = None
     column: int | None = None
+    #: the list of what it says, one item each (a NONSTANDARD_BML warning's adaptations)
+    details: list[str] = field(default_factory=list)
 
 
 @dataclass

@@ -20,6 +20,8 @@ WARNING_TYPES = (
     "BEHAVIOR_TYPE_NOT_SUPPORTED",
     "CUSTOM_ATTRIBUTE_NOT_SUPPORTED",
     "INTERRUPTED",
+    # not in BML 1.0: the block was written for another realizer, and read with these adaptations
+    "NONSTANDARD_BML",
 )
 
 
@@ -35,8 +37,10 @@ def sync_point_progress(block_id: str, behaviour_id: str, sync_id: str, time: fl
 
 
 def warning(target_id: str, warning_type: str, description: str, global_time: float, character_id: str,
-            modified: Iterable[str] = (), line: int | None = None, column: int | None = None) -> Feedback:
-    """A warning about a block or behaviour; ``line`` and ``column`` locate it in the BML source if known."""
+            modified: Iterable[str] = (), line: int | None = None, column: int | None = None,
+            adaptations: Iterable[str] = ()) -> Feedback:
+    """A warning about a block or behaviour; ``line`` and ``column`` locate it in the BML source if known;
+    a ``NONSTANDARD_BML`` warning lists its ``adaptations``."""
     if warning_type not in WARNING_TYPES:
         raise ValueError(f"unknown warning type {warning_type!r}")
     feedback = {"type": "warningFeedback", "id": target_id, "warningType": warning_type,
@@ -44,6 +48,9 @@ def warning(target_id: str, warning_type: str, description: str, global_time: fl
                 "characterId": character_id}
     if line is not None:
         feedback["line"], feedback["column"] = line, column
+    adaptations = list(adaptations)
+    if adaptations:
+        feedback["adaptations"] = adaptations
     return feedback
 
 

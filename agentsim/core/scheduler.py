@@ -122,8 +122,9 @@ class Scheduler(Composition, Interruption, Retiming):
 
     # ------------------------------------------------------------------ submission
     def warn(self, target: str, kind: str, description: str, character: str, modified=(),
-             line: int | None = None, column: int | None = None) -> None:
-        self.log.send(fb.warning(target, kind, description, self.env.now, character, modified, line, column))
+             line: int | None = None, column: int | None = None, adaptations=()) -> None:
+        self.log.send(fb.warning(target, kind, description, self.env.now, character, modified, line, column,
+                                 adaptations))
 
     def submit(self, block: Block, source: str = "") -> BlockRun | None:
         """Submit one parsed block now. Returns its run, or None if it was refused."""
@@ -131,7 +132,7 @@ class Scheduler(Composition, Interruption, Retiming):
         character = block.character_id
         for w in block.warnings:
             target = f"{block.id}:{w.behaviours[0]}" if w.behaviours else block.id
-            self.warn(target, w.warning_type, w.description, character, w.behaviours, w.line, w.column)
+            self.warn(target, w.warning_type, w.description, character, w.behaviours, w.line, w.column, w.details)
         if any(r.id == block.id for r in self.runs):
             self.warn(block.id, "PARSING_FAILURE", f"block refused{where}: a block with id {block.id!r} is "
                       "already pending or running", character)

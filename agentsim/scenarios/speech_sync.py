@@ -13,7 +13,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from agentsim.bml.parser import normalize_space
+from agentsim.bml.speech_text import normalize_space
 from agentsim.core.errors import AgentsimError
 from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer

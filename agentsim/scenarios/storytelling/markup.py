@@ -45,7 +45,7 @@ from xml.sax.saxutils import escape, quoteattr
 from agentsim.animation.arms import GESTURE_FORMS
 from agentsim.animation.pose import FACE_LEXEMES
 from agentsim.animation.scene import DEFAULT_SCENE
-from agentsim.bml.parser import normalize_space
+from agentsim.bml.speech_text import normalize_space
 from agentsim.bml.vocabulary import BML_NAMESPACE
 from agentsim.core.errors import AgentsimError
 from agentsim.speech.backend import Utterance

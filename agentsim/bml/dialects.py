@@ -1,0 +1,528 @@
+"""BML as other realizers write it, read as BML 1.0: the lenient reader's adaptations of an element tree.
+
+Greta, SmartBody, the Virtual Human Toolkit (NVBG), EMBR, SEMAINE and the BML drafts write BML that BML 1.0
+does not accept: blocks in envelopes (``<act>``, ``<fml-apml>``) or several in one file, blocks and
+behaviours without ids, the draft namespace, draft attribute names (``type=`` for the lexeme,
+``rotation``, ``stroke_start``), negative start times, and behaviours of their own (``<animation>``,
+``<lips>``, ``<saccade>``, ...). :func:`find_blocks` finds the blocks of a document and
+:class:`Adapter` rewrites one block's tree into BML 1.0 (and the few types BML 1.0 lacks, see
+:data:`~agentsim.bml.vocabulary.DIALECT_BEHAVIOURS`), noting every adaptation, so that the strict reader
+can read it. What has no mapping is taken out and reported, one report per kind of element.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+from agentsim.animation.arms import GESTURE_FORMS
+from agentsim.animation.pose import POSTURES
+from agentsim.bml.tree import FOREST, Node
+from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLT_NAMESPACE, DIALECT_BEHAVIOURS,
+                                     EXTENSION_BEHAVIOURS)
+from agentsim.core.block import BEHAVIOUR_TYPES
+
+#: The namespace of the BML drafts before 1.0 (Greta, SEMAINE, the Vienna draft), read as BML 1.0.
+DRAFT_NAMESPACES = ("http://www.mindmakers.org/projects/BML", "http://www.mindmakers.org/projects/bml",
+                    "http://www.mindmakers.org/projects/BML/", "http://www.mindmakers.org/projects/bml/")
+#: Sync point names as every type of behaviour spells them, by a spelling folded to lower case without
+#: underscores or hyphens (``stroke_start``, ``strokeENd`` and ``STROKE`` are strokeStart, strokeEnd, stroke).
+SYNC_SPELLINGS = {s.lower(): s for t in BEHAVIOUR_TYPES.values() for s in t.syncs}
+#: Behaviour types whose ``type=`` attribute the drafts used for the lexeme.
+TYPE_IS_LEXEME = {"gesture", "head", "face", "faceLexeme", "posture", "postureShift", "faceShift"}
+#: Elements of other realizers that have no counterpart here (taken out, reported once per block).
+UNMAPPED_HINTS = {
+    "blend": "SmartBody's parametric blend of animation clips",
+    "reach": "SmartBody's reaching for an object",
+    "constraint": "SmartBody's joint constraint",
+    "states": "SmartBody's animation state machine",
+    "bodyreach": "SmartBody's reaching for an object",
+    "grab": "SmartBody's grasping",
+    "noise": "SmartBody's joint noise",
+    "interrupt": "SmartBody's interrupt (use bmla:interrupt)",
+    "sbm:command": "a SmartBody command",
+    "fml": "FML is the intent behind behaviour, not behaviour",
+}
+#: Words in the names of SmartBody/NVBG animation clips, and the gesture lexeme each is closest to.
+CLIP_WORDS = (("beat", "BEAT"), ("chop", "CHOP"), ("offer", "OFFER"), ("palm", "OFFER"), ("you", "OFFER"),
+              ("present", "OFFER"), ("point", "POINT_DOWN"), ("indicat", "POINT_DOWN"), ("there", "POINT_DOWN"))
+#: The direction of a saccade (degrees, counter-clockwise from the character's right) in BML's names.
+SACCADE_DIRECTIONS = ("LEFT", "UPLEFT", "UP", "UPRIGHT", "RIGHT", "DOWNRIGHT", "DOWN", "DOWNLEFT")
+#: SmartBody's sbm:joint-range, by its highest joint, as BML's gaze influence.
+JOINT_RANGE = (("BACK", "TORSO"), ("CHEST", "TORSO"), ("NECK", "NECK"), ("HEAD", "HEAD"), ("EYES", "EYES"))
+#: Elements of BMLA and BMLT, which only count in their own namespaces.
+EXTENSION_LOCALS = set().union(*EXTENSION_BEHAVIOURS.values())
+_NUMBER = re.compile(r"^\s*[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\s*$")
+_REF_SYNC = re.compile(r"^(?P<path>.*:)(?P<sync>[^:+\-\s]+)(?P<rest>\s*(?:[+-].*)?)$")
+
+
+@dataclass
+class Notes:
+    """What was adapted, in order, each said once (with how many times it happened)."""
+
+    counts: dict[str, int] = field(default_factory=dict)
+
+    def add(self, note: str) -> None:
+        self.counts[note] = self.counts.get(note, 0) + 1
+
+    def extend(self, notes) -> None:
+        for note in notes:
+            self.add(note)
+
+    def __bool__(self) -> bool:
+        return bool(self.counts)
+
+    def lines(self) -> list[str]:
+        return [note if n == 1 else f"{note} ({n} times)" for note, n in self.counts.items()]
+
+
+@dataclass
+class Envelope:
+    """A ``<bml>`` found in a document: the element, what its envelope said, and what could not be used."""
+
+    node: Node
+    notes: Notes = field(default_factory=Notes)
+    character: str | None = None
+    losses: list[tuple[str, Node]] = field(default_factory=list)
+
+
+def is_smartbody(prefix: str, uri: str | None) -> bool:
+    """Whether an attribute prefix is SmartBody's (``sbm:``, declared as ict.usc.edu or not declared at all);
+    attributes of other namespaces are BML 1.0 extensions, reported as such by the strict reader."""
+    return uri is not None and "ict.usc.edu" in uri or uri is None and prefix == "sbm"
+
+
+def is_bml_uri(uri: str | None) -> bool:
+    return uri in (None, "", BML_NAMESPACE) or uri in DRAFT_NAMESPACES
+
+
+def find_blocks(root: Node, forest: bool) -> list[Envelope]:
+    """The ``<bml>`` blocks of a document, in order: the root itself, those of an ``<act>`` (VHT/NVBG: its
+    ``<participant>`` is the character) or ``<fml-apml>`` (Greta: the ``<fml>`` part is reported), or
+    several written one after another. Empty if there is none."""
+    if root.local == "bml":
+        return [Envelope(root)]
+    found: list[Envelope] = []
+    if root.tag == FOREST:
+        tops = root.elements()
+        blocks = sum(1 for top in tops if top.local == "bml")
+        for top in tops:
+            if top.local == "bml":
+                envelope = Envelope(top)
+                if blocks > 1:
+                    envelope.notes.add(f"{blocks} <bml> blocks in one document: each realized as a block, in order")
+                found.append(envelope)
+            else:
+                found.extend(find_blocks(top, False))
+        return found
+    character = None
+    losses: list[tuple[str, Node]] = []
+    for child in root.elements():
+        if child.local == "participant" and child.attrs.get("id", "").strip():
+            if child.attrs.get("role", "actor") == "actor" or character is None:
+                character = child.attrs["id"].strip()
+        elif child.local == "bml":
+            found.append(Envelope(child))
+        elif child.local == "fml":
+            losses.append((f"the <fml> part of <{root.tag}> is not supported: {UNMAPPED_HINTS['fml']}; only its "
+                           "<bml> is realized", child))
+        else:
+            inner = find_blocks(child, False)
+            if inner:
+                found.extend(inner)
+            else:
+                losses.append((f"<{child.tag}> in <{root.tag}> is not BML and is ignored", child))
+    for envelope in found:
+        envelope.notes.add(f"envelope <{root.tag}>: the <bml> inside it realized as a block")
+        if character:
+            envelope.character = character
+        envelope.losses = losses + envelope.losses
+        losses = []  # reported with the first block only
+    return found
+
+
+class Adapter:
+    """Rewrites one block's element tree into BML 1.0 as the strict reader reads it, noting each change.
+
+    ``name_block`` gives an id to a block without one.
+    """
+
+    def __init__(self, envelope: Envelope, name_block):
+        self.envelope = envelope
+        self.node = envelope.node
+        self.notes = envelope.notes
+        self.losses = envelope.losses
+        self.name_block = name_block
+        self.unmapped: dict[str, list[Node]] = {}
+        self.clips: dict[str, str] = {}
+        self.curves: list[Node] = []
+        self.prosody: list[Node] = []
+
+    # ------------------------------------------------------------------------------------------- the block
+    def adapt(self) -> None:
+        node = self.node
+        self.read_namespaces(node)
+        if not node.attrs.get("id", "").strip():
+            node.attrs["id"] = self.name_block()
+            self.notes.add(f"block without id: named {node.attrs['id']}")
+        if self.envelope.character and not node.attrs.get("characterId"):
+            node.attrs["characterId"] = self.envelope.character
+            self.notes.add(f"character {self.envelope.character!r} taken from the <participant> of the envelope")
+        for key in ("character", "characterid", "agent"):
+            if key in node.attrs and "characterId" not in node.attrs:
+                node.attrs["characterId"] = node.attrs.pop(key)
+                self.notes.add(f"<bml {key}=...> read as characterId")
+        behaviours = self.behaviours(node)
+        self.name_behaviours(behaviours)
+        self.shift_negative_times(behaviours)
+        speeches = [b for b in behaviours if b.tag == "speech"]
+        for curves in self.curves:
+            if speeches and not self.sync_keys(curves):
+                curves.attrs["start"] = f"{speeches[0].attrs['id']}:start"
+                self.notes.add("<curves> without a time start with the speech (their keys are times in it)")
+        self.move_prosody(speeches)
+        if self.clips:
+            shown = ", ".join(f"{name!r} as {lexeme}" for name, lexeme in list(self.clips.items())[:6])
+            more = f" and {len(self.clips) - 6} more" if len(self.clips) > 6 else ""
+            self.notes.add(f"SmartBody/NVBG <animation> clips played as the closest gesture: {shown}{more}")
+        for name, nodes in self.unmapped.items():
+            hint = UNMAPPED_HINTS.get(name, UNMAPPED_HINTS.get(name.split(":")[-1], "no counterpart here"))
+            count = f"{len(nodes)} <{name}> elements" if len(nodes) > 1 else f"<{name}>"
+            self.losses.append((f"{count}: {hint}; not realized", nodes[0]))
+
+    def read_namespaces(self, node: Node) -> None:
+        """The draft namespace is read as BML 1.0 (in every element's declarations)."""
+        changed: dict[int, dict[str, str]] = {}
+        drafts: set[str] = set()
+
+        def visit(n: Node) -> None:
+            if id(n.namespaces) not in changed:
+                mapping = n.namespaces
+                if any(uri in DRAFT_NAMESPACES for uri in mapping.values()):
+                    drafts.update(uri for uri in mapping.values() if uri in DRAFT_NAMESPACES)
+                    mapping = {p: (BML_NAMESPACE if uri in DRAFT_NAMESPACES else uri) for p, uri in mapping.items()}
+                changed[id(n.namespaces)] = mapping
+            n.namespaces = changed[id(n.namespaces)]
+            for child in n.elements():
+                visit(child)
+
+        visit(node)
+        for uri in sorted(drafts):
+            self.notes.add(f"namespace {uri} (a BML draft) read as BML 1.0")
+
+    def behaviours(self, parent: Node) -> list[Node]:
+        """Map the behaviour elements under ``parent`` (and its ``<required>``) in place; returns them."""
+        kept: list[Node | str] = []
+        found: list[Node] = []
+        for child in parent.children:
+            if isinstance(child, str):
+                kept.append(child)
+                continue
+            uri = child.namespace
+            if child.local == "required" and is_bml_uri(uri):
+                found.extend(self.behaviours(child))
+                kept.append(child)
+            elif child.local == "constraint" and is_bml_uri(uri) and child.elements() and all(
+                    c.local in ("synchronize", "before", "after") for c in child.elements()):
+                self.constraint_refs(child)
+                kept.append(child)
+            elif uri in EXTENSION_BEHAVIOURS and child.local in EXTENSION_BEHAVIOURS[uri]:
+                self.sync_attributes(child)
+                found.append(child)
+                kept.append(child)
+            elif child.local in ("pitchaccent", "boundary"):
+                self.prosody.append(child)  # Greta's: they belong to the speech they name
+            elif self.map_element(child):
+                found.append(child)
+                kept.append(child)
+            else:
+                self.unmapped.setdefault(child.tag, []).append(child)
+        parent.children = kept
+        return found
+
+    # ------------------------------------------------------------------------------------------- elements
+    def map_element(self, node: Node) -> bool:
+        """Rewrite one behaviour element into a type we have; False if it has no mapping."""
+        local = node.local
+        mapped = getattr(self, f"map_{local.replace('-', '_')}", None)
+        if local in BEHAVIOUR_TYPES and local not in DIALECT_BEHAVIOURS and local not in EXTENSION_LOCALS:
+            if not is_bml_uri(node.namespace):
+                self.notes.add(f"<{node.tag}> (namespace {node.namespace or 'undeclared'}) read as BML <{local}>")
+            new = self.core(node)
+        elif mapped is not None:
+            new = mapped(node)
+            if new is None:
+                return False
+        else:
+            return False
+        self.make_bml(node, new)
+        self.attributes(node)
+        return True
+
+    def make_bml(self, node: Node, new_type: str) -> None:
+        if node.tag != new_type or node.namespace not in (None, "", BML_NAMESPACE):
+            node.namespaces = {**node.namespaces, "": BML_NAMESPACE}
+        node.tag = new_type
+
+    def core(self, node: Node) -> str:
+        """A BML 1.0 element, perhaps with draft attributes."""
+        local, attrs = node.local, node.attrs
+        kind = attrs.get("type", "").strip()
+        if local == "gesture" and kind.upper() in ("POINT", "POINTING", "DEICTIC") and "lexeme" not in attrs:
+            attrs.pop("type")
+            self.notes.add("<gesture type=\"POINT\"> (a draft) read as <pointing>")
+            return "pointing"
+        if local == "face" and kind.lower() == "facs":
+            attrs.pop("type")
+            self.notes.add("<face type=\"facs\" au=...> read as <faceFacs>")
+            return "faceFacs"
+        if local == "head" and kind.upper() == "ORIENT":
+            attrs.pop("type")
+            attrs.setdefault("target", (attrs.get("direction") or "").lower() or "user")
+            self.notes.add("<head type=\"ORIENT\"> read as <headDirectionShift>")
+            return "headDirectionShift"
+        if local == "gaze" and kind:
+            attrs.pop("type")
+            self.notes.add("<gaze type=...> (a draft) not needed in BML 1.0; ignored")
+        return local
+
+    def map_animation(self, node: Node) -> str:
+        """SmartBody/NVBG ``<animation name>``: a gesture of the closest lexeme, or a beat, timing kept."""
+        name = node.attrs.pop("name", "")
+        low = name.lower()
+        lexeme = next((lex for word, lex in CLIP_WORDS if word in low and lex in GESTURE_FORMS), "BEAT")
+        node.attrs.setdefault("lexeme", lexeme)
+        self.clips[name] = lexeme
+        for key in ("speed", "ref"):
+            node.attrs.pop(key, None)
+        return "gesture"
+
+    def map_body(self, node: Node) -> str | None:
+        """SmartBody's ``<body posture>``: a posture shift (a lean if the clip's name says so, else a weight
+        shift)."""
+        name = node.attrs.pop("posture", None)
+        if name is None:
+            return None
+        low = name.lower().replace("_", "")
+        lexeme = next((p for p in POSTURES if p.lower().replace("_", "") in low), "WEIGHT_SHIFT")
+        node.attrs.setdefault("lexeme", lexeme)
+        self.notes.add(f"<body posture={name!r}> played as a posture shift ({lexeme})")
+        return "postureShift"
+
+    def map_torso(self, node: Node) -> str:
+        """Greta's ``<torso>``: a posture shift."""
+        self.notes.add("Greta's <torso> played as a posture shift")
+        lexeme = node.attrs.pop("lexeme", "") or node.attrs.pop("type", "")
+        reference = next((c.text().strip() for c in node.elements() if c.local == "description"), "")
+        low = (lexeme + " " + reference).lower().replace("_", "").replace("=", "")
+        node.attrs["lexeme"] = next((p for p in POSTURES if p.lower().replace("_", "") in low), "WEIGHT_SHIFT")
+        return "postureShift"
+
+    def map_saccade(self, node: Node) -> str | None:
+        """SmartBody's ``<saccade direction magnitude duration>``: a short gaze of the eyes, that far off
+        ahead. A saccade model (``mode=listen|talk|think``) has no mapping."""
+        if "mode" in node.attrs and "magnitude" not in node.attrs:
+            return None
+        attrs = node.attrs
+        try:
+            direction = float(attrs.pop("direction", "0"))
+            magnitude = float(attrs.pop("magnitude", "5"))
+        except ValueError:
+            return None
+        attrs.pop("duration", None)
+        attrs.setdefault("target", "user")
+        attrs.setdefault("influence", "EYES")
+        attrs["offsetAngle"] = f"{abs(magnitude):g}"
+        sector = int(((180.0 - direction) % 360.0 + 22.5) // 45.0) % 8
+        attrs["offsetDirection"] = SACCADE_DIRECTIONS[sector]
+        self.notes.add("SmartBody's <saccade> played as a gaze of the eyes")
+        return "gaze"
+
+    def move_prosody(self, speeches: list[Node]) -> None:
+        """Greta's pitch accents and boundaries go into the speech whose time markers they name, where the
+        speech reading turns them into emphasis and pauses."""
+        by_id = {s.attrs["id"]: s for s in speeches}
+        for node in self.prosody:
+            ref = node.attrs.get("start", "") or node.attrs.get("end", "")
+            owner = by_id.get(ref.split(":", 1)[0]) if ":" in ref else (speeches[0] if len(speeches) == 1 else None)
+            if owner is None:
+                self.losses.append((f"<{node.tag}>: it names no time marker of a speech in this block; not "
+                                    "realized", node))
+            else:
+                owner.children.append(node)
+
+    def map_lips(self, node: Node) -> str:
+        self.notes.add("SmartBody's <lips viseme> played as visemes on the jaw and lips")
+        return "lips"
+
+    def map_event(self, node: Node) -> str:
+        """SmartBody's ``<event message>``: a sync point without motion, at the time it names."""
+        attrs = node.attrs
+        for key in ("stroke", "ready", "relax", "time"):
+            if key in attrs and "start" not in attrs:
+                attrs["start"] = attrs.pop(key)
+            attrs.pop(key, None)
+        self.notes.add("SmartBody's <event> realized as a sync point without motion (start = end)")
+        return "event"
+
+    def map_curves(self, node: Node) -> str | None:
+        """SmartBody's ``<curves>`` of ``<curve name num_keys>t v in out ...</curve>``: face channels."""
+        params: list[Node] = []
+        for curve in node.elements():
+            name = curve.attrs.get("name", "").strip()
+            try:
+                numbers = [float(x) for x in curve.text().split()]
+            except ValueError:
+                self.losses.append((f"<curve name={name!r}>: its keys are not numbers; not realized", curve))
+                continue
+            keys = int(float(curve.attrs.get("num_keys", "0") or 0))
+            step = 4 if keys and len(numbers) == 4 * keys else 2
+            pairs = [(numbers[i], numbers[i + 1]) for i in range(0, len(numbers) - 1, step)]
+            if not name or not pairs:
+                continue
+            value = " ".join(f"{t:g} {v:g}" for t, v in pairs)
+            params.append(Node("parameter", {"name": f"curve:{name}", "value": value}, curve.line, curve.column,
+                               {"": BMLT_NAMESPACE}))
+        node.children = list(params)
+        self.notes.add("SmartBody's <curves> played as keyframed jaw and lip channels" if params else
+                       "an empty <curves> realized as a face motion without keys")
+        self.curves.append(node)
+        return "curves"
+
+    # ------------------------------------------------------------------------------------------- attributes
+    def attributes(self, node: Node) -> None:
+        attrs = node.attrs
+        kind = node.tag
+        if kind in TYPE_IS_LEXEME and attrs.get("type", "").strip() and not attrs.get("lexeme", "").strip():
+            attrs["lexeme"] = attrs.pop("type").strip().upper()
+            self.notes.add("draft attribute type= read as the lexeme")
+        if kind == "head":
+            for key in ("rotation", "action"):
+                value = attrs.get(key, "").strip()
+                if key == "rotation" and value and not attrs.get("lexeme"):
+                    attrs["lexeme"] = attrs.pop(key).upper()
+                    self.notes.add("draft attribute rotation= read as the lexeme of the head movement")
+                elif key in attrs:
+                    attrs.pop(key)
+                    self.notes.add(f"draft attribute {key}={value!r} of <head> not needed; ignored")
+            if "repeats" in attrs and "repetition" not in attrs:
+                attrs["repetition"] = attrs.pop("repeats")
+                self.notes.add("repeats= read as repetition")
+        if kind in ("gaze", "gazeShift", "pointing", "headDirectionShift"):
+            for old, new in (("direction", "offsetDirection"), ("angle", "offsetAngle")):
+                if old in attrs and new not in attrs:
+                    attrs[new] = attrs.pop(old)
+                    self.notes.add(f"draft attribute {old}= read as {new}")
+        for key in list(attrs):
+            if key in ("agent", "character"):
+                attrs.pop(key)
+                self.notes.add(f"per-behaviour {key}= ignored: every behaviour plays on its block's character")
+            elif ":" in key:
+                prefix = key.split(":", 1)[0]
+                if key == "sbm:joint-range" and kind in ("gaze", "gazeShift"):
+                    value = attrs.pop(key).upper()
+                    influence = next((inf for joint, inf in JOINT_RANGE if joint in value), None)
+                    if influence:
+                        attrs.setdefault("influence", influence)
+                        self.notes.add("sbm:joint-range read as the gaze influence")
+                elif is_smartbody(prefix, node.namespaces.get(prefix)):
+                    attrs.pop(key)
+                    self.notes.add(f"SmartBody attribute {key} ignored")
+        if kind == "speech":
+            for key in ("ready", "stroke", "relax", "strokeStart", "strokeEnd"):
+                if key in attrs:
+                    attrs.pop(key)
+                    self.notes.add(f"speech attribute {key}= (NVBG) ignored: a speech has only start and end")
+        self.sync_attributes(node)
+
+    def sync_attributes(self, node: Node) -> None:
+        """Sync point names as the drafts and EMBR spell them (``stroke_start``, ``strokeENd``), in the
+        attributes and in the references."""
+        syncs = BEHAVIOUR_TYPES[node.local].syncs if node.local in BEHAVIOUR_TYPES else ()
+        for key in list(node.attrs):
+            canonical = SYNC_SPELLINGS.get(key.lower().replace("_", "").replace("-", ""))
+            if canonical and canonical != key and canonical in syncs and canonical not in node.attrs:
+                node.attrs[canonical] = node.attrs.pop(key)
+                self.notes.add(f"sync point {key} read as {canonical}")
+                key = canonical
+            if key in syncs:
+                node.attrs[key] = self.ref(node.attrs[key])
+
+    def constraint_refs(self, node: Node) -> None:
+        for child in node.elements():
+            if "ref" in child.attrs:
+                child.attrs["ref"] = self.ref(child.attrs["ref"])
+            for sync in child.elements():
+                if "ref" in sync.attrs:
+                    sync.attrs["ref"] = self.ref(sync.attrs["ref"])
+
+    def ref(self, value: str) -> str:
+        match = _REF_SYNC.match(value.strip())
+        if not match:
+            return value
+        sync = match.group("sync")
+        canonical = SYNC_SPELLINGS.get(sync.lower().replace("_", "").replace("-", ""))
+        if canonical and canonical != sync:
+            self.notes.add(f"sync point {sync} read as {canonical}")
+            return f"{match.group('path')}{canonical}{match.group('rest')}"
+        return value
+
+    # ------------------------------------------------------------------------------------------- ids, times
+    def name_behaviours(self, behaviours: list[Node]) -> None:
+        """Behaviours without id are named ``<element><n>`` (n counts the element's id-less ones from 1,
+        skipping ids in use); a repeated id becomes ``<id>_<k>`` (k from 2)."""
+        used = {b.attrs["id"].strip() for b in behaviours if b.attrs.get("id", "").strip()}
+        counters: dict[str, int] = {}
+        seen: set[str] = set()
+        named: list[str] = []
+        for b in behaviours:
+            bid = b.attrs.get("id", "").strip()
+            if not bid:
+                n = counters.get(b.local, 0)
+                while True:
+                    n += 1
+                    bid = f"{b.local}{n}"
+                    if bid not in used:
+                        break
+                counters[b.local] = n
+                used.add(bid)
+                b.attrs["id"] = bid
+                named.append(bid)
+            elif bid in seen:
+                k = 2
+                while f"{bid}_{k}" in used:
+                    k += 1
+                new = f"{bid}_{k}"
+                used.add(new)
+                b.attrs["id"] = new
+                self.notes.add(f"duplicate behaviour id {bid!r} renamed {new!r} (references to {bid!r} mean "
+                               "the first)")
+                bid = new
+            seen.add(bid)
+        if named:
+            shown = ", ".join(named[:8]) + (f" and {len(named) - 8} more" if len(named) > 8 else "")
+            self.notes.add(f"{len(named)} behaviour{'s' if len(named) > 1 else ''} without id named by element and "
+                           f"number: {shown}")
+
+    def shift_negative_times(self, behaviours: list[Node]) -> None:
+        """Greta writes times before the block's start (``start="-0.2"``) and plays the block later by as
+        much: every number in the block moves later by the earliest's distance before 0, and behaviours
+        that had no time of their own start at that time."""
+        numbers = [(b, key) for b in behaviours for key in self.sync_keys(b) if _NUMBER.match(b.attrs[key])]
+        earliest = min((float(b.attrs[key]) for b, key in numbers), default=0.0)
+        if not earliest < 0 or not math.isfinite(earliest):
+            return
+        shift = -earliest
+        for b, key in numbers:
+            b.attrs[key] = f"{float(b.attrs[key]) + shift:g}"
+        for b in behaviours:
+            if not self.sync_keys(b) and b.local not in ("interrupt", "activate"):
+                b.attrs["start"] = f"{shift:g}"
+        self.notes.add(f"times before the block start (earliest {earliest:g} s): the whole block plays {shift:g} s "
+                       "later, its relative timing kept")
+
+    @staticmethod
+    def sync_keys(node: Node) -> list[str]:
+        syncs = BEHAVIOUR_TYPES[node.local].syncs if node.local in BEHAVIOUR_TYPES else ()
+        return [k for k in node.attrs if k in syncs]
