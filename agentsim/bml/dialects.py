@@ -21,7 +21,8 @@ from agentsim.animation.pose import POSTURES
 from agentsim.bml.tree import FOREST, Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLT_NAMESPACE, DIALECT_BEHAVIOURS,
                                      EXTENSION_BEHAVIOURS)
-from agentsim.core.block import BEHAVIOUR_TYPES
+from agentsim.animation.units import motion_unit
+from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour
 
 #: The namespace of the BML drafts before 1.0 (Greta, SEMAINE, the Vienna draft), read as BML 1.0.
 DRAFT_NAMESPACES = ("http://www.mindmakers.org/projects/BML", "http://www.mindmakers.org/projects/bml",
@@ -44,6 +45,15 @@ UNMAPPED_HINTS = {
     "sbm:command": "a SmartBody command",
     "fml": "FML is the intent behind behaviour, not behaviour",
 }
+#: Lexemes of head movements, which EMBR writes as gestures.
+HEAD_LEXEMES = ("NOD", "SHAKE", "TILT")
+#: What drafts, Greta and EMBR call facial expressions, as our face lexemes.
+EXPRESSIONS = {"happy": "SMILE", "joy": "SMILE", "smile": "SMILE", "angry": "FROWN", "anger": "FROWN",
+               "surprised": "SURPRISE", "surprise": "SURPRISE", "sad": "LOWER_BROWS", "sadness": "LOWER_BROWS",
+               "afraid": "WIDEN_EYES", "fear": "WIDEN_EYES", "eyebrows": "RAISE_BROWS", "disgusted": "FROWN",
+               "disgust": "FROWN", "sceptical": "FROWN", "skeptical": "FROWN", "neutral": "NEUTRAL"}
+#: Greta's deictic lexicon (``DEICTIC=YOU``) as scene targets.
+DEICTIC_TARGETS = {"YOU": "user", "THERE": "left", "HERE": "down", "UP": "up", "DOWN": "down"}
 #: Words in the names of SmartBody/NVBG animation clips, and the gesture lexeme each is closest to.
 CLIP_WORDS = (("beat", "BEAT"), ("chop", "CHOP"), ("offer", "OFFER"), ("palm", "OFFER"), ("you", "OFFER"),
               ("present", "OFFER"), ("point", "POINT_DOWN"), ("indicat", "POINT_DOWN"), ("there", "POINT_DOWN"))
@@ -51,6 +61,15 @@ CLIP_WORDS = (("beat", "BEAT"), ("chop", "CHOP"), ("offer", "OFFER"), ("palm", "
 SACCADE_DIRECTIONS = ("LEFT", "UPLEFT", "UP", "UPRIGHT", "RIGHT", "DOWNRIGHT", "DOWN", "DOWNLEFT")
 #: SmartBody's sbm:joint-range, by its highest joint, as BML's gaze influence.
 JOINT_RANGE = (("BACK", "TORSO"), ("CHEST", "TORSO"), ("NECK", "NECK"), ("HEAD", "HEAD"), ("EYES", "EYES"))
+#: Sync points as SmartBody and EMBR name them on behaviours that do not have them, by behaviour type.
+FACE_ALIASES = {"ready": "attackPeak", "stroke": "attackPeak", "strokeStart": "attackPeak", "strokeEnd": "relax"}
+SYNC_ALIASES = {
+    "face": FACE_ALIASES, "faceLexeme": FACE_ALIASES, "faceFacs": FACE_ALIASES,
+    "gaze": {"stroke": "ready", "strokeStart": "ready", "strokeEnd": "relax"},
+    "posture": {"stroke": "ready", "strokeStart": "ready", "strokeEnd": "relax"},
+    "lips": {"stroke": "ready"},
+    "speech": {"ready": "start", "stroke": "start", "strokeStart": "start", "relax": "end", "strokeEnd": "end"},
+}
 #: Elements of BMLA and BMLT, which only count in their own namespaces.
 EXTENSION_LOCALS = set().union(*EXTENSION_BEHAVIOURS.values())
 _NUMBER = re.compile(r"^\s*[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\s*$")
@@ -85,6 +104,31 @@ class Envelope:
     notes: Notes = field(default_factory=Notes)
     character: str | None = None
     losses: list[tuple[str, Node]] = field(default_factory=list)
+
+
+def speech_marks(node: Node) -> set[str]:
+    """The names of the sync points written in a speech (``<sync id>``, ``<tm id>``, ``<mark name>``)."""
+    names = set()
+    for child in node.elements():
+        if child.local in ("sync", "tm"):
+            names.add(child.attrs.get("id", "").strip())
+        elif child.local == "mark":
+            names.add(child.attrs.get("name", "").strip().rsplit(":", 1)[-1])
+        names |= speech_marks(child)
+    return names
+
+
+def implied_start(node: Node) -> float:
+    """Where a behaviour would start, from its numeric sync times and its preferred timing."""
+    kind = BEHAVIOUR_TYPES[node.local]
+    numbers = {k: float(v) for k, v in node.attrs.items() if k in kind.syncs and _NUMBER.match(v)}
+    if "start" in numbers or not numbers:
+        return numbers.get("start", 0.0)
+    try:
+        preferred = motion_unit(Behaviour("", kind.name, list(kind.syncs), dict(node.attrs))).preferred()
+    except KeyError:
+        return min(numbers.values())
+    return min(t - preferred[kind.syncs.index(k)] for k, t in numbers.items())
 
 
 def is_smartbody(prefix: str, uri: str | None) -> bool:
@@ -158,6 +202,7 @@ class Adapter:
         self.clips: dict[str, str] = {}
         self.curves: list[Node] = []
         self.prosody: list[Node] = []
+        self.constraints: list[Node] = []
 
     # ------------------------------------------------------------------------------------------- the block
     def adapt(self) -> None:
@@ -175,6 +220,8 @@ class Adapter:
                 self.notes.add(f"<bml {key}=...> read as characterId")
         behaviours = self.behaviours(node)
         self.name_behaviours(behaviours)
+        self.retarget_refs(behaviours, self.constraints)
+        self.times_after_start(behaviours)
         self.shift_negative_times(behaviours)
         speeches = [b for b in behaviours if b.tag == "speech"]
         for curves in self.curves:
@@ -226,6 +273,7 @@ class Adapter:
             elif child.local == "constraint" and is_bml_uri(uri) and child.elements() and all(
                     c.local in ("synchronize", "before", "after") for c in child.elements()):
                 self.constraint_refs(child)
+                self.constraints.append(child)
                 kept.append(child)
             elif uri in EXTENSION_BEHAVIOURS and child.local in EXTENSION_BEHAVIOURS[uri]:
                 self.sync_attributes(child)
@@ -266,25 +314,63 @@ class Adapter:
         node.tag = new_type
 
     def core(self, node: Node) -> str:
-        """A BML 1.0 element, perhaps with draft attributes."""
+        """A BML 1.0 element, perhaps with draft attributes: ``type=`` naming the kind of behaviour (a
+        pointing gesture, FACS, a head orientation), Greta's ``class=instance`` lexicon keys, EMBR's nods
+        written as gestures, a face lexeme in a child element."""
         local, attrs = node.local, node.attrs
         kind = attrs.get("type", "").strip()
-        if local == "gesture" and kind.upper() in ("POINT", "POINTING", "DEICTIC") and "lexeme" not in attrs:
+        family, _, instance = kind.partition("=")
+        family = family.strip().upper()
+        pointing_self = instance.strip().upper().startswith("ME")
+        if local == "gesture" and family in ("POINT", "POINTING", "DEICTIC") and not attrs.get("lexeme") \
+                and not pointing_self:
             attrs.pop("type")
-            self.notes.add("<gesture type=\"POINT\"> (a draft) read as <pointing>")
+            if instance and "target" not in attrs:
+                attrs["target"] = DEICTIC_TARGETS.get(instance.strip().rstrip("0123456789").upper(), "user")
+            self.notes.add(f"<gesture type={kind!r}> (a draft) read as <pointing>")
             return "pointing"
-        if local == "face" and kind.lower() == "facs":
+        if local == "gesture" and attrs.get("lexeme", "").strip().upper() in HEAD_LEXEMES:
+            self.notes.add(f"<gesture lexeme={attrs['lexeme']!r}> (a head movement written as a gesture) read as "
+                           "<head>")
+            attrs["lexeme"] = attrs["lexeme"].strip().upper()
+            return "head"
+        if local == "gesture" and instance and not attrs.get("lexeme"):
             attrs.pop("type")
-            self.notes.add("<face type=\"facs\" au=...> read as <faceFacs>")
-            return "faceFacs"
-        if local == "head" and kind.upper() == "ORIENT":
+            attrs["lexeme"] = family if family in GESTURE_FORMS else instance.strip().upper()
+            self.notes.add("Greta's lexicon key type=\"class=instance\" read as the lexeme")
+        if local == "gesture" and "hand" in attrs and "mode" not in attrs:
+            hand = attrs.pop("hand").strip().upper()
+            attrs["mode"] = {"LEFT": "LEFT_HAND", "RIGHT": "RIGHT_HAND", "BOTH": "BOTH_HANDS"}.get(hand, hand)
+            self.notes.add("draft attribute hand= read as mode")
+        if local == "face":
+            if family == "FACS":
+                attrs.pop("type")
+                self.notes.add("<face type=\"facs\" au=...> read as <faceFacs>")
+                return "faceFacs"
+            lexeme = next((c.attrs.get("lexeme", "") for c in node.elements() if c.local == "lexeme"), "")
+            if lexeme and not attrs.get("lexeme"):
+                attrs["lexeme"] = lexeme
+                self.notes.add("a face's lexeme given in a <lexeme> child read as its lexeme")
+            if kind and not attrs.get("lexeme"):
+                attrs.pop("type")
+                word = (instance or family).strip().lower()
+                if family == "MOUTH" and "shape" in attrs:
+                    word = attrs.pop("shape").strip().lower()
+                attrs["lexeme"] = EXPRESSIONS.get(word.rstrip("0123456789").split("_")[0], word.upper())
+                self.notes.add(f"face type={kind!r} read as the expression {attrs['lexeme']}")
+        if local == "head" and family == "ORIENT":
             attrs.pop("type")
             attrs.setdefault("target", (attrs.get("direction") or "").lower() or "user")
+            attrs.pop("direction", None)
             self.notes.add("<head type=\"ORIENT\"> read as <headDirectionShift>")
             return "headDirectionShift"
-        if local == "gaze" and kind:
-            attrs.pop("type")
-            self.notes.add("<gaze type=...> (a draft) not needed in BML 1.0; ignored")
+        if local == "gaze":
+            if kind:
+                attrs.pop("type")
+                self.notes.add("draft attribute type= of <gaze> not needed in BML 1.0; ignored")
+            if "modality" in attrs and "influence" not in attrs:
+                attrs["influence"] = attrs.pop("modality").strip().upper()
+                self.notes.add("draft attribute modality= read as the gaze influence")
         return local
 
     def map_animation(self, node: Node) -> str:
@@ -437,17 +523,35 @@ class Adapter:
         self.sync_attributes(node)
 
     def sync_attributes(self, node: Node) -> None:
-        """Sync point names as the drafts and EMBR spell them (``stroke_start``, ``strokeENd``), in the
-        attributes and in the references."""
+        """Sync point names as the drafts and EMBR spell them (``stroke_start``, ``strokeENd``), and as
+        SmartBody names them for every kind of behaviour (a face's ``ready`` is its attackPeak), in the
+        attributes and in the references; a sync point the behaviour does not have is left out."""
         syncs = BEHAVIOUR_TYPES[node.local].syncs if node.local in BEHAVIOUR_TYPES else ()
+        aliases = SYNC_ALIASES.get(node.local, {})
         for key in list(node.attrs):
             canonical = SYNC_SPELLINGS.get(key.lower().replace("_", "").replace("-", ""))
-            if canonical and canonical != key and canonical in syncs and canonical not in node.attrs:
-                node.attrs[canonical] = node.attrs.pop(key)
+            if canonical is None:
+                continue
+            if canonical not in syncs and aliases.get(canonical) in syncs:
+                if aliases[canonical] in node.attrs:
+                    node.attrs.pop(key)
+                    self.notes.add(f"sync point {key} of <{node.local}> left out (it has no such sync point, and "
+                                   f"{aliases[canonical]} is given)")
+                    continue
+                self.notes.add(f"sync point {key} of <{node.local}> read as {aliases[canonical]}")
+                canonical = aliases[canonical]
+            elif canonical != key and canonical in syncs:
                 self.notes.add(f"sync point {key} read as {canonical}")
-                key = canonical
-            if key in syncs:
-                node.attrs[key] = self.ref(node.attrs[key])
+            if canonical not in syncs:
+                node.attrs.pop(key)
+                self.notes.add(f"sync point {key} of <{node.local}> left out: it has no such sync point")
+                continue
+            if canonical != key:
+                if canonical in node.attrs:
+                    node.attrs.pop(key)
+                    continue
+                node.attrs[canonical] = node.attrs.pop(key)
+            node.attrs[canonical] = self.ref(node.attrs[canonical])
 
     def constraint_refs(self, node: Node) -> None:
         for child in node.elements():
@@ -467,6 +571,40 @@ class Adapter:
             self.notes.add(f"sync point {sync} read as {canonical}")
             return f"{match.group('path')}{canonical}{match.group('rest')}"
         return value
+
+    def retarget_refs(self, behaviours: list[Node], constraints: list[Node]) -> None:
+        """References to a sync point that the behaviour referred to has under another name (SmartBody's
+        ``sp1:relax`` of a speech is its end, a face's ``ready`` its attackPeak)."""
+        block_id = self.node.attrs.get("id", "")
+        kinds = {b.attrs.get("id", ""): b.local for b in behaviours}
+        marks = {b.attrs.get("id", ""): speech_marks(b) for b in behaviours if b.local == "speech"}
+
+        def fix(value: str) -> str:
+            match = _REF_SYNC.match(value.strip())
+            if not match:
+                return value
+            path = match.group("path")[:-1].split(":")
+            if len(path) == 2 and path[0] == block_id:
+                path = path[1:]
+            if len(path) != 1 or path[0] not in kinds:
+                return value
+            kind, sync = kinds[path[0]], match.group("sync")
+            if sync in BEHAVIOUR_TYPES[kind].syncs or sync in marks.get(path[0], ()):
+                return value
+            alias = SYNC_ALIASES.get(kind, {}).get(sync)
+            if alias is None:
+                return value
+            self.notes.add(f"{path[0]}:{sync} read as {path[0]}:{alias} (a <{kind}> has no {sync})")
+            return f"{match.group('path')}{alias}{match.group('rest')}"
+
+        for b in behaviours:
+            for key in self.sync_keys(b):
+                b.attrs[key] = fix(b.attrs[key])
+        for c in constraints:
+            for child in c.elements():
+                for n in (child, *child.elements()):
+                    if "ref" in n.attrs:
+                        n.attrs["ref"] = fix(n.attrs["ref"])
 
     # ------------------------------------------------------------------------------------------- ids, times
     def name_behaviours(self, behaviours: list[Node]) -> None:
@@ -505,22 +643,37 @@ class Adapter:
             self.notes.add(f"{len(named)} behaviour{'s' if len(named) > 1 else ''} without id named by element and "
                            f"number: {shown}")
 
+    def times_after_start(self, behaviours: list[Node]) -> None:
+        """Greta's older BML writes a behaviour's later times as seconds after its start (``start="5.34"
+        stroke="0.68" end="2.62"``): a number smaller than the behaviour's own start is read so."""
+        for b in behaviours:
+            start = b.attrs.get("start", "")
+            if not _NUMBER.match(start):
+                continue
+            t0 = float(start)
+            for key in self.sync_keys(b):
+                value = b.attrs[key]
+                if key != "start" and _NUMBER.match(value) and float(value) < t0:
+                    b.attrs[key] = f"{t0 + float(value):g}"
+                    self.notes.add(f"{key}= smaller than start=: read as seconds after the start (Greta)")
+
     def shift_negative_times(self, behaviours: list[Node]) -> None:
-        """Greta writes times before the block's start (``start="-0.2"``) and plays the block later by as
-        much: every number in the block moves later by the earliest's distance before 0, and behaviours
-        that had no time of their own start at that time."""
+        """Greta writes times before the block's start (``start="-0.2"``, or a ``ready="0"`` that leaves no
+        time to prepare) and plays the block later by as much: every number in the block moves later by
+        the earliest start's distance before 0 (a behaviour's start as its numbers and its preferred timing
+        put it), and behaviours that had no time of their own start at that time."""
         numbers = [(b, key) for b in behaviours for key in self.sync_keys(b) if _NUMBER.match(b.attrs[key])]
-        earliest = min((float(b.attrs[key]) for b, key in numbers), default=0.0)
-        if not earliest < 0 or not math.isfinite(earliest):
+        earliest = min((implied_start(b) for b in behaviours if any(x is b for x, _ in numbers)), default=0.0)
+        if not earliest < -1e-9 or not math.isfinite(earliest):
             return
-        shift = -earliest
+        shift = round(-earliest, 6)
         for b, key in numbers:
             b.attrs[key] = f"{float(b.attrs[key]) + shift:g}"
         for b in behaviours:
             if not self.sync_keys(b) and b.local not in ("interrupt", "activate"):
                 b.attrs["start"] = f"{shift:g}"
-        self.notes.add(f"times before the block start (earliest {earliest:g} s): the whole block plays {shift:g} s "
-                       "later, its relative timing kept")
+        self.notes.add(f"times before the block start (the earliest behaviour would start at {earliest:.3g} s): "
+                       f"the whole block plays {shift:g} s later, its relative timing kept")
 
     @staticmethod
     def sync_keys(node: Node) -> list[str]:
