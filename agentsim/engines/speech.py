@@ -27,7 +27,7 @@ from agentsim.core.errors import ScheduleError
 from agentsim.core.pegboard import ComputedPeg, OffsetPeg
 from agentsim.core.interruption import set_key_time
 from agentsim.core.timed import KeyRef, TimedBehaviour, parameter_at
-from agentsim.speech.backend import SpeechText, TTSBackend, Utterance
+from agentsim.speech.backend import Prosody, SpeechText, TTSBackend, Utterance
 
 #: Speech keys may be off their rigid spacing by this much (seconds) before the speech is invalid.
 RIGID_TOLERANCE = 1e-6
@@ -73,6 +73,15 @@ class SpeechConfig:
                 self.delivery = DeliveryModel()
 
 
+def speech_text(behaviour: Behaviour, rate: float = 1.0) -> SpeechText:
+    """What a backend is asked to speak for a speech behaviour: its text, sync marks and prosody spans,
+    at ``rate`` times the backend's own rate."""
+    prosody = tuple(Prosody(kind, start, end, tuple((str(name), str(value)) for name, value in
+                                                    (attrs.items() if isinstance(attrs, dict) else attrs)))
+                    for kind, start, end, attrs in behaviour.prosody)
+    return SpeechText(behaviour.text, tuple(behaviour.marks), rate, prosody)
+
+
 class SpeechPlanner(Planner):
     """Times speech with a :class:`~agentsim.speech.backend.TTSBackend` (or the linear model)."""
 
@@ -88,10 +97,11 @@ class SpeechPlanner(Planner):
         self.speaking: set[int] = set()  # behaviours timed by their audio now, not by the plan
 
     def utterance(self, behaviour: Behaviour) -> Utterance:
+        """The backend's utterance of a speech behaviour (its text, marks and prosody), made once."""
         key = id(behaviour)
         utt = self._utterances.get(key)
         if utt is None:
-            utt = self.backend.synthesize(SpeechText(behaviour.text, tuple(behaviour.marks)))
+            utt = self.backend.synthesize(speech_text(behaviour))
             self._utterances[key] = utt
         return utt
 
@@ -107,7 +117,11 @@ class SpeechPlanner(Planner):
         return self.config.linear_model
 
     def linear_plan(self, behaviour: Behaviour):
-        """The speech plan made from the linear model alone (``timing="linear"``)."""
+        """The speech plan made from the linear model alone (``timing="linear"``).
+
+        The linear model knows the text only: the behaviour's prosody spans are ignored here (see
+        :func:`~agentsim.speech.linear_model.plan_from_linear`).
+        """
         key = id(behaviour)
         if key not in self._plans:
             from agentsim.speech.linear_model import plan_from_linear
@@ -330,7 +344,7 @@ class SpeechEngine(Engine):
                                      [timed.id])
             return
         behaviour = timed.behaviour
-        utterance = self.planner.backend.synthesize(SpeechText(behaviour.text, tuple(behaviour.marks), rate))
+        utterance = self.planner.backend.synthesize(speech_text(behaviour, rate))
         self.planner.set_utterance(behaviour, utterance)
         marks = {m.name: m.time for m in utterance.marks}
         timed.preferred = [0.0] + [marks[s] for s in timed.sync_ids[1:-1]] + [utterance.duration]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Protocol, Sequence, runtime_checkable
 
@@ -28,6 +29,7 @@ class Prosody:
     attrs: tuple[tuple[str, str], ...] = ()
 
     def attr(self, name: str, default: str = "") -> str:
+        """The value of attribute ``name`` as written (``default`` if the span has none)."""
         return dict(self.attrs).get(name, default)
 
 
@@ -117,6 +119,80 @@ class TTSBackend(Protocol):
     def synthesize(self, speech: SpeechText) -> Utterance:
         """Speak ``speech`` and return its timeline (and audio, if the backend makes sound)."""
         ...
+
+
+def check_prosody(speech: SpeechText) -> list[Prosody]:
+    """The prosody spans of ``speech`` a backend can apply, properly nested, in the order they open.
+
+    Spans of an unknown kind and empty spans other than breaks are left out, and so is a span that
+    crosses one opened before it (it starts inside that span and ends after it): each span kept ends
+    before, or inside, every span around it. Spans opening at one offset open the longest first (the
+    first given, of equal ones), so that the inner one closes first.
+
+    Raises
+    ------
+    ValueError
+        For a span outside the text, a span that ends before it starts, or a break with ``end != start``.
+    """
+    n = len(speech.text)
+    for span in speech.prosody:
+        if not 0 <= span.start <= span.end <= n:
+            raise ValueError(f"{span.kind} span {span.start}..{span.end} is outside the text (length {n}) "
+                             f"or ends before it starts")
+        if span.kind == "break" and span.end != span.start:
+            raise ValueError(f"a break stands at one offset, not at {span.start}..{span.end}")
+    return nest_spans([span for span in speech.prosody
+                       if span.kind in PROSODY_KINDS and (span.kind == "break" or span.end > span.start)])
+
+
+def nest_spans(spans: Sequence[Prosody]) -> list[Prosody]:
+    """``spans`` in the order they open (longest first at one offset), leaving out any span that crosses
+    one opened before it. Breaks (empty) are kept in their place: they cross nothing."""
+    order = sorted(range(len(spans)), key=lambda i: (spans[i].start, -spans[i].end, i))
+    kept: list[Prosody] = []
+    open_ends: list[int] = []
+    for i in order:
+        span = spans[i]
+        while open_ends and open_ends[-1] <= span.start:
+            open_ends.pop()
+        if open_ends and span.end > open_ends[-1]:
+            continue  # it crosses the span it starts in
+        kept.append(span)
+        if span.kind != "break":
+            open_ends.append(span.end)
+    return kept
+
+
+_TIME = re.compile(r"\s*(\d+(?:\.\d*)?|\.\d+)\s*(ms|s)\s*", re.IGNORECASE)
+
+
+def parse_time(value: str) -> float | None:
+    """Seconds of an SSML time designation (``"300ms"``, ``"0.3s"``, ``"2s"``); None if it is not one."""
+    match = _TIME.fullmatch(value or "")
+    if match is None:
+        return None
+    number = float(match.group(1))
+    return number / 1000.0 if match.group(2).lower() == "ms" else number
+
+
+_NUMBER = re.compile(r"\s*([+-]?)(\d+(?:\.\d*)?|\.\d+)\s*(%|st|db|hz)?\s*", re.IGNORECASE)
+
+
+def parse_number(value: str) -> tuple[str, float, str] | None:
+    """``(sign, magnitude, unit)`` of a number as SSML's prosody attributes write it, or None.
+
+    ``"+20%"`` gives ``("+", 20.0, "%")``, ``"1.5"`` ``("", 1.5, "")``, ``"-2st"`` ``("-", 2.0, "st")``;
+    the unit is one of ``""``, ``"%"``, ``"st"``, ``"db"``, ``"hz"`` (lower case).
+    """
+    match = _NUMBER.fullmatch(value or "")
+    if match is None:
+        return None
+    sign, number, unit = match.groups()
+    return sign, float(number), (unit or "").lower()
+
+
+#: SSML's break strengths, weakest first.
+BREAK_STRENGTHS = ("none", "x-weak", "weak", "medium", "strong", "x-strong")
 
 
 def mark_times_from_words(speech: SpeechText, words: Sequence[Word], duration: float) -> list[Mark]:

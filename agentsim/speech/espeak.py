@@ -32,6 +32,25 @@ Observed behaviour of espeak-ng 1.51 that the code relies on or works around:
   same text spoken again in one process gives the same words and phonemes but times that differ by
   up to about 20 ms, and different audio samples. The first synthesis in a fresh process is exactly
   reproducible.
+
+Prosody spans (:class:`~agentsim.speech.backend.Prosody`) are sent as espeak-ng's SSML elements, with
+the values it reads (``docs/markup.md`` and ``ssml.c`` of espeak-ng; others are left out, see
+:func:`_prosody_markup`). Measured with espeak-ng 1.51 at 175 words per minute:
+
+* ``<break time=.../>`` widens the gap between its two words by the time given, within 0.05 s at 120
+  to 420 words per minute (500 ms: 0.46-0.51 s). It ends a clause, so the word before it gets 0-50 ms
+  longer (up to 0.11 s at 120 words per minute). Strengths: none, x-weak and weak add nothing there;
+  medium (also a break without attributes) about 0.15 s, strong 0.3 s, x-strong 0.6 s.
+* ``<prosody rate=...>``: the enclosed words last 1.54-1.67 times as long at x-slow (espeak: 60 % of the
+  voice's rate), 1.19-1.25 at slow (80 %), 0.81-0.85 at fast (125 %), 0.63-0.71 at x-fast (160 %);
+  percentages and factors likewise, within espeak's 80 to 450 words per minute. The words around keep
+  their times.
+* ``pitch`` and ``volume`` change the enclosed words' length by 2 % at most and no word moves by more
+  than 30 ms; ``emphasis`` (moderate and up) makes the words 24-42 % longer, and louder.
+* ``say-as interpret-as="characters"`` over a written word gives one WORD event for the whole span, so
+  the spelled word stays one :class:`~agentsim.speech.backend.Word` with all its letters' phonemes.
+* An SSML element is set apart from the text around it as if by a space, so an element inside a written
+  word would split it in two: span edges inside a word are moved to the word's edges.
 """
 
 from __future__ import annotations
@@ -47,7 +66,8 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from agentsim.speech.backend import Mark, Phoneme, SpeechText, Utterance, Word
+from agentsim.speech.backend import (BREAK_STRENGTHS, Mark, Phoneme, Prosody, SpeechText, Utterance, Word,
+                                     check_prosody, nest_spans, parse_number, parse_time)
 from agentsim.core.errors import SpeechBackendUnavailable
 
 __all__ = ["EspeakBackend", "INSTALL_HINT"]
@@ -292,17 +312,30 @@ _WRITTEN_WORD = re.compile(r"[^\s\x00\u2012-\u2015\u2026/]+")  # not space, NUL,
 _SILENT_EDGE = frozenset('.,;:!?"\'()[]{}<>«»“”„‘’‚‹›…–—¡¿*_-')
 
 
-def _to_ssml(text: str, marks: tuple[tuple[int, str], ...]) -> tuple[str, list[int]]:
-    """SSML for ``text`` with a mark element ``m<i>`` for ``marks[i]`` at its offset.
+def _to_ssml(text: str, marks: tuple[tuple[int, str], ...], prosody: tuple[Prosody, ...] = ()
+             ) -> tuple[str, list[int]]:
+    """SSML for ``text`` with a mark element ``m<i>`` for ``marks[i]`` at its offset and an element for
+    each prosody span espeak-ng can apply (see :func:`_prosody_markup`).
 
     Returns the SSML and, for each of its characters, the offset in ``text`` it stands for (a character
     of an escaped entity stands for the escaped character, markup for the character that follows it).
-    Marks get generated names so that any name survives the round trip.
+    Marks get generated names so that any name survives the round trip. At one offset, the elements
+    that close come first (the inner before the outer), then breaks, marks, and the elements that open
+    (the outer before the inner).
     """
     for offset, name in marks:
         if not 0 <= offset <= len(text):
             raise ValueError(f"mark {name!r} at offset {offset} is outside the text (length {len(text)})")
     order = sorted(range(len(marks)), key=lambda i: (marks[i][0], i))
+    opens: dict[int, list[str]] = {}
+    closes: dict[int, list[str]] = {}
+    breaks: dict[int, list[str]] = {}
+    for span, (opening, closing) in _prosody_markup(text, prosody):
+        if span.kind == "break":
+            breaks.setdefault(span.start, []).append(opening)
+        else:
+            opens.setdefault(span.start, []).append(opening)
+            closes.setdefault(span.end, []).insert(0, closing)  # opened later: inner, closes first
     pieces: list[str] = []
     origin: list[int] = []
 
@@ -312,12 +345,133 @@ def _to_ssml(text: str, marks: tuple[tuple[int, str], ...]) -> tuple[str, list[i
 
     k = 0
     for offset in range(len(text) + 1):
+        for piece in closes.get(offset, []) + breaks.get(offset, []):
+            emit(piece, offset)
         while k < len(order) and marks[order[k]][0] == offset:
             emit(_MARK_ELEMENT.format(order[k]), offset)
             k += 1
+        for piece in opens.get(offset, ()):
+            emit(piece, offset)
         if offset < len(text):
             emit(escape(text[offset]) if text[offset] != "\0" else " ", offset)  # NUL would end the C string
     return "".join(pieces), origin
+
+
+# What espeak-ng 1.51 reads (its ssml.c). A value it does not know is worse than left out: an unknown
+# emphasis level is looked up at index -1 of a table, an unknown say-as makes it read the text as
+# something else and report words inside the markup, and "0.3s" is read as 0 ms (it reads the digits
+# before the first other character, then "s" for seconds).
+_EMPHASIS_LEVELS = frozenset({"none", "reduced", "moderate", "strong", "x-strong"})
+_PROSODY_LABELS = {
+    "rate": frozenset({"x-slow", "slow", "medium", "fast", "x-fast", "default"}),
+    "pitch": frozenset({"x-low", "low", "medium", "high", "x-high", "default"}),
+    "range": frozenset({"x-low", "low", "medium", "high", "x-high", "default"}),
+    "volume": frozenset({"silent", "x-soft", "soft", "medium", "loud", "x-loud", "default"}),
+}
+#: Units espeak reads in each prosody attribute ("st" and "db" only as a signed change).
+_PROSODY_UNITS = {"rate": ("", "%"), "pitch": ("", "%", "st"), "range": ("", "%", "st"),
+                  "volume": ("", "%", "db")}
+#: say-as interpretations espeak reads, by the name given; SSML's "digits" is espeak's "tts:digits"
+#: (digit by digit). Others ("cardinal", "date", ...) are left out: espeak reads numbers as cardinals.
+_SAY_AS = {"characters": "characters", "tts:char": "tts:char", "tts:key": "tts:key",
+           "tts:digits": "tts:digits", "digits": "tts:digits", "telephone": "telephone"}
+
+
+def _prosody_value(name: str, value: str) -> str | None:
+    """``value`` of prosody attribute ``name`` as espeak reads it, or None if espeak cannot read it.
+
+    A label, a percentage (``"80%"``, ``"+20%"``), a number (for ``rate`` a factor: ``"1.5"``, ``"+0.5"``;
+    for pitch, range and volume espeak's own 0-100 scale, or a change on it: ``"75"``, ``"+10"``), a signed
+    number of semitones for pitch and range (``"+2st"``), of espeak's volume units for volume (``"+6dB"``).
+    Values in Hz, unsigned semitones or decibels, rates below 1 % and percentages below zero are left
+    out.
+    """
+    label = value.strip().lower()
+    if label in _PROSODY_LABELS[name]:
+        return label
+    number = parse_number(value)
+    if number is None:
+        return None
+    sign, magnitude, unit = number
+    if unit not in _PROSODY_UNITS[name] or (unit in ("st", "db") and not sign):
+        return None
+    if unit == "%" or name == "rate":
+        percent = magnitude * (1.0 if unit == "%" else 100.0)
+        percent = percent if not sign else 100.0 + (percent if sign == "+" else -percent)
+        if percent < (1.0 if name == "rate" else 0.0):
+            return None
+    return f"{sign}{magnitude:g}{'dB' if unit == 'db' else unit}"
+
+
+def _attribute(name: str, value: str) -> str:
+    """`` name="value"``, the value escaped for a double-quoted attribute."""
+    return f' {name}="{escape(value, {chr(34): "&quot;"})}"'
+
+
+def _markup(span: Prosody) -> tuple[str, str] | None:
+    """The opening and closing markup of one span (a break: its empty element and ""), or None when
+    espeak-ng can apply nothing of it."""
+    if span.kind == "break":
+        seconds = parse_time(span.attr("time")) if span.attr("time") else None
+        strength = span.attr("strength").strip().lower()
+        if seconds is not None:
+            return "<break" + _attribute("time", f"{round(seconds * 1000)}ms") + "/>", ""
+        if strength in BREAK_STRENGTHS:
+            return "<break" + _attribute("strength", strength) + "/>", ""
+        return ("<break/>", "") if not span.attrs else None
+    if span.kind == "emphasis":
+        level = span.attr("level").strip().lower()
+        return "<emphasis" + (_attribute("level", level) if level in _EMPHASIS_LEVELS else "") + ">", "</emphasis>"
+    if span.kind == "prosody":
+        attributes = ""
+        for name in ("rate", "pitch", "range", "volume"):
+            value = _prosody_value(name, span.attr(name)) if span.attr(name) else None
+            attributes += _attribute(name, value) if value is not None else ""
+        return ("<prosody" + attributes + ">", "</prosody>") if attributes else None
+    if span.kind == "say-as":
+        interpret = _SAY_AS.get(span.attr("interpret-as").strip().lower())
+        if interpret is None:
+            return None
+        attributes = _attribute("interpret-as", interpret)
+        if interpret == "characters" and span.attr("format").strip().lower() == "glyphs":
+            attributes += _attribute("format", "glyphs")
+        if interpret == "tts:digits" and span.attr("detail").strip().isdigit():
+            attributes += _attribute("detail", span.attr("detail").strip())
+        return "<say-as" + attributes + ">", "</say-as>"
+    return None
+
+
+def _prosody_markup(text: str, prosody: tuple[Prosody, ...]) -> list[tuple[Prosody, tuple[str, str]]]:
+    """The spans espeak-ng can apply, with their markup, on offsets moved to the edges of written words.
+
+    espeak separates an SSML element from the text around it as if by a space, so an element inside a
+    written word would split it: an offset strictly inside a word's spoken core moves out of it, to the
+    core's start for a span's start and to its end for a span's end or a break. Spans the move makes
+    cross are left out (the one opened later). In the order they open.
+    """
+    cores = [(token.core_start, token.core_end) for token in _tokens(text)]
+    starts = [start for start, _ in cores]
+
+    def snap(offset: int, outward_to_end: bool) -> int:
+        i = bisect.bisect_right(starts, offset) - 1
+        if i >= 0 and cores[i][0] < offset < cores[i][1]:
+            return cores[i][1] if outward_to_end else cores[i][0]
+        return offset
+
+    markup: dict[int, tuple[str, str]] = {}
+    moved = []
+    for span in check_prosody(SpeechText(text, prosody=tuple(prosody))):
+        found = _markup(span)
+        if found is None:
+            continue
+        if span.kind == "break":
+            start = end = snap(span.start, True)
+        else:
+            start, end = snap(span.start, False), snap(span.end, True)
+        span = Prosody(span.kind, start, end, span.attrs)
+        markup[id(span)] = found
+        moved.append(span)
+    return [(span, markup[id(span)]) for span in nest_spans(moved)]
 
 
 @dataclass(frozen=True)
@@ -565,7 +719,7 @@ class EspeakBackend:
         Parameters
         ----------
         speech : SpeechText
-            Plain text and marks at character offsets (0 to ``len(text)``).
+            Plain text, marks at character offsets (0 to ``len(text)``) and prosody spans.
 
         Returns
         -------
@@ -573,7 +727,7 @@ class EspeakBackend:
             Times in seconds from the start of ``audio`` (float32 mono in [-1, 1]).
         """
         text = speech.text
-        ssml, origin = _to_ssml(text, speech.marks)
+        ssml, origin = _to_ssml(text, speech.marks, speech.prosody)
         tokens = _tokens(text)
         engine = self._engine
         words_per_minute = min(max(round(self.rate * speech.rate), _RATE_MINIMUM), _RATE_MAXIMUM)
@@ -612,6 +766,11 @@ class EspeakBackend:
         audio = pcm.astype(np.float32) / np.float32(32768.0)
         return Utterance(text=text, duration=duration, words=words, phonemes=phonemes, marks=marks,
                          sentences=sentences, sample_rate=rate, audio=audio, backend=self.name)
+
+    def ssml(self, speech: SpeechText) -> str:
+        """The SSML sent to espeak-ng for ``speech``: ``marks[i]`` as ``<mark name="m<i>"/>``, and the
+        prosody spans espeak-ng can apply as its elements (see :func:`_prosody_markup`)."""
+        return _to_ssml(speech.text, speech.marks, speech.prosody)[0]
 
     def _symbols(self, word: str) -> list[str]:
         """Phoneme symbols of one written word on its own."""

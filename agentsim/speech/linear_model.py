@@ -224,6 +224,12 @@ def plan_from_linear(text: str, model: LinearModel, *, delay: float = 0.0, laten
         ``model.onset(char_end_k)``; its phoneme count is guessed from its spelling
         (:func:`estimate_phonemes`) and its phonemes share its span evenly; its stressed vowel is placed
         at the position of its first vowel letter. The end is ``model.onset(len(text))``.
+
+    Notes
+    -----
+    The plan knows the text only: prosody spans (breaks, rate changes, emphasis) of the speech are not
+    part of the linear model and are ignored here, so a plan for a speech with them is off by what they
+    change.
     """
     spans = written_words(text)
     if not spans:
