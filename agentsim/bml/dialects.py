@@ -19,10 +19,11 @@ from dataclasses import dataclass, field
 from agentsim.animation.arms import GESTURE_FORMS
 from agentsim.animation.pose import POSTURES
 from agentsim.bml.tree import FOREST, Node
-from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLT_NAMESPACE, DIALECT_BEHAVIOURS,
-                                     EXTENSION_BEHAVIOURS)
+from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
+                                     DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
 from agentsim.animation.units import motion_unit
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour
+from agentsim.core.engine import stretch_times
 
 #: The namespace of the BML drafts before 1.0 (Greta, SEMAINE, the Vienna draft), read as BML 1.0.
 DRAFT_NAMESPACES = ("http://www.mindmakers.org/projects/BML", "http://www.mindmakers.org/projects/bml",
@@ -44,7 +45,13 @@ UNMAPPED_HINTS = {
     "interrupt": "SmartBody's interrupt (use bmla:interrupt)",
     "sbm:command": "a SmartBody command",
     "fml": "FML is the intent behind behaviour, not behaviour",
+    "lip": "Greta's lip sync from a phoneme file, which is not part of the document",
+    "turn": "the turn-taking of the Virtual Human Toolkit's act",
 }
+#: Greta's compositions, as BML 1.0's.
+COMPOSITIONS = {"blend": "MERGE"}
+#: The prefix given to BMLA where older BMLT names are read as BMLA's.
+BMLA_PREFIX = "bmla"
 #: Lexemes of head movements, which EMBR writes as gestures.
 HEAD_LEXEMES = ("NOD", "SHAKE", "TILT")
 #: What drafts, Greta and EMBR call facial expressions, as our face lexemes.
@@ -106,6 +113,44 @@ class Envelope:
     losses: list[tuple[str, Node]] = field(default_factory=list)
 
 
+#: Element names the lenient reader knows, by their lower-case spelling (EMBR writes ``<BML>``, ``<SPEECH>``).
+KNOWN_ELEMENTS = {name.lower(): name for name in (*BEHAVIOUR_TYPES, "bml", "text", "sync", "required", "constraint",
+                                                  "synchronize", "before", "after", "act", "participant",
+                                                  "fml-apml", "tm", "mark", "description", "animation", "lips",
+                                                  "curves", "curve", "event", "saccade", "body", "torso")}
+_DOCTYPE = re.compile(rb"<!DOCTYPE\s+[\w:.-]+(?:\s+(?:SYSTEM|PUBLIC)(?:\s+(?:\"[^\"]*\"|'[^']*')){1,2})?\s*"
+                      rb"(?:\[\s*\])?\s*>")
+
+
+def without_doctype(data: bytes) -> tuple[bytes, bool]:
+    """A document type declaration that only names an external DTD (and declares nothing) is blanked out:
+    the DTD is never fetched, and the hardened reader refuses what could fetch it. One that declares
+    entities stays, and is refused."""
+    match = _DOCTYPE.search(data)
+    if not match:
+        return data, False
+    return data[:match.start()] + b" " * (match.end() - match.start()) + data[match.end():], True
+
+
+def fold_case(node: Node) -> bool:
+    """Element names written in another case (``<BML>``, ``<SPEECH>``) get BML's spelling; True if any did."""
+    changed = False
+    known = KNOWN_ELEMENTS.get(node.local.lower())
+    if known is not None and known != node.local:
+        node.tag = f"{node.prefix}:{known}" if node.prefix else known
+        changed = True
+    for child in node.elements():
+        changed = fold_case(child) or changed
+    return changed
+
+
+def remove_nodes(node: Node, gone: set[int]) -> None:
+    """Take the elements whose ``id()`` is in ``gone`` out of the tree under ``node``."""
+    node.children = [c for c in node.children if isinstance(c, str) or id(c) not in gone]
+    for child in node.elements():
+        remove_nodes(child, gone)
+
+
 def speech_marks(node: Node) -> set[str]:
     """The names of the sync points written in a speech (``<sync id>``, ``<tm id>``, ``<mark name>``)."""
     names = set()
@@ -128,7 +173,8 @@ def implied_start(node: Node) -> float:
         preferred = motion_unit(Behaviour("", kind.name, list(kind.syncs), dict(node.attrs))).preferred()
     except KeyError:
         return min(numbers.values())
-    return min(t - preferred[kind.syncs.index(k)] for k, t in numbers.items())
+    # as the planners do: the preferred timing stretched linearly between the known keys
+    return stretch_times(preferred, {kind.syncs.index(k): t for k, t in numbers.items()}, 0.0)[0]
 
 
 def is_smartbody(prefix: str, uri: str | None) -> bool:
@@ -203,6 +249,7 @@ class Adapter:
         self.curves: list[Node] = []
         self.prosody: list[Node] = []
         self.constraints: list[Node] = []
+        self.written: dict[int, str] = {}  # id() of an element -> its name as written, before mapping
 
     # ------------------------------------------------------------------------------------------- the block
     def adapt(self) -> None:
@@ -216,8 +263,22 @@ class Adapter:
             self.notes.add(f"character {self.envelope.character!r} taken from the <participant> of the envelope")
         for key in ("character", "characterid", "agent"):
             if key in node.attrs and "characterId" not in node.attrs:
-                node.attrs["characterId"] = node.attrs.pop(key)
+                node.attrs["characterId"] = node.attrs.pop(key).strip()
                 self.notes.add(f"<bml {key}=...> read as characterId")
+        composition = node.attrs.get("composition", "").strip()
+        if composition.lower() in COMPOSITIONS:
+            node.attrs["composition"] = COMPOSITIONS[composition.lower()]
+            self.notes.add(f"composition {composition!r} (Greta's) read as {node.attrs['composition']}")
+        for key in list(node.attrs):
+            prefix, _, name = key.partition(":")
+            if name and node.namespaces.get(prefix) == BMLT_NAMESPACE:
+                value = node.attrs.pop(key)
+                if name in BMLA_BLOCK_ATTRIBUTES:
+                    node.attrs[f"{BMLA_PREFIX}:{name}"] = value
+                    node.namespaces = {**node.namespaces, BMLA_PREFIX: BMLA_NAMESPACE}
+                    self.notes.add(f"older BMLT block attribute {key} read as BMLA's")
+                else:
+                    self.notes.add(f"older BMLT block attribute {key} not needed; ignored")
         behaviours = self.behaviours(node)
         self.name_behaviours(behaviours)
         self.retarget_refs(behaviours, self.constraints)
@@ -267,6 +328,7 @@ class Adapter:
                 kept.append(child)
                 continue
             uri = child.namespace
+            self.written[id(child)] = child.local
             if child.local == "required" and is_bml_uri(uri):
                 found.extend(self.behaviours(child))
                 kept.append(child)
@@ -274,6 +336,13 @@ class Adapter:
                     c.local in ("synchronize", "before", "after") for c in child.elements()):
                 self.constraint_refs(child)
                 self.constraints.append(child)
+                kept.append(child)
+            elif uri == BMLT_NAMESPACE and child.local in EXTENSION_BEHAVIOURS[BMLA_NAMESPACE]:
+                child.tag = f"{BMLA_PREFIX}:{child.local}"
+                child.namespaces = {**child.namespaces, BMLA_PREFIX: BMLA_NAMESPACE}
+                self.notes.add(f"older BMLT <bmlt:{child.local}> read as BMLA's")
+                self.sync_attributes(child)
+                found.append(child)
                 kept.append(child)
             elif uri in EXTENSION_BEHAVIOURS and child.local in EXTENSION_BEHAVIOURS[uri]:
                 self.sync_attributes(child)
@@ -516,10 +585,17 @@ class Adapter:
                     attrs.pop(key)
                     self.notes.add(f"SmartBody attribute {key} ignored")
         if kind == "speech":
-            for key in ("ready", "stroke", "relax", "strokeStart", "strokeEnd"):
-                if key in attrs:
+            nvbg = [key for key in ("ready", "stroke", "relax", "strokeStart", "strokeEnd") if key in attrs]
+            if nvbg:
+                if "end" in attrs:
+                    nvbg.append("end")  # a template's times (0.1, 0.2), not the speech's
+                for key in nvbg:
                     attrs.pop(key)
-                    self.notes.add(f"speech attribute {key}= (NVBG) ignored: a speech has only start and end")
+                self.notes.add(f"speech timing attributes {', '.join(nvbg)} (NVBG's placeholders) ignored: the "
+                               "speech takes as long as it takes to say")
+            if "wait" in attrs and "start" not in attrs:
+                attrs["start"] = attrs.pop("wait")
+                self.notes.add("EMBR's wait= of a speech read as its start")
         self.sync_attributes(node)
 
     def sync_attributes(self, node: Node) -> None:
@@ -608,25 +684,36 @@ class Adapter:
 
     # ------------------------------------------------------------------------------------------- ids, times
     def name_behaviours(self, behaviours: list[Node]) -> None:
-        """Behaviours without id are named ``<element><n>`` (n counts the element's id-less ones from 1,
-        skipping ids in use); a repeated id becomes ``<id>_<k>`` (k from 2)."""
+        """Behaviours without id are named ``<element><n>``, the element's name as written without a prefix
+        (n counts the id-less elements of that name from 1, in document order, skipping ids in use); a
+        repeated id becomes ``<id>_<k>`` (k from 2)."""
         used = {b.attrs["id"].strip() for b in behaviours if b.attrs.get("id", "").strip()}
         counters: dict[str, int] = {}
         seen: set[str] = set()
         named: list[str] = []
+        first: dict[str, Node] = {}
+        merged: list[Node] = []
         for b in behaviours:
             bid = b.attrs.get("id", "").strip()
             if not bid:
-                n = counters.get(b.local, 0)
+                written = self.written.get(id(b), b.local)
+                n = counters.get(written, 0)
                 while True:
                     n += 1
-                    bid = f"{b.local}{n}"
+                    bid = f"{written}{n}"
                     if bid not in used:
                         break
-                counters[b.local] = n
+                counters[written] = n
                 used.add(bid)
                 b.attrs["id"] = bid
                 named.append(bid)
+            elif bid in seen and self.merges(first[bid], b):
+                for key, value in b.attrs.items():
+                    first[bid].attrs.setdefault(key, value)
+                merged.append(b)
+                self.notes.add(f"repeated <{b.local} id={bid!r}> that only adds attributes merged into the first "
+                               "(Greta writes one attribute to an element)")
+                continue
             elif bid in seen:
                 k = 2
                 while f"{bid}_{k}" in used:
@@ -638,6 +725,11 @@ class Adapter:
                                "the first)")
                 bid = new
             seen.add(bid)
+            first.setdefault(bid, b)
+        if merged:
+            gone = {id(n) for n in merged}
+            behaviours[:] = [b for b in behaviours if id(b) not in gone]
+            remove_nodes(self.node, gone)
         if named:
             shown = ", ".join(named[:8]) + (f" and {len(named) - 8} more" if len(named) > 8 else "")
             self.notes.add(f"{len(named)} behaviour{'s' if len(named) > 1 else ''} without id named by element and "
@@ -656,6 +748,13 @@ class Adapter:
                 if key != "start" and _NUMBER.match(value) and float(value) < t0:
                     b.attrs[key] = f"{t0 + float(value):g}"
                     self.notes.add(f"{key}= smaller than start=: read as seconds after the start (Greta)")
+
+    def merges(self, first: Node, again: Node) -> bool:
+        """Whether a repeated id is Greta's way of giving one more attribute: same element, no time of its
+        own, and only attributes the first lacks."""
+        extra = {k for k in again.attrs if k != "id"}
+        return (again.local == first.local and not self.sync_keys(again) and bool(extra)
+                and not extra & set(first.attrs) and not again.elements())
 
     def shift_negative_times(self, behaviours: list[Node]) -> None:
         """Greta writes times before the block's start (``start="-0.2"``, or a ``ready="0"`` that leaves no

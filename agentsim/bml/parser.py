@@ -17,7 +17,7 @@ import re
 from dataclasses import dataclass
 from typing import Callable
 
-from agentsim.bml.dialects import Adapter, Notes, find_blocks
+from agentsim.bml.dialects import Adapter, Notes, find_blocks, fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
 from agentsim.bml.tree import Node, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
@@ -126,11 +126,19 @@ def parse_document(text: str | bytes, strict: bool = False,
             return [parse_bml(text)]
         except BMLError as exc:
             return [Refused(guess_block_id(text), exc)]
+    data = text.encode("utf-8") if isinstance(text, str) else text
+    data, doctype = without_doctype(data)
     try:
-        root, forest = read_forest(text)
+        root, forest = read_forest(data)
     except BMLError as exc:
         return [Refused(guess_block_id(text), exc)]
+    folded = fold_case(root)
     envelopes = find_blocks(root, forest)
+    for envelope in envelopes:
+        if doctype:
+            envelope.notes.add("document type declaration (an external DTD, never read) left out")
+        if folded:
+            envelope.notes.add("element names in another case (<BML>, <SPEECH>) read as BML's")
     if not envelopes:
         return [Refused(root.attrs.get("id", ""),
                         BMLError(f"expected a <bml> element, found <{root.tag}>", root.line, root.column))]

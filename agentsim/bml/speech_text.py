@@ -99,7 +99,11 @@ class _Walk:
                 self.mark(child.attrs.get("id", ""), child)
             elif local == "mark":
                 self.adapt("SSML <mark name> read as sync points of the speech")
-                self.mark(child.attrs.get("name", ""), child)
+                name = child.attrs.get("name", "").strip()
+                if name.startswith(f"{self.speech_id}:"):  # SEMAINE qualifies them with the speech's id
+                    name = name[len(self.speech_id) + 1:]
+                    self.adapt("mark names qualified with the speech id read without it")
+                self.mark(name, child)
             elif top and local in NOT_TEXT:
                 continue
             elif local == "break":
@@ -145,6 +149,9 @@ def read_speech(node: Node, speech_id: str, lenient: bool) -> SpeechReading | No
             walk.adapt(f"SSML speech (type={kind!r}) read as its words, marks and prosody")
         else:
             walk.adapt("speech without <text>: the text written in the speech element read as its text")
+    if lenient and not "".join(walk.raw).strip() and node.attrs.get("text", "").strip():
+        walk.put(node.attrs["text"])
+        walk.adapt("the text= attribute of a speech (Greta, SEMAINE) read as its text")
     if walk.timed_syncs:
         walk.adapt(f"{walk.timed_syncs} sync points of the text carry times (from a recording): the speech is "
                    "synthesised, with its own timing")
