@@ -8,9 +8,10 @@ time warping, transition units, replacement groups):
 ===============  ========================================================================================
 module           what lives there
 ===============  ========================================================================================
-``body``         the H-Anim style skeleton: joints, offsets, Euler channels (BVH order ZXY), joint
-                 limits, degrees of freedom by name (``"skullbase.pitch"``), forward kinematics and the
-                 analytic two-link arm inverse kinematics.
+``body``         the H-Anim style skeleton: joints (a jaw and four lip joints in the face), offsets,
+                 Euler channels (BVH order ZXY), joint limits, degrees of freedom by name
+                 (``"skullbase.pitch"``), forward kinematics and the analytic two-link arm inverse
+                 kinematics.
 ``units``        motion units: the preferred key times and phases of every kind of motion, the binding
                  of a behaviour to its unit, and where a timed unit is at a given time.
 ``time_source``  TimeSource: the time a driver is advanced by (the clock, or animator time that
@@ -25,6 +26,8 @@ module           what lives there
                  pointing by inverse kinematics, hand shapes and key frame sequences.
 ``head``         nods, shakes and tilts, head turns, gaze with its eyes, saccades and held eyelids.
 ``pose``         face expressions and postures blended to and held, locomotion, the jaw during speech.
+``lips``         lip sync: the viseme table (jaw, lip spread and rounding, lip closure), the drivers of
+                 visemes and of keyframed face channels, and the monotone cubic their keys follow.
 ``functions``    motor functions by name with default parameters (background drivers, motion units).
 ``manager``      the DriverManager: drivers, Arbitrator and motor functions of one body, and the event
                  sweep that evaluates poses.

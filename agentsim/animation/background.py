@@ -45,7 +45,7 @@ class BaseTrack:
 
 
 class IdleSway(Driver):
-    """The body at rest, never quite still (idle drift): stance, weight shift, arms, head and jaw.
+    """The body at rest, never quite still (idle drift): stance, weight shift, arms, head, jaw and lips.
 
     Each DOF has a base value (the rest pose; shifts such as postureShift, headDirectionShift and
     locomotion move it with :meth:`set_base`) plus a slow random sway drawn from a seeded Generator.
@@ -61,7 +61,8 @@ class IdleSway(Driver):
 
     def __init__(self, body: Body, rng: np.random.Generator, name: str = "idle sway"):
         joints = ["HumanoidRoot", "sacroiliac", "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle",
-                  "vl5", "vc4", "skullbase", "temporomandibular", "l_eyebrow", "r_eyebrow"]
+                  "vl5", "vc4", "skullbase", "temporomandibular", "lower_lip", "upper_lip", "l_lip_corner",
+                  "r_lip_corner", "l_eyebrow", "r_eyebrow"]
         for side in "lr":
             joints += [f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist", f"{side}_fingers"]
         names = [f"{j}.{a}" for j in joints for a in ("roll", "pitch", "yaw")]

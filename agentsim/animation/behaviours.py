@@ -2,7 +2,8 @@
 
 :func:`build_drivers` turns what a realizer played (its recording) into drivers on a
 :class:`~agentsim.animation.manager.DriverManager`; gestures and pointing get their hands chosen,
-conducting beats numbered and coarticulation on each hand.
+conducting beats numbered and coarticulation on each hand; visemes (``lips``) hand the mouth on from one to
+the next.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 from agentsim.animation.arms import GESTURE_FORMS, GestureDriver, PointingDriver, conducting_meter, conducting_path
 from agentsim.animation.drivers import PRIORITY
 from agentsim.animation.head import GazeDriver, HeadDriver, HeadTurnDriver
+from agentsim.animation.lips import LipsDriver, curves_driver, lips_values
 from agentsim.animation.manager import DriverManager
 from agentsim.animation.motion import KeyTimes, ReplacementGroup
 from agentsim.animation.pose import (POSTURES, LocomotionDriver, PoseDriver, SpeechJawDriver, TransitionDriver,
@@ -72,6 +74,7 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
     groups = {"gaze": ReplacementGroup("gaze")}
     infos: list[UnitInfo] = []
     arm_items: list[tuple] = []
+    lips_items: list[tuple] = []
 
     for record in sorted(records, key=lambda x: (x.start if x.start is not None else math.inf, x.order)):
         b = record.behaviour
@@ -96,6 +99,9 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
         common = {"stop": stop, "time_source": ts}
         if b.type in ("gesture", "pointing"):
             arm_items.append((record, keys, info, common))
+            continue
+        if b.type == "lips":
+            lips_items.append((record, keys, info, common))
             continue
         if b.type == "speech":
             drv = manager.add(SpeechJawDriver(name, keys, **common))
@@ -131,6 +137,12 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
             else:
                 drv = manager.add(PoseDriver(name, keys, values, PRIORITY["shift"], "end", release="end",
                                              rest_after=True, **common))
+        elif b.type == "curves":
+            drv, note = curves_driver(name, keys, b, **common)
+            info.note = note
+            if drv is None:
+                continue
+            manager.add(drv)
         elif b.type == "locomotion":
             drv = manager.add(LocomotionDriver(name, keys, _bml_target(scene, b), **common))
         elif b.type == "transition":
@@ -146,6 +158,7 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
         info.drivers.append(drv.name)
 
     _build_arms(manager, arm_items, scene)
+    _build_lips(manager, lips_items)
     return infos
 
 
@@ -170,6 +183,19 @@ def _bml_target(scene: Scene, behaviour) -> np.ndarray:
     if angle:
         point = offset_target(point, np.array([0.0, 1.665, 0.085]), angle, attrs.get("offsetDirection", "RIGHT"))
     return point
+
+
+def _build_lips(manager: DriverManager, items: list[tuple]) -> None:
+    """Visemes, in the order they start: each holds its shape until the next one takes over when that
+    starts during its relax..end, so consecutive visemes blend from one shape into the next."""
+    items = sorted(items, key=lambda it: (it[1].start, it[0].order))
+    for k, (record, keys, info, common) in enumerate(items):
+        values, note = lips_values(record.behaviour.attributes)
+        info.note = note
+        following = items[k + 1][1].start if k + 1 < len(items) else None
+        hold_until = following if following is not None and following < keys.end else None
+        drv = manager.add(LipsDriver(f"{record.block}:{record.id}", keys, values, hold_until, **common))
+        info.drivers.append(drv.name)
 
 
 def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> None:

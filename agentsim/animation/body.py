@@ -10,7 +10,9 @@ With all rotations zero the figure stands with its arms hanging down, palms faci
 that matter: a positive ``pitch`` turns a forward-pointing segment downwards (head nods down, eyes look
 down); a positive ``yaw`` turns the face towards the character's left; for a hanging arm a positive
 shoulder ``roll`` swings the hand towards +X (abduction of the left arm) and a negative elbow ``pitch``
-bends the forearm forwards.
+bends the forearm forwards. The mouth: a positive jaw (``temporomandibular``) pitch opens it, a positive
+``upper_lip`` and a negative ``lower_lip`` pitch close the lips, a positive ``l_lip_corner`` and a negative
+``r_lip_corner`` yaw spread the mouth corners (the other signs round them).
 
 Everything is vectorised over frames: angles are numpy arrays of shape ``(n,)``, rotations ``(n, 3, 3)``.
 """
@@ -96,6 +98,30 @@ def _eye(side: str) -> list[Joint]:
     ]
 
 
+def _mouth() -> list[Joint]:
+    """The lips: each of the four is a short segment whose end site is a lip edge or a mouth corner.
+
+    ``upper_lip`` (on the skull) and ``lower_lip`` (on the jaw, so it drops with it) pitch their edges
+    towards each other to close the mouth: a positive upper lip pitch lowers the upper lip, a negative
+    lower lip pitch raises the lower one. At rest the two edges are 3 mm apart in front of the teeth.
+    ``l_lip_corner`` and ``r_lip_corner`` turn about a vertical axis through a point behind the middle of
+    the lips, so a corner swings outwards and back (spread, as in "ee") or inwards and forwards (rounded
+    and protruded, as in "oo"). The pair follows the body's mirror convention for left and right (as
+    shoulder and eyebrow rolls do): ``l_lip_corner.yaw`` spreads when positive, ``r_lip_corner.yaw`` when
+    negative; about 1 mm of corner travel per 2 degrees.
+    """
+    return [
+        Joint("lower_lip", "temporomandibular", (0.0, -0.028, 0.028),
+              {"roll": FIXED, "pitch": (-20, 20), "yaw": FIXED}, end_site=(0.0, 0.003, 0.014)),
+        Joint("upper_lip", "skullbase", (0.0, -0.018, 0.086),
+              {"roll": FIXED, "pitch": (-10, 15), "yaw": FIXED}, end_site=(0.0, -0.004, 0.016)),
+        Joint("l_lip_corner", "skullbase", (0.0, -0.025, 0.075),
+              {"roll": FIXED, "pitch": FIXED, "yaw": (-30, 20)}, end_site=(0.026, 0.0, 0.02)),
+        Joint("r_lip_corner", "skullbase", (0.0, -0.025, 0.075),
+              {"roll": FIXED, "pitch": FIXED, "yaw": (-20, 30)}, end_site=(-0.026, 0.0, 0.02)),
+    ]
+
+
 def default_joints() -> list[Joint]:
     """The joints of the default figure (about 1.7 m tall), parents before children, in BVH order."""
     spine = (-180, 180)
@@ -114,6 +140,7 @@ def default_joints() -> list[Joint]:
               {"roll": (-30, 30), "pitch": (-40, 40), "yaw": (-70, 70)}, end_site=(0.0, 0.18, 0.0)),
         Joint("temporomandibular", "skullbase", (0.0, 0.0, 0.06),
               {"roll": FIXED, "pitch": (-5, 25), "yaw": FIXED}, end_site=(0.0, -0.05, 0.05)),
+        *_mouth(),
         *_eye("l"), *_eye("r"),
         *_arm("l"), *_arm("r"),
     ]

@@ -32,6 +32,7 @@ PRIORITY = {
     "shift": 10,       # gazeShift, headDirectionShift, postureShift, faceShift, locomotion
     "speech": 15,      # the jaw while speaking
     "behaviour": 20,   # gesture, pointing, gaze, face, posture
+    "lips": 22,        # visemes and keyframed face curves: the mouth speaks over the speech jaw and expressions
     "head": 25,        # nod, shake, tilt: they ride on top of a gaze or a head turn
     "command": 30,     # motor functions invoked directly (hand shapes, eyelids, key frames)
 }

@@ -1,0 +1,302 @@
+"""Lip sync: mouth shapes of visemes and face channels, and the drivers of ``lips`` and ``curves`` behaviours.
+
+Other realizers write lip sync as a row of visemes (SmartBody's ``<lips viseme="Ih" .../>``, read into
+``lips`` behaviours) or as keyframed channels (``<curves>``, read into ``curves`` behaviours). Both are
+played on the mouth: the jaw (``temporomandibular.pitch``) and the lips (``upper_lip.pitch``,
+``lower_lip.pitch``, ``l_lip_corner.yaw``, ``r_lip_corner.yaw``; see :mod:`agentsim.animation.body`).
+
+The viseme table
+----------------
+A :class:`MouthShape` describes a viseme on the two axes a viseme needs (open/closed and wide/narrow,
+the way animators read visemes) plus the lips' closure: how far the jaw opens, how far the corners
+spread (positive) or round and protrude (negative), how far the upper lip comes down and the lower lip up.
+The values follow the standard articulation of each viseme class:
+
+* open vowels open the jaw most (Aa 16 degrees, as the ``OPEN_MOUTH`` face lexeme; Ah, Ao a little less),
+  mid vowels half (Eh, Oh 9), close vowels little (Ih, Uh 5; Iy, Uw 3);
+* front vowels spread the lips, the more the closer (Eh 6, Ih 8, Iy/EE 12);
+* back rounded vowels and W round them, the more the closer (Ao -8, Oh -14, Uw/OO -18, W -20), as do
+  Er, R (-6, -10) and the postalveolars ShCh (-10, lips flared: the upper lip lifts a little);
+* bilabials BMP (PBM) close the lips on an almost closed jaw: upper lip down, lower lip up;
+* labiodentals F (FV) raise the lower lip to the upper teeth, the upper lip lifting clear of them;
+* the tongue consonants (D, Th, Z, L, K, N) leave the lips near rest on a slightly open jaw (Z, the
+  sibilants, with the teeth close and the lips spread);
+* ``_`` is silence: the rest pose.
+
+An unknown name gets a neutral half-open mouth (jaw 8 degrees) and a note. Names are matched without
+regard to case; a few aliases (PBM, FV, EE, OO, KG, S, Sh, Ch, J) name the same shapes.
+
+Face channels (``curves``) use the same table: a channel named like a viseme moves the mouth to that
+shape scaled by its value, and the FaceFX channel names map onto it (``open``: the jaw alone, ``wide``:
+the spread alone, ``W``, ``ShCh``, ``PBM``, ``FV``: those visemes). Channels add up, as blend shapes do.
+The tongue channels (``tBack``, ``tRoof``, ``tTeeth``) have nothing to move in this skeleton and are
+noted, like unknown channels.
+
+Timing and arbitration
+----------------------
+A viseme blends from the pose it finds to its shape (scaled by ``articulation``) between start and ready
+(over at least :data:`MIN_RAMP`: SmartBody writes ready at start), holds it to relax and hands the
+mouth back to whoever held it before (the speech jaw, the rest pose), which blends there by end (at
+least :data:`MIN_RAMP` after relax). Visemes drive the mouth at priority ``lips``, above the speech jaw,
+which therefore yields wherever a viseme is, and above face expressions. Of overlapping
+visemes the later takes over when it starts, blending from where the earlier one has the mouth; an
+earlier viseme whose follower starts during its relax..end keeps its shape until then, so the mouth goes
+straight from one shape to the next rather than towards rest and back.
+
+A curves behaviour's channel keys (seconds from its start, stretched in proportion when the plan gave
+the behaviour another duration) are interpolated by a monotone piecewise cubic (Fritsch-Carlson slopes,
+zero slope at the first and last key): the weight passes through every key, has a continuous velocity
+and never overshoots the keys. Before the first and after the last key a channel keeps that key's
+value. Its first :data:`CURVE_BLEND` seconds blend from the pose the curves find.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from agentsim.animation.drivers import EPSILON, PRIORITY
+from agentsim.animation.motion import KeyTimes, MotionDriver, blend_in
+from agentsim.animation.units import curve_keys, curves_duration
+
+#: The DOFs of the mouth, in the order of :class:`MouthShape`'s fields (the corners share ``spread``).
+MOUTH_DOFS = ("temporomandibular.pitch", "l_lip_corner.yaw", "r_lip_corner.yaw", "upper_lip.pitch",
+              "lower_lip.pitch")
+#: Shortest blend (s) of a viseme into its shape: about half the length of a phoneme in fluent speech.
+MIN_RAMP = 0.05
+#: Blend (s) from the pose a curves behaviour finds into its keyed values.
+CURVE_BLEND = 0.04
+
+
+@dataclass(frozen=True)
+class MouthShape:
+    """A mouth shape in degrees: ``jaw`` opening, corner ``spread`` (negative: rounded), ``upper`` lip
+    lowered and ``lower`` lip raised (both close the lips)."""
+
+    jaw: float = 0.0
+    spread: float = 0.0
+    upper: float = 0.0
+    lower: float = 0.0
+
+    def dofs(self, scale: float = 1.0) -> dict[str, float]:
+        """The shape as DOF values (degrees), scaled: the corners mirror each other, the lower lip rises
+        with a negative pitch."""
+        return {"temporomandibular.pitch": self.jaw * scale, "l_lip_corner.yaw": self.spread * scale,
+                "r_lip_corner.yaw": 0.0 - self.spread * scale, "upper_lip.pitch": self.upper * scale,
+                "lower_lip.pitch": 0.0 - self.lower * scale}
+
+
+#: Viseme name (lower case) -> mouth shape; see the module's description for the rationale.
+VISEMES: dict[str, MouthShape] = {
+    "_": MouthShape(),
+    "aa": MouthShape(jaw=16, spread=2),
+    "ah": MouthShape(jaw=12),
+    "ao": MouthShape(jaw=13, spread=-8),
+    "eh": MouthShape(jaw=9, spread=6),
+    "er": MouthShape(jaw=6, spread=-6),
+    "ih": MouthShape(jaw=5, spread=8),
+    "iy": MouthShape(jaw=3, spread=12),
+    "ee": MouthShape(jaw=3, spread=12),
+    "uh": MouthShape(jaw=5, spread=-10),
+    "uw": MouthShape(jaw=3, spread=-18),
+    "oo": MouthShape(jaw=3, spread=-18),
+    "oh": MouthShape(jaw=9, spread=-14),
+    "w": MouthShape(jaw=2, spread=-20),
+    "bmp": MouthShape(jaw=1, upper=8, lower=12),
+    "pbm": MouthShape(jaw=1, upper=8, lower=12),
+    "f": MouthShape(jaw=1, spread=2, upper=-3, lower=12),
+    "fv": MouthShape(jaw=1, spread=2, upper=-3, lower=12),
+    "d": MouthShape(jaw=4, spread=4),
+    "th": MouthShape(jaw=5, spread=3),
+    "z": MouthShape(jaw=2, spread=8),
+    "s": MouthShape(jaw=2, spread=8),
+    "r": MouthShape(jaw=4, spread=-10),
+    "l": MouthShape(jaw=7, spread=2),
+    "k": MouthShape(jaw=6, spread=2),
+    "kg": MouthShape(jaw=6, spread=2),
+    "n": MouthShape(jaw=4, spread=2),
+    "shch": MouthShape(jaw=3, spread=-10, upper=-3),
+    "sh": MouthShape(jaw=3, spread=-10, upper=-3),
+    "ch": MouthShape(jaw=3, spread=-10, upper=-3),
+    "j": MouthShape(jaw=3, spread=-10, upper=-3),
+}
+#: A viseme the table does not know: a neutral half-open mouth.
+NEUTRAL = MouthShape(jaw=8)
+#: Face channel name (lower case) -> mouth shape at weight 1: the visemes, and the FaceFX components.
+CHANNELS: dict[str, MouthShape] = {**VISEMES, "open": MouthShape(jaw=16), "wide": MouthShape(spread=12)}
+#: Channels that move the tongue, which this skeleton does not have.
+TONGUE_CHANNELS = frozenset({"tback", "troof", "tteeth"})
+
+
+def viseme_shape(name: str) -> MouthShape | None:
+    """The mouth shape of a viseme (any case), or None if the table does not know it."""
+    return VISEMES.get(name.strip().lower())
+
+
+def articulation_of(attrs: Mapping[str, str]) -> tuple[float, str]:
+    """A lips behaviour's ``articulation`` (default 1) limited to 0..1, and a note if it had to be changed."""
+    text = attrs.get("articulation", "1")
+    try:
+        value = float(text)
+    except ValueError:
+        return 1.0, f"articulation {text!r} is not a number: 1 used"
+    if not np.isfinite(value):
+        return 1.0, f"articulation {text!r} is not a number: 1 used"
+    if value < 0.0 or value > 1.0:
+        clipped = min(max(value, 0.0), 1.0)
+        return clipped, f"articulation {value:g} limited to {clipped:g}"
+    return value, ""
+
+
+def lips_values(attrs: Mapping[str, str]) -> tuple[dict[str, float], str]:
+    """The DOF values a lips behaviour holds (its viseme's shape times its articulation), and a note
+    (an unknown viseme, a changed articulation; empty if none)."""
+    notes = []
+    name = attrs.get("viseme", "")
+    shape = viseme_shape(name)
+    if shape is None:
+        shape = NEUTRAL
+        notes.append(f"unknown viseme {name!r}: a neutral half-open mouth")
+    amount, note = articulation_of(attrs)
+    if note:
+        notes.append(note)
+    return shape.dofs(amount), "; ".join(notes)
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One face channel of a curves behaviour: its keys (seconds from the start, weight) and the DOF
+    values it moves to at weight 1."""
+
+    name: str
+    times: np.ndarray
+    weights: np.ndarray
+    values: dict[str, float]
+
+
+def curve_channels(behaviour) -> tuple[list[Channel], list[str]]:
+    """The channels of a curves behaviour that move the mouth, and notes on those that do not (the
+    tongue, names without a mapping, channels without keys)."""
+    channels: list[Channel] = []
+    notes: list[str] = []
+    for name, keys in curve_keys(behaviour).items():
+        low = name.strip().lower()
+        if not keys:
+            notes.append(f"{name}: no keys")
+        elif low in TONGUE_CHANNELS:
+            notes.append(f"{name}: no tongue in this skeleton")
+        elif low not in CHANNELS:
+            notes.append(f"{name}: no mapping")
+        else:
+            values = {d: v for d, v in CHANNELS[low].dofs().items() if v != 0.0}
+            if not values:  # the silence channel: the rest pose, which the mouth returns to anyway
+                notes.append(f"{name}: the rest pose, nothing to move")
+                continue
+            channels.append(Channel(name, np.array([k[0] for k in keys], dtype=float),
+                                    np.array([k[1] for k in keys], dtype=float), values))
+    return channels, notes
+
+
+def monotone_cubic(xs: Sequence[float], ys: Sequence[float], t) -> np.ndarray:
+    """Interpolate keys ``(xs, ys)`` (increasing ``xs``) at times ``t`` by a monotone piecewise cubic.
+
+    Hermite cubics with Fritsch-Carlson slopes (a weighted harmonic mean of the neighbouring secants where
+    they have one sign, zero at a local extremum and at the first and last key): the curve passes through
+    every key, has a continuous first derivative and stays between neighbouring keys. Keys at one time
+    make a step; outside the keys the value is the nearest key's.
+    """
+    xs = np.asarray(xs, dtype=float)
+    ys = np.asarray(ys, dtype=float)
+    t = np.asarray(t, dtype=float)
+    if len(xs) == 1:
+        return np.full(t.shape, ys[0])
+    h = np.diff(xs)
+    step = h <= EPSILON
+    delta = np.where(step, 0.0, np.diff(ys) / np.where(step, 1.0, h))
+    m = np.zeros(len(xs))
+    for k in range(1, len(xs) - 1):
+        if delta[k - 1] * delta[k] > 0:
+            w1, w2 = 2 * h[k] + h[k - 1], h[k] + 2 * h[k - 1]
+            m[k] = (w1 + w2) / (w1 / delta[k - 1] + w2 / delta[k])
+    tc = np.clip(t, xs[0], xs[-1])
+    k = np.clip(np.searchsorted(xs, tc, side="right") - 1, 0, len(xs) - 2)
+    hk = h[k]
+    u = np.where(hk > EPSILON, (tc - xs[k]) / np.where(hk > EPSILON, hk, 1.0), 1.0)
+    u2, u3 = u * u, u * u * u
+    return ((2 * u3 - 3 * u2 + 1) * ys[k] + (u3 - 2 * u2 + u) * hk * m[k]
+            + (-2 * u3 + 3 * u2) * ys[k + 1] + (u3 - u2) * hk * m[k + 1])
+
+
+class LipsDriver(MotionDriver):
+    """A viseme: the mouth DOFs blend from the pose found at the start to ``values`` by ready (at least
+    :data:`MIN_RAMP` after the start), hold to relax (or to ``hold_until``, when the next viseme starts
+    during this one's relax..end) and are handed back for the rest of the unit."""
+
+    def __init__(self, name: str, keys: KeyTimes, values: Mapping[str, float], hold_until: float | None = None,
+                 **kw):
+        super().__init__(name, keys, PRIORITY["lips"], list(values), **kw)
+        self.values = dict(values)
+        self.hold_until = hold_until
+
+    def release_time(self) -> float:
+        """Relax, or the next viseme's start when that comes between relax and end."""
+        relax = self.keys.time("relax") if self.keys.has("relax") else self.keys.end
+        if self.hold_until is not None:
+            return max(relax, min(self.hold_until, self.keys.end))
+        return relax
+
+    def handover(self) -> float:
+        return max(self.keys.end - self.release_time(), MIN_RAMP)
+
+    def ramp_end(self) -> float:
+        """When the shape is reached (driver time): ready, or :data:`MIN_RAMP` after the unit began."""
+        ready = self.keys.time("ready") if self.keys.has("ready") else self.keys.start
+        return max(ready, self.begun + MIN_RAMP)
+
+    def on_tick(self, t: np.ndarray) -> None:
+        target = {k: np.full(len(t), v) for k, v in self.values.items()}
+        self.write_held(blend_in(self, target, t, self.begun, self.ramp_end()))
+
+
+class CurvesDriver(MotionDriver):
+    """Keyframed face channels: each channel's weight (interpolated by :func:`monotone_cubic`) times its
+    shape, summed over channels, on the mouth DOFs any channel moves, from start to end."""
+
+    grant_blend = CURVE_BLEND
+    release_key = "end"
+
+    def __init__(self, name: str, keys: KeyTimes, channels: Sequence[Channel], duration: float, **kw):
+        dofs = [d for d in MOUTH_DOFS if any(d in c.values for c in channels)]
+        super().__init__(name, keys, PRIORITY["lips"], dofs, **kw)
+        self.channels = list(channels)
+        self.duration = float(duration)
+
+    def curve_time(self, t: np.ndarray) -> np.ndarray:
+        """Seconds on the curves' own time axis at driver times ``t`` (stretched in proportion when the
+        behaviour's planned duration differs from its last key)."""
+        span = self.keys.end - self.keys.start
+        local = np.asarray(t, dtype=float) - self.keys.start
+        if span > EPSILON and abs(span - self.duration) > 1e-9:
+            local = local * (self.duration / span)
+        return local
+
+    def on_tick(self, t: np.ndarray) -> None:
+        local = self.curve_time(t)
+        out = {d: np.zeros(len(t)) for d in self.dof_names}
+        for c in self.channels:
+            w = monotone_cubic(c.times, c.weights, local)
+            for d, v in c.values.items():
+                out[d] += w * v
+        self.write_held(out)
+
+
+def curves_driver(name: str, keys: KeyTimes, behaviour, **kw) -> tuple[CurvesDriver | None, str]:
+    """The driver of a curves behaviour (None if none of its channels moves the mouth) and a note on the
+    channels left out."""
+    channels, notes = curve_channels(behaviour)
+    note = ("channels without DOFs: " + ", ".join(notes)) if notes else ""
+    if not channels:
+        return None, (note + "; " if note else "") + "no channel moves this body"
+    return CurvesDriver(name, keys, channels, curves_duration(behaviour), **kw), note
