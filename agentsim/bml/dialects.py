@@ -254,6 +254,7 @@ class Adapter:
     # ------------------------------------------------------------------------------------------- the block
     def adapt(self) -> None:
         node = self.node
+        self.declared_namespace = node.namespace
         self.read_namespaces(node)
         if not node.attrs.get("id", "").strip():
             node.attrs["id"] = self.name_block()
@@ -282,8 +283,10 @@ class Adapter:
         behaviours = self.behaviours(node)
         self.name_behaviours(behaviours)
         self.retarget_refs(behaviours, self.constraints)
-        self.times_after_start(behaviours)
-        self.shift_negative_times(behaviours)
+        if self.declared_namespace != BML_NAMESPACE:
+            # Greta's ways with time read otherwise valid BML 1.0 otherwise: only where BML 1.0 is not declared
+            self.times_after_start(behaviours)
+            self.shift_negative_times(behaviours)
         speeches = [b for b in behaviours if b.tag == "speech"]
         for curves in self.curves:
             if speeches and not self.sync_keys(curves):
