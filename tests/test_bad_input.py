@@ -148,7 +148,8 @@ def test_not_bml_and_bad_composition():
 # ---------------------------------------------------------------- property: never raises, never hangs
 ASAP = Path(__file__).parent / "bml-examples-asap"
 SOURCES = (sorted(EXAMPLES.glob("*.xml")) + sorted((Path(__file__).parent / "bml").glob("*.xml"))
-           + sorted((ASAP / "asap").rglob("*.xml")) + sorted((ASAP / "bmlt").glob("*.xml")))
+           + sorted((ASAP / "asap").rglob("*.xml")) + sorted((ASAP / "bmlt").glob("*.xml"))
+           + sorted((Path(__file__).parent / "dialects").rglob("*.[xb]ml")))
 TOKENS = ["<", ">", "/>", '"', ":", "+", "-", "-1e9", "1e30", "0", "-3", "start=\"a:b\"", 'end="speech1:end-99"',
           '<sync id="s9"/>', "&amp;", "&lol;", "<!ENTITY x 'y'>", 'composition="APPEND"', 'composition="REPLACE"',
           'id=""', "</bml>", "<bml>", "<head id=\"n9\" lexeme=\"NOD\" start=\"n9:end\"/>",
@@ -160,7 +161,13 @@ TOKENS = ["<", ">", "/>", '"', ":", "+", "-", "-1e9", "1e30", "0", "-3", "start=
           ' bmla:prependBefore="bml1"', ' composition="APPEND-AFTER(bml1,bml2)"', ' composition="CHUNK-AFTER(bml3)"',
           '<bmla:interrupt id="i9" target="bml1" include="speech1"/>', '<bmla:activate id="a9" target="bml2"/>',
           '<bmla:parametervaluechange id="p9" target="bml1:speech1" paramId="volume">'
-          '<bmla:trajectory type="linear" initialValue="0" targetValue="100"/></bmla:parametervaluechange>']
+          '<bmla:trajectory type="linear" initialValue="0" targetValue="100"/></bmla:parametervaluechange>',
+          # other realizers' BML: envelopes, marks, draft attributes, their own behaviours
+          "<act>", "</act>", "<fml-apml>", '<participant id="p" role="actor"/>', '<tm id="tm9"/>',
+          '<mark name="T9"/>', 'type="NOD"', 'stroke_start="s1:tm1"', 'start="-0.5"', 'end="0.1"',
+          '<lips viseme="Aa" start="0.1" ready="0.1" relax="0.2" end="0.2"/>', '<animation name="Beat"/>',
+          '<event stroke="sp1:relax"/>', "<emphasis>", "</emphasis>", '<break time="9s"/>',
+          '<curves><curve name="open" num_keys="2">0 0 0 0 1 1 0 0</curve></curves>', "<BML>"]
 
 
 @contextmanager
@@ -245,3 +252,11 @@ def test_ids_with_a_colon_are_refused_because_feedback_ids_join_ids_with_colons(
         "behaviour ignored", "speech s: sync id 'a:b' contains ':' and is ignored"]
     assert {f["id"] for f in r.syncs} == {"b:h:" + s for s in ("start", "ready", "strokeStart", "stroke",
                                                                 "strokeEnd", "relax", "end")} | {"b:s:start", "b:s:end"}
+
+
+def test_an_unknown_encoding_is_refused_in_both_readers():
+    doc = '<?xml version="1.0" encoding="TF-8"?><bml id="b1"><head id="h" lexeme="NOD"/></bml>'
+    for strict in (True, False):
+        r = realize(doc, strict=strict)
+        (w,) = r.warnings
+        assert w["warningType"] == "PARSING_FAILURE" and "TF-8" in w["description"] and not r.blocks

@@ -16,8 +16,8 @@ import math
 import re
 from dataclasses import dataclass, field
 
-from agentsim.animation.arms import GESTURE_FORMS
-from agentsim.animation.pose import POSTURES
+from agentsim.animation.arms import GESTURE_FORMS, conducting_meter
+from agentsim.animation.pose import FACE_LEXEMES, FACS_UNITS, POSTURES
 from agentsim.bml.tree import FOREST, Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
@@ -142,6 +142,11 @@ def fold_case(node: Node) -> bool:
     for child in node.elements():
         changed = fold_case(child) or changed
     return changed
+
+
+def seconds(value: float) -> str:
+    """A time written back into an attribute, as exactly as a float prints (to the nanosecond)."""
+    return repr(round(value, 9))
 
 
 def remove_nodes(node: Node, gone: set[int]) -> None:
@@ -293,6 +298,8 @@ class Adapter:
                 curves.attrs["start"] = f"{speeches[0].attrs['id']}:start"
                 self.notes.add("<curves> without a time start with the speech (their keys are times in it)")
         self.move_prosody(speeches)
+        if self.notes:
+            self.note_lexemes(behaviours)
         if self.clips:
             shown = ", ".join(f"{name!r} as {lexeme}" for name, lexeme in list(self.clips.items())[:6])
             more = f" and {len(self.clips) - 6} more" if len(self.clips) > 6 else ""
@@ -301,6 +308,33 @@ class Adapter:
             hint = UNMAPPED_HINTS.get(name, UNMAPPED_HINTS.get(name.split(":")[-1], "no counterpart here"))
             count = f"{len(nodes)} <{name}> elements" if len(nodes) > 1 else f"<{name}>"
             self.losses.append((f"{count}: {hint}; not realized", nodes[0]))
+
+    def note_lexemes(self, behaviours: list[Node]) -> None:
+        """Say which lexemes of the foreign vocabulary have no motion of their own here, and what plays
+        instead."""
+        fallbacks: dict[str, list[str]] = {}
+        for b in behaviours:
+            lexeme = b.attrs.get("lexeme", "").strip()
+            if b.tag == "faceFacs":
+                au = b.attrs.get("au", "").strip()
+                known = au.isdigit() and int(au) in FACS_UNITS
+                lexeme, instead = f"AU{au}", "no motion"
+            elif b.tag in ("face", "faceLexeme", "faceShift"):
+                known, instead = lexeme.upper() in FACE_LEXEMES, "no motion"
+            elif b.tag == "gesture":
+                known = lexeme.upper() in GESTURE_FORMS or conducting_meter(lexeme.upper()) is not None or not lexeme
+                instead = "a generic gesture"
+            elif b.tag == "head":
+                known, instead = lexeme.upper() in HEAD_LEXEMES or not lexeme, "a nod"
+            elif b.tag in ("posture", "postureShift"):
+                known, instead = lexeme.upper() in POSTURES or not lexeme, "a weight shift"
+            else:
+                continue
+            if not known:
+                fallbacks.setdefault(instead, []).append(f"{lexeme} ({b.attrs.get('id', '')})")
+        for instead, items in fallbacks.items():
+            shown = ", ".join(items[:6]) + (f" and {len(items) - 6} more" if len(items) > 6 else "")
+            self.notes.add(f"lexemes with no motion of their own here, played as {instead}: {shown}")
 
     def read_namespaces(self, node: Node) -> None:
         """The draft namespace is read as BML 1.0 (in every element's declarations)."""
@@ -749,7 +783,7 @@ class Adapter:
             for key in self.sync_keys(b):
                 value = b.attrs[key]
                 if key != "start" and _NUMBER.match(value) and float(value) < t0:
-                    b.attrs[key] = f"{t0 + float(value):g}"
+                    b.attrs[key] = seconds(t0 + float(value))
                     self.notes.add(f"{key}= smaller than start=: read as seconds after the start (Greta)")
 
     def merges(self, first: Node, again: Node) -> bool:
@@ -768,14 +802,14 @@ class Adapter:
         earliest = min((implied_start(b) for b in behaviours if any(x is b for x, _ in numbers)), default=0.0)
         if not earliest < -1e-9 or not math.isfinite(earliest):
             return
-        shift = round(-earliest, 6)
+        shift = -earliest
         for b, key in numbers:
-            b.attrs[key] = f"{float(b.attrs[key]) + shift:g}"
+            b.attrs[key] = seconds(float(b.attrs[key]) + shift)
         for b in behaviours:
             if not self.sync_keys(b) and b.local not in ("interrupt", "activate"):
-                b.attrs["start"] = f"{shift:g}"
-        self.notes.add(f"times before the block start (the earliest behaviour would start at {earliest:.3g} s): "
-                       f"the whole block plays {shift:g} s later, its relative timing kept")
+                b.attrs["start"] = seconds(shift)
+        self.notes.add(f"times before the block start (the earliest behaviour would start at {earliest:.3f} s): "
+                       f"the whole block plays {shift:.3f} s later, its relative timing kept")
 
     @staticmethod
     def sync_keys(node: Node) -> list[str]:

@@ -126,6 +126,8 @@ def _parse(data: bytes, shift: int = 0) -> Node:
         message = xml.parsers.expat.errors.messages.get(exc.code, str(exc))
         column = exc.offset + 1 - (shift if exc.lineno == 1 else 0)
         raise BMLError(f"malformed XML: {message}", exc.lineno, column) from None
+    except LookupError as exc:  # an encoding the XML declaration names that Python does not know
+        raise BMLError(f"malformed XML: {exc}", 1, 1) from None
     except DefusedXmlException as exc:
         raise BMLError(f"refused XML construct ({type(exc).__name__}): entity and external references "
                        "are not allowed in BML", expat.CurrentLineNumber, expat.CurrentColumnNumber + 1) from None
