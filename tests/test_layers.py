@@ -27,7 +27,7 @@ PACKAGE = ROOT / "agentsim"
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("core", ("agentsim", "agentsim.core")),
     ("libraries", ("agentsim.bml", "agentsim.speech", "agentsim.beats", "agentsim.music", "agentsim.animation")),
-    ("realizer parts", ("agentsim.engines", "agentsim.anticipators")),
+    ("realizer parts", ("agentsim.engines", "agentsim.anticipators", "agentsim.media")),
     ("realizer", ("agentsim.realizer",)),
     ("scenarios", ("agentsim.scenarios",)),
     ("command line", ("agentsim.cli", "agentsim.__main__")),

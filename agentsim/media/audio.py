@@ -1,0 +1,123 @@
+"""What a listener of the run heard, as one track on the run's time axis.
+
+Each speech is placed where it was heard: its first sample at ``t0`` (the request plus the playback latency
+of its strategy), speech time ``s`` at ``t0 + s * (1 + drift_ppm * 1e-6)``, its BMLA volume changes applied,
+cut (with a 5 ms fade) where an interruption stopped it. Sound files (``bmlt:audiofile``) start where they
+were played and stop where they were stopped; other sources (an ensemble the conductor heard) are given as
+:class:`Source`. Sources at other sample rates are resampled by linear interpolation onto the track's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Iterable
+
+import numpy as np
+
+#: The fade (s) where a sound is cut short, so that the cut does not click.
+FADE = 0.005
+
+
+@dataclass(frozen=True)
+class Source:
+    """A sound to place on the axis: mono ``samples`` at ``rate``, its sample 0 heard at ``start`` (s).
+
+    ``speed`` is how fast its own clock runs against the run's (1 + drift); ``stop`` cuts it (s, or None);
+    ``gain`` is a loudness factor as a function of global time, or None for 1.
+    """
+
+    samples: np.ndarray
+    rate: int
+    start: float
+    speed: float = 1.0
+    stop: float | None = None
+    gain: Callable[[float], float] | None = None
+    label: str = ""
+
+    @property
+    def end(self) -> float:
+        end = self.start + len(self.samples) / self.rate * self.speed
+        return min(end, self.stop) if self.stop is not None else end
+
+
+@dataclass
+class Track:
+    """Mono samples at ``rate`` whose sample 0 is at simulated time 0, and what went into it."""
+
+    samples: np.ndarray
+    rate: int
+    labels: list[str] = field(default_factory=list)
+
+    @property
+    def duration(self) -> float:
+        return len(self.samples) / self.rate
+
+    def time_of(self, index: int) -> float:
+        return index / self.rate
+
+
+def speech_sources(recording) -> list[Source]:
+    """The speeches of a recording that made sound, as sources."""
+    sources = []
+    for heard in recording.speech:
+        audio = getattr(heard.utterance, "audio", None)
+        if audio is None or len(audio) == 0:
+            continue
+        gain = heard.gain if heard.volume else None
+        sources.append(Source(np.asarray(audio, np.float32), int(heard.utterance.sample_rate), float(heard.t0),
+                              1.0 + heard.drift_ppm * 1e-6, heard.stopped, gain,
+                              f"{heard.block}:{heard.behaviour}"))
+    return sources
+
+
+def file_sources(recording) -> list[Source]:
+    """The sound files a recording played (``bmlt:audiofile``), as sources."""
+    import soundfile
+
+    sources = []
+    for played in recording.audio:
+        data, rate = soundfile.read(played.path, dtype="float32", always_2d=True)
+        sources.append(Source(data.mean(axis=1), int(rate), float(played.start), 1.0, played.stopped,
+                              label=f"{played.block}:{played.behaviour}"))
+    return sources
+
+
+def mix(sources: Iterable[Source], rate: int | None = None, duration: float | None = None) -> Track:
+    """Mix ``sources`` into one track at ``rate`` (default: the highest of the sources', or 22050 Hz),
+    long enough for the last of them (or ``duration`` s). Samples are summed and clipped to [-1, 1]."""
+    sources = list(sources)
+    if rate is None:
+        rate = max((s.rate for s in sources), default=22050)
+    end = max((s.end for s in sources), default=0.0)
+    n = int(np.ceil((duration if duration is not None else end) * rate))
+    out = np.zeros(n, np.float64)
+    for source in sources:
+        first = max(0, int(np.floor(source.start * rate)))
+        last = min(n, int(np.ceil(source.end * rate)))
+        if last <= first:
+            continue
+        t = np.arange(first, last) / rate
+        # where in the source each output sample falls (in source samples)
+        position = (t - source.start) / source.speed * source.rate
+        if source.speed == 1.0 and source.rate == rate and abs(source.start * rate - round(source.start * rate)) < 1e-6:
+            offset = int(round(source.start * rate))
+            index = np.arange(first, last) - offset
+            ok = (index >= 0) & (index < len(source.samples))
+            values = np.zeros(last - first)
+            values[ok] = source.samples[index[ok]]
+        else:
+            values = np.interp(position, np.arange(len(source.samples)), source.samples, left=0.0, right=0.0)
+        if source.gain is not None:
+            values = values * np.array([source.gain(x) for x in t]) if len(t) < 200_000 else \
+                values * np.interp(t, t[::256], [source.gain(x) for x in t[::256]])
+        if source.stop is not None:
+            values = values * np.clip((source.stop - t) / FADE, 0.0, 1.0)
+        out[first:last] += values
+    labels = [s.label for s in sources if s.label]
+    return Track(np.clip(out, -1.0, 1.0).astype(np.float32), int(rate), labels)
+
+
+def run_track(recording, extra: Iterable[Source] = (), rate: int | None = None,
+              duration: float | None = None) -> Track:
+    """Everything the run's listener heard: its speech, its sound files and ``extra`` sources."""
+    return mix([*speech_sources(recording), *file_sources(recording), *extra], rate, duration)
