@@ -38,3 +38,31 @@ def realize(*documents, at=None, until=None, **kwargs) -> Result:
         realizer.submit_at(t, doc)
     realizer.run(until=until)
     return Result(realizer)
+
+
+def bvh_positions(path, names: list[str]) -> dict:
+    """World positions (frames, 3) of joints as a BVH reader (bvhio) reads the file: its rotations and
+    offsets composed from the root, independently of our own forward kinematics."""
+    import bvhio
+    import glm
+    import numpy as np
+
+    container = bvhio.readAsBvh(str(path))
+    parent, by_name = {}, {}
+
+    def walk(joint, up=None):
+        by_name[joint.Name] = joint
+        parent[joint.Name] = up
+        for child in joint.Children:
+            walk(child, joint)
+
+    walk(container.Root)
+
+    def world(name, k):
+        j = by_name[name]
+        if parent[name] is None:
+            return j.Keyframes[k].Rotation, glm.vec3(j.Keyframes[k].Position)
+        rot, pos = world(parent[name].Name, k)
+        return rot * j.Keyframes[k].Rotation, pos + rot * glm.vec3(j.Offset)
+
+    return {name: np.array([list(world(name, k)[1]) for k in range(container.FrameCount)]) for name in names}

@@ -137,7 +137,8 @@ def test_chunks_follow_one_another_and_coarticulate():
     r.check(["bml1", "bml2"])
     # the second chunk starts when the first subsides: its gesture relaxes as the next one starts
     assert r.sync["bml1:g1:relax"] == r.block["bml2:start"] == pytest.approx(r.sync["bml2:g1:start"], abs=1e-9)
-    assert r.sync["bml1:g1:stroke"] == r.sync["bml1:speech1:chunk"] == r.sync["bml1:speech1:end"]
+    # the mark after the last word is where that word ends; the speech ends after its final pause
+    assert r.sync["bml1:g1:stroke"] == r.sync["bml1:speech1:chunk"] <= r.sync["bml1:speech1:end"]
     # different hands: the first gesture retracts on its own while the second prepares (a beat: 0.3 s)
     assert r.sync["bml1:g1:end"] == pytest.approx(r.sync["bml1:g1:relax"] + 0.3, abs=1e-12)
     # on the same hand its retraction is skipped: relax = end = the next gesture's start

@@ -30,6 +30,13 @@ def backend(name: str):
     return BuiltinBackend()
 
 
+def describe_backend(tts) -> str:
+    """One line saying which speech backend times (and voices) the run."""
+    if getattr(tts, "name", "") == "espeak":
+        return f"espeak-ng (voice {tts.voice}, {tts.rate} words per minute)"
+    return "the built-in timing model (no sound; --tts espeak speaks)"
+
+
 def add_strategy(parser: argparse.ArgumentParser, extra: str = "") -> argparse.Action:
     return parser.add_argument("--strategy", default="best", metavar="S",
                                help=f"animator-time strategy{extra} (best)")

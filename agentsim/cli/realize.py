@@ -36,9 +36,9 @@ def add_parsers(commands) -> None:
     realize.add_argument("--until", type=float, metavar="SECONDS", help="stop the run at this simulated time")
     realize.add_argument("--realtime", action="store_true", help="run in real time instead of simulated time")
     options.add_anticipators(realize)
-    realize.add_argument("--bvh", metavar="OUT.bvh", help="write the motion as BVH (Blender imports it)")
-    realize.add_argument("--poses", metavar="OUT.npz", help="write joint angles per frame (numpy .npz)")
-    options.add_fps(realize, "--bvh/--poses")
+    options.add_tts(realize, default="espeak")
+    add_outputs(realize)
+    options.add_fps(realize, "--bvh/--poses/--report")
     options.add_seed(realize, "the background motion (blinks, sway)")
     realize.set_defaults(handler=realize_files)
 
@@ -52,6 +52,59 @@ def add_parsers(commands) -> None:
     anticipators = commands.add_parser("anticipators", help="installed anticipators")
     anticipators.add_argument("action", choices=["list"])
     anticipators.set_defaults(handler=list_anticipators)
+
+
+def add_outputs(parser: argparse.ArgumentParser) -> None:
+    """The files a run can write, all on its time axis (simulated time 0 = WAV sample 0 = frame 0)."""
+    parser.add_argument("--wav", metavar="OUT.wav", help="write what a listener of the run heard (needs a backend "
+                                                         "that makes sound: --tts espeak)")
+    parser.add_argument("--bvh", metavar="OUT.bvh", help="write the motion as BVH")
+    parser.add_argument("--poses", metavar="OUT.npz", help="write joint angles per frame (numpy .npz)")
+    parser.add_argument("--textgrid", metavar="OUT.TextGrid", help="write words, phones, marks and strokes as a "
+                                                                   "Praat TextGrid")
+    parser.add_argument("--csv", metavar="DIR", help="write gestures.csv (one row per pegged behaviour) into DIR")
+    parser.add_argument("--report", metavar="OUT.html", help="write a report to watch and hear in a browser (with "
+                                                             "a folder OUT_files beside it)")
+
+
+def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sources=(), beat_times=None) -> None:
+    """Write the files ``args`` asks for from a finished run, on its time axis."""
+    from agentsim.media.audio import run_track
+    from agentsim.media.files import write_npz, write_textgrid, write_wav
+    from agentsim.media.tables import gesture_rows, write_csv
+
+    recording = realizer.recording()
+    stream = None
+    if args.bvh or args.poses or args.report:
+        from agentsim.animation import evaluate_poses
+
+        stream = evaluate_poses(recording, fps=args.fps, seed=args.seed)
+    track = run_track(recording, extra_sources) if (args.wav or args.report) else None
+    gestures = gesture_rows(recording, beat_times) if (args.csv or args.report or args.textgrid) else []
+    if args.wav:
+        write_wav(args.wav, track)
+    if args.bvh:
+        from agentsim.animation import write_bvh
+
+        write_bvh(args.bvh, stream)
+    if args.poses:
+        write_npz(args.poses, stream)
+    if args.textgrid:
+        write_textgrid(args.textgrid, recording, gestures)
+    if args.csv:
+        write_csv(Path(args.csv) / "gestures.csv", gestures)
+    if args.report:
+        from agentsim.media.report import write_report
+
+        write_report(args.report, recording=recording, stream=stream, track=track if track.duration > 0 else None,
+                     gestures=gestures, title=title)
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Say, before any work, which output cannot be written."""
+    from agentsim.media.files import check_writable
+
+    check_writable([args.wav, args.bvh, args.poses, args.textgrid, args.report], [args.csv])
 
 
 def read_document(path: str) -> str | bytes:
@@ -75,7 +128,12 @@ def realize_files(args: argparse.Namespace) -> int:
     if args.until is not None and not args.until >= 0:
         raise UsageError("--until must be a non-negative number of seconds")
     options.check_fps(args)
-    realizer = Realizer(realtime=args.realtime, anticipators=options.anticipators(args), strict=args.strict)
+    check_outputs(args)
+    tts = options.backend(args.tts)
+    if args.wav and args.tts == "builtin":
+        raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak")
+    print(f"speech: {options.describe_backend(tts)}", file=sys.stderr)
+    realizer = Realizer(realtime=args.realtime, anticipators=options.anticipators(args), strict=args.strict, tts=tts)
     out = sys.stdout
 
     def emit(feedback):
@@ -87,14 +145,7 @@ def realize_files(args: argparse.Namespace) -> int:
     for i in order:
         realizer.submit_at(at[i], documents[i][1], source=documents[i][0])
     realizer.run(until=args.until)
-    if args.bvh or args.poses:
-        from agentsim.animation import evaluate_poses, write_bvh, write_npz
-
-        stream = evaluate_poses(realizer.recording(), fps=args.fps, seed=args.seed)
-        if args.bvh:
-            write_bvh(args.bvh, stream)
-        if args.poses:
-            write_npz(args.poses, stream)
+    write_run_outputs(args, realizer, title=", ".join(Path(f).name for f in args.files))
     return 0
 
 

@@ -2,11 +2,11 @@
 it was tied to really sounded, when its sync point happened, and the error.
 
 A behaviour is pegged when one of its sync points refers to a speech's sync point or to an anticipator's
-peg (its stroke is tried first). The word is the one the speech's
-sync point is realised on (the first word at or after the mark); it really sounded where the run's listener
-heard its onset (:mod:`agentsim.media.audio`'s placement: playback latency and drift included). An
-anticipator's beat sounded where ``beat_times`` says (the ensemble's onset of it, in the conductor), else at
-its peg's last time. All times are seconds on the run's axis; column names carry their units.
+peg (its stroke is tried first). The word is the one the speech's sync point falls in (a syllable's mark),
+else the first word after it; it really sounded where the run's listener heard it
+(:mod:`agentsim.media.audio`'s placement: playback latency and drift included). An anticipator's beat
+sounded where ``beat_times`` says (the ensemble's onset of it, in the conductor), else at its peg's last
+time. All times are seconds on the run's axis; column names carry their units.
 """
 
 from __future__ import annotations
@@ -56,8 +56,9 @@ def _word_heard(recording, block: str, speech: str, sync: str) -> tuple[str, flo
         if mark is None:
             return "", None
         t = mark.time
+        inside = [w for w in utterance.words if w.start - 1e-9 <= t < w.end]  # a mark on a syllable of a word
         following = [w for w in utterance.words if w.start >= t - 1e-9]
-        word = following[0].text if following else ""
+        word = inside[0].text if inside else following[0].text if following else ""
     sounded = heard.t0 + t * speed
     if heard.stopped is not None and sounded > heard.stopped + 1e-9:
         return word, None

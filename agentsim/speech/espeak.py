@@ -55,6 +55,8 @@ the values it reads (``docs/markup.md`` and ``ssml.c`` of espeak-ng; others are 
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import bisect
 import ctypes
 import difflib
@@ -668,6 +670,10 @@ def _first_sound_after(events: list[_RawEvent], index: int) -> int | None:
     return None
 
 
+#: How many utterances a backend keeps to say again as they were (see :meth:`EspeakBackend.synthesize`).
+REMEMBERED = 64
+
+
 class EspeakBackend:
     """Text-to-speech with espeak-ng, timed by the synthesiser's own word, phoneme and mark events.
 
@@ -707,6 +713,9 @@ class EspeakBackend:
         self._engine.select(voice, int(rate))
         self.voice = voice
         self.rate = int(rate)
+        # espeak-ng carries state from one utterance to the next (the same text spoken again can come out
+        # some milliseconds longer): a text is synthesised once per backend, and said the same every time
+        self._spoken: OrderedDict[SpeechText, Utterance] = OrderedDict()
 
     @property
     def sample_rate(self) -> int:
@@ -724,8 +733,20 @@ class EspeakBackend:
         Returns
         -------
         Utterance
-            Times in seconds from the start of ``audio`` (float32 mono in [-1, 1]).
+            Times in seconds from the start of ``audio`` (float32 mono in [-1, 1]). The same ``speech``
+            asked for again gets the same utterance (the last :data:`REMEMBERED` are kept).
         """
+        spoken = self._spoken.get(speech)
+        if spoken is not None:
+            self._spoken.move_to_end(speech)
+            return spoken
+        utterance = self._synthesize(speech)
+        self._spoken[speech] = utterance
+        if len(self._spoken) > REMEMBERED:
+            self._spoken.popitem(last=False)
+        return utterance
+
+    def _synthesize(self, speech: SpeechText) -> Utterance:
         text = speech.text
         ssml, origin = _to_ssml(text, speech.marks, speech.prosody)
         tokens = _tokens(text)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -129,8 +129,9 @@ def written_labels(text: str, utterance: Utterance) -> list[tuple[str, float, fl
 
 
 def export_textgrid(path: str | Path, story: Story, utterance: Utterance, planned: Sequence[float],
-                    realised: Sequence[float] | None = None, ids: Sequence[str] | None = None) -> Path:
-    """Write a telling as a TextGrid on the audio's time axis.
+                    realised: Sequence[float] | None = None, ids: Sequence[str] | None = None,
+                    to_axis: Callable[[float], float] | None = None, axis: str = "") -> Path:
+    """Write a telling as a TextGrid, on the audio's time axis or (``to_axis``) the run's.
 
     Tiers: ``words`` (:func:`written_labels`) and ``phones`` (intervals; a stressed vowel's label ends
     in ``ˈ``), ``gestures``
@@ -151,11 +152,18 @@ def export_textgrid(path: str | Path, story: Story, utterance: Utterance, planne
         Audio time (s) at which each gesture's sync point was passed (NaN: never).
     ids : sequence of str, optional
         BML id of each gesture (labels of the ``strokes`` tier).
+    to_axis : callable, optional
+        Maps an audio time (of ``utterance`` and ``planned``) to the TextGrid's axis (the run's: where the
+        audio was heard); ``realised`` is already on that axis.
+    axis : str
+        Said by an empty point tier named ``axis: ...`` (which axis the times are on).
     """
     from praatio import textgrid
     from praatio.utilities.constants import Interval, Point
 
-    end = float(utterance.duration)
+    at = to_axis if to_axis is not None else (lambda x: x)
+    planned = [at(float(p)) for p in planned]
+    end = float(at(utterance.duration))
     start = 0.0
     if realised is not None:
         finite = [float(t) for t in realised if np.isfinite(t)]
@@ -172,10 +180,11 @@ def export_textgrid(path: str | Path, story: Story, utterance: Utterance, planne
         return out
 
     grid = textgrid.Textgrid(start, end)
-    grid.addTier(textgrid.IntervalTier("words", intervals(written_labels(story.text, utterance)), start, end))
     grid.addTier(textgrid.IntervalTier(
-        "phones", intervals((p.symbol + ("ˈ" if p.stressed else ""), p.start, p.end) for p in utterance.phonemes),
-        start, end))
+        "words", intervals((label, at(a), at(b)) for label, a, b in written_labels(story.text, utterance)), start, end))
+    grid.addTier(textgrid.IntervalTier(
+        "phones", intervals((p.symbol + ("ˈ" if p.stressed else ""), at(p.start), at(p.end))
+                            for p in utterance.phonemes), start, end))
     points: dict[float, list[str]] = {}
     for g, t in zip(story.gestures, planned):
         points.setdefault(float(t), []).append(g.label)
@@ -189,6 +198,8 @@ def export_textgrid(path: str | Path, story: Story, utterance: Utterance, planne
                 strokes.setdefault(float(t), []).append(f"{gid} {1000.0 * (t - p):+.1f}ms")
         grid.addTier(textgrid.PointTier("strokes", [Point(t, " ".join(v)) for t, v in sorted(strokes.items())],
                                         start, end))
+    if axis:
+        grid.addTier(textgrid.PointTier(f"axis: {axis}", [], start, end))
     path = Path(path)
     grid.save(str(path), format="long_textgrid", includeBlankSpaces=True)
     return path

@@ -7,15 +7,19 @@ animator-time strategy under an event-delivery condition, and writes to ``--out`
 =====================  ==============================================================================
 ``metrics.json``       the figures: words, gestures, duration, strategy, sync error (p50, p95, max, ms)
                        overall and per kind, snaps, stalls, warnings, wall time and its stages
-``narration.wav``      the speech as synthesised
-``story.TextGrid``     on the audio's axis: words, phones, gestures (planned), strokes (realised)
-``story.bvh``          the body's motion (clock axis: the audio starts at ``audio_start_s``)
+``narration.wav``      the speech where the run's listener heard it (from ``audio_start_s``, drifting)
+``story.TextGrid``     words, phones, gestures (planned), strokes (realised)
+``story.bvh``          the body's motion
+``gestures.csv``       one row per gesture: its word, when it sounded, when its stroke came, the error
 ``timeline.png``       behaviours, phases, pegs and feedback of the first ``--window`` seconds
 ``sync_errors.png``    every gesture's sync error over the whole story
 ``feedback.jsonl``     the BML feedback, one JSON object per line
 ``story.bml``          the BML block that was realised
 ``compare.json``       with ``--compare``: the figures of every strategy on the same seed
 =====================  ==============================================================================
+
+Every file is on the run's one time axis: simulated time 0 is WAV sample 0, BVH frame 0 and feedback
+``globalTime`` 0 (the TextGrid says so in its ``axis`` tier, ``metrics.json`` in ``time_axis``).
 
 Wall time counts everything from reading the story to the last file written except the first-time
 synthesis of the speech, which is cached on disk (``--cache``) and reported separately.
@@ -34,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from agentsim.core.errors import AgentsimError
+from agentsim.media import AXIS
 from agentsim.scenarios.storytelling.markup import Story, StoryError, read_story
 from agentsim.scenarios.storytelling.telling import Telling, make_voice, syllable_times, tell
 
@@ -136,6 +141,7 @@ def main(args: argparse.Namespace) -> int:
     metrics["cache_load_seconds"] = cache.load_seconds
     metrics["stages_seconds"] = OrderedDict([("simulation", telling.wall_seconds)] + list(stages.items()))
     metrics["fps"] = args.fps
+    metrics["time_axis"] = AXIS
     metrics.update(telling.extra)
     if args.compare:
         rows = OrderedDict((name, _row(t)) for name, t in tellings.items())
@@ -200,7 +206,9 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.core.feedback import to_json
     from agentsim.scenarios.storytelling.praat import export_textgrid
-    from agentsim.speech.exports import write_wav
+    from agentsim.media.audio import run_track
+    from agentsim.media.files import write_wav
+    from agentsim.media.tables import gesture_rows, write_csv
 
     stages: OrderedDict[str, float] = OrderedDict()
 
@@ -221,13 +229,14 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     telling.extra["motion_strokes"] = motion_strokes(telling, stream)
     t = stage("motion check", t)
     utterance = telling.utterance
-    if utterance.audio is not None:
-        write_wav(out / "narration.wav", utterance)
+    if utterance.audio is not None:  # where the listener heard it: late by the playback latency, drifting
+        write_wav(out / "narration.wav", run_track(telling.recording))
     t = stage("wav", t)
     speech = telling.speech
     _, planned, _ = syllable_times(telling.story, utterance)
-    realised = (telling.passed - speech.t0) / speech.scale  # audio axis
-    export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, realised, telling.ids)
+    export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, telling.passed, telling.ids,
+                    to_axis=speech.true_time, axis=AXIS)
+    write_csv(out / "gestures.csv", gesture_rows(telling.recording))
     t = stage("textgrid", t)
     plot_window(telling, out / "timeline.png", stream, window)
     plot_errors(telling, out / "sync_errors.png")

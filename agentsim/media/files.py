@@ -1,0 +1,130 @@
+"""The files a run writes, on its one time axis, each saying so where its format has room: the WAV's comment,
+the npz's ``time_axis`` entry, the TextGrid's ``axis`` tier, the JSON's ``time_axis`` field. BVH has no
+syntax for comments (a reader we test refuses one), so the BVH says nothing; its frame 0 is at 0 s too.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from agentsim.core.errors import UsageError
+from agentsim.media import AXIS
+from agentsim.media.audio import Track
+
+
+def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[str | Path | None] = ()) -> None:
+    """Raise :class:`UsageError` naming the first output that cannot be written: a file whose folder does not
+    exist or is not writable, a folder that cannot be made or written. Called before any work is done."""
+    for name in files:
+        if name is None:
+            continue
+        path = Path(name)
+        folder = path.parent if str(path.parent) else Path(".")
+        if path.is_dir():
+            raise UsageError(f"cannot write {path}: it is a folder")
+        if not folder.is_dir():
+            raise UsageError(f"cannot write {path}: there is no folder {folder}")
+        if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+            raise UsageError(f"cannot write {path}: no permission to write in {folder}")
+    for name in folders:
+        if name is None:
+            continue
+        path = Path(name)
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UsageError(f"cannot make the output folder {path}: {exc.strerror or exc}") from None
+        if not os.access(path, os.W_OK):
+            raise UsageError(f"cannot write in the output folder {path}: no permission")
+
+
+def write_wav(path: str | Path, track: Track) -> Path:
+    """Write a track as 16-bit PCM WAV; its comment (INFO chunk) says the time axis."""
+    import soundfile
+
+    path = Path(path)
+    with soundfile.SoundFile(str(path), "w", track.rate, 1, "PCM_16", format="WAV") as f:
+        f.comment = f"agentsim: {AXIS}"
+        f.software = "agentsim"
+        f.write(track.samples)
+    return path
+
+
+def write_npz(path: str | Path, stream) -> Path:
+    """The poses as :func:`agentsim.animation.write_npz` writes them, plus ``time_axis``."""
+    path = Path(path)
+    uids = sorted(stream.driver_names)
+    np.savez_compressed(
+        path, times=stream.times, channels=np.array(stream.channels), values=stream.values,
+        joints=np.array(stream.joints), positions=stream.positions, fps=np.array(stream.fps),
+        writers=stream.writers if stream.writers is not None else np.empty((0, 0), dtype=np.int32),
+        driver_uids=np.array(uids, dtype=np.int64), driver_names=np.array([stream.driver_names[u] for u in uids]),
+        time_axis=np.array(AXIS))
+    return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+
+def heard_words(heard) -> list[tuple[str, float, float]]:
+    """A heard speech's words on the run's axis: (text, onset, offset), up to an interruption."""
+    speed = 1.0 + heard.drift_ppm * 1e-6
+    words = []
+    for w in heard.utterance.words:
+        a, b = heard.t0 + w.start * speed, heard.t0 + w.end * speed
+        if heard.stopped is not None:
+            if a >= heard.stopped:
+                break
+            b = min(b, heard.stopped)
+        words.append((w.text, a, b))
+    return words
+
+
+def write_textgrid(path: str | Path, recording, gestures=(), end: float | None = None) -> Path:
+    """A Praat TextGrid of the run on its axis: ``words`` and ``phones`` of every speech where they were
+    heard, ``marks`` (the speeches' sync points as fed back), ``strokes`` (each pegged behaviour's sync point,
+    labelled with its id and error), and an empty ``axis`` tier whose name says the axis."""
+    from praatio import textgrid
+    from praatio.utilities.constants import Interval, Point
+
+    sync_times = {f["id"]: f["globalTime"] for f in recording.feedback if f["type"] == "syncPointProgress"}
+    if end is None:
+        end = max([0.0, *sync_times.values(), *(heard_words(h)[-1][2] for h in recording.speech if heard_words(h))])
+    end = max(end, 1e-3)
+
+    def intervals(items):
+        out, last = [], 0.0
+        for label, a, b in sorted(items, key=lambda x: x[1]):
+            a, b = max(a, last), min(b, end)
+            if b - a > 1e-6 and label:
+                out.append(Interval(a, b, label))
+                last = b
+        return out
+
+    words, phones, marks = [], [], {}
+    for heard in recording.speech:
+        words.extend(heard_words(heard))
+        speed = 1.0 + heard.drift_ppm * 1e-6
+        for p in heard.utterance.phonemes:
+            a, b = heard.t0 + p.start * speed, heard.t0 + p.end * speed
+            if heard.stopped is None or a < heard.stopped:
+                phones.append((p.symbol + ("ˈ" if p.stressed else ""), a, b))
+        for sync_id, t in sync_times.items():
+            block, behaviour, sync = sync_id.split(":", 2)
+            if (block, behaviour) == (heard.block, heard.behaviour) and sync not in ("start", "end") and t <= end:
+                marks.setdefault(round(t, 9), []).append(sync_id)
+    strokes: dict[float, list[str]] = {}
+    for row in gestures:
+        if row.happened_s is not None and row.happened_s <= end:
+            label = f"{row.block}:{row.behaviour}" + (f" {row.error_ms:+.1f}ms" if row.error_ms is not None else "")
+            strokes.setdefault(round(row.happened_s, 9), []).append(label)
+    grid = textgrid.Textgrid(0.0, end)
+    grid.addTier(textgrid.IntervalTier("words", intervals(words), 0.0, end))
+    grid.addTier(textgrid.IntervalTier("phones", intervals(phones), 0.0, end))
+    grid.addTier(textgrid.PointTier("marks", [Point(t, " ".join(v)) for t, v in sorted(marks.items())], 0.0, end))
+    grid.addTier(textgrid.PointTier("strokes", [Point(t, " ".join(v)) for t, v in sorted(strokes.items())], 0.0, end))
+    grid.addTier(textgrid.PointTier(f"axis: {AXIS}", [], 0.0, end))
+    path = Path(path)
+    grid.save(str(path), format="long_textgrid", includeBlankSpaces=True)
+    return path
