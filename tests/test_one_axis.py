@@ -146,3 +146,33 @@ def test_the_storyteller_writes_its_files_on_the_feedback_axis(tmp_path):
     found = onsets(samples, rate, after_pause)
     assert max(abs(x - a) for x, a in zip(found, after_pause)) <= ONSET_TOLERANCE
     assert metrics["time_axis"].startswith("simulated time") and metrics["audio_start_s"] > 1.0
+
+
+def test_the_conductor_writes_the_ensemble_and_its_beats_on_the_motion_axis(tmp_path):
+    import csv
+    import json
+
+    out = tmp_path / "conductor"
+    proc = subprocess.run([sys.executable, "-m", "agentsim.cli", "run", "conductor", "--out", str(out)],
+                          capture_output=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    samples, rate = soundfile.read(str(out / "ensemble.wav"), dtype="float32")
+    beats = list(csv.DictReader(open(out / "beats.csv")))
+    sounded = [float(b["sounded_s"]) for b in beats if b["sounded_s"]]
+    # silence until the first beat sounds, then sound within a few milliseconds of it (the audio is placed
+    # where the conductor heard it, not from its own sample 0)
+    first_sound = np.flatnonzero(np.abs(samples) > 1e-3)[0] / rate
+    assert sounded[0] - 0.01 <= first_sound <= sounded[0] + 0.01
+    feedback = [json.loads(line) for line in (out / "feedback.jsonl").read_text().splitlines()]
+    assert len(samples) / rate >= max(f["globalTime"] for f in feedback) - 1.0
+    conducted = [b for b in beats if b["ictus_s"] and b["sounded_s"]]
+    assert conducted
+    for b in conducted:
+        assert float(b["asynchrony_ms"]) == pytest.approx(1000 * (float(b["sounded_s"]) - float(b["ictus_s"])),
+                                                          abs=1e-3)
+    ictus = {int(b["beat"]): float(b["ictus_s"]) for b in beats if b["ictus_s"]}
+    gestures = list(csv.DictReader(open(out / "gestures.csv")))
+    strokes = {row["tied_to"].rsplit("beat", 1)[1]: float(row["happened_s"]) for row in gestures if row["happened_s"]}
+    common = set(strokes) & {str(k) for k in ictus}
+    assert common and all(strokes[k] == pytest.approx(ictus[int(k)], abs=1e-6) for k in common)
+    assert json.loads((out / "metrics.json").read_text())["time_axis"].startswith("simulated time")

@@ -280,25 +280,86 @@ def _clean(value):
     return value
 
 
+def ensemble_source(run: Run):
+    """The ensemble as the conductor heard it: its first sample where hearing began (s, the run's axis)."""
+    from agentsim.media.audio import Source
+
+    return Source(run.ears.recording(), int(run.ears.sample_rate), float(run.ears.start), label="ensemble")
+
+
+def sounded_beats(run: Run) -> np.ndarray:
+    """When each beat of the piece really sounded (s; index 0 is beat 1; NaN if it was not played): the
+    musicians' mean onset plus the renderer's onset offset (live: the onsets heard)."""
+    from agentsim.music.onsets import beat_onset_offset
+
+    if run.live:
+        heard = run.ears.observed
+        beats = np.full(max(heard) if heard else 0, np.nan)
+        for b, t in heard.items():
+            beats[b - 1] = t
+        return beats
+    return run.ensemble.beat_times() + beat_onset_offset(run.config.audio.sample_rate, _soundfont(run.config))
+
+
+def beat_sounded(run: Run):
+    """For the gesture table: when the beat an anticipator's ``beat<n>`` peg names really sounded."""
+    sounded = sounded_beats(run)
+
+    def lookup(anticipator: str, sync: str) -> float | None:
+        if not sync.startswith("beat") or not sync[4:].isdigit():
+            return None
+        n = int(sync[4:])
+        return float(sounded[n - 1]) if 1 <= n <= sounded.size and np.isfinite(sounded[n - 1]) else None
+
+    return lookup
+
+
+def beat_rows(run: Run) -> list[dict]:
+    """One row per beat of the piece: the conductor's ictus, when the beat sounded (the ensemble's mean
+    onset with the renderer's offset), each musician's onset, the asynchrony (ms), what the tracker heard."""
+    sounded = sounded_beats(run)
+    onsets = None if run.live else run.ensemble.onset_matrix()
+    names = [] if run.live else [m.name for m in run.ensemble.musicians]
+    n = max([sounded.size, *run.conductor.ictus.keys(), 0])
+    rows = []
+    for beat in range(1, n + 1):
+        ictus = run.conductor.ictus.get(beat)
+        s = float(sounded[beat - 1]) if beat <= sounded.size and np.isfinite(sounded[beat - 1]) else None
+        row = {"beat": beat, "ictus_s": ictus, "sounded_s": s,
+               "asynchrony_ms": (s - ictus) * 1000.0 if s is not None and ictus is not None else None,
+               "heard_onset_s": run.ears.observed.get(beat)}
+        for i, name in enumerate(names):
+            value = onsets[i, beat - 1] if beat <= onsets.shape[1] else np.nan
+            row[f"onset_{name}_s"] = float(value) if np.isfinite(value) else None
+        rows.append(row)
+    return rows
+
+
 def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True) -> Path:
     """Write the run's files into the folder ``out`` (created if needed)."""
-    import soundfile
-
     from agentsim.animation import evaluate_poses, plot_timeline, write_bvh
     from agentsim.core.feedback import to_json
+    from agentsim.media.audio import run_track
+    from agentsim.media.files import write_wav
+    from agentsim.media.tables import gesture_rows, write_csv
     from agentsim.scenarios.conductor.metrics import plot_tempo
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    from agentsim.media import AXIS
+
+    (out / "metrics.json").write_text(json.dumps({**metrics, "time_axis": AXIS}, indent=2) + "\n")
     recording = run.realizer.recording()
     with open(out / "feedback.jsonl", "w") as f:
         for item in recording.feedback:
             f.write(to_json(item) + "\n")
-    sr = run.ears.sample_rate
-    soundfile.write(str(out / "ensemble.wav"), run.ears.recording(), sr, subtype="PCM_16")
+    # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the feedback's)
+    track = run_track(recording, [ensemble_source(run)])
+    write_wav(out / "ensemble.wav", track)
     stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
     write_bvh(out / "conductor.bvh", stream)
+    write_csv(out / "beats.csv", beat_rows(run))
+    write_csv(out / "gestures.csv", gesture_rows(recording, beat_sounded(run)))
     if "tempo" not in run.extra:
         collect_metrics(run)
     events = [(g["time"], "louder") for g in run.conductor.louder]
