@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 
 import numpy as np
@@ -19,7 +20,7 @@ from agentsim.scenarios.conductor.config import ModelParams, config_from_dict, l
 from agentsim.scenarios.conductor.ensemble import Timekeeper
 from agentsim.scenarios.conductor.metrics import beats_to_recover, local_tempo
 from agentsim.scenarios.conductor.planning import ResponseEstimator
-from agentsim.scenarios.conductor.scenario import collect_metrics, simulate
+from agentsim.scenarios.conductor.scenario import TIMELINE_WINDOW, collect_metrics, simulate
 
 QUIET = dict(timekeeper_sd=0.0, motor_sd=0.0, ictus_sd=0.0, drag=0.0)
 
@@ -156,6 +157,10 @@ def test_outputs_are_written_and_valid(default_run):
     assert not [f for f in feedback if f["type"] == "warningFeedback"]
     for png in ("tempo.png", "timeline.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # timeline.png is the overview; each TIMELINE_WINDOW seconds of the run has its own picture
+    windows = sorted(p.name for p in out.glob("timeline_*s.png"))
+    assert len(windows) == math.ceil(metrics["simulated_seconds"] / TIMELINE_WINDOW) and len(windows) > 1
+    assert windows[0] == f"timeline_0000-{TIMELINE_WINDOW:04.0f}s.png"
     assert seconds < 60
 
 

@@ -293,6 +293,10 @@ def test_the_command_writes_every_output_and_repeats_itself(tmp_path, cache_dir,
     assert m["strategy"] == "best" and m["gestures"] == 65 and m["sync_error_ms"]["p95"] <= 15.0
     assert set(m["sync_error_ms"]) >= {"p50", "p95", "max"}
     assert m["motion_strokes"]["intact"] >= 0.9 * m["motion_strokes"]["measured"]
+    # timeline.png is the overview; each --window seconds of the story has its own picture
+    windows = sorted(p.name for p in first.glob("timeline_*s.png"))
+    assert windows[:2] == ["timeline_0000-0008s.png", "timeline_0008-0016s.png"]
+    assert len(windows) >= m["duration_s"] / 8
     lines = (first / "feedback.jsonl").read_text().splitlines()
     assert all(json.loads(line)["type"] for line in lines)
     assert import_textgrid(first / "story.TextGrid", scene=read_story(

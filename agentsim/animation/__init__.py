@@ -34,7 +34,9 @@ module           what lives there
 ``behaviours``   ``build_drivers``: the motion drivers that play a list of timed BML behaviours.
 ``output``       ``evaluate_poses`` (a PoseStream of joint angles and joint positions per frame),
                  ``write_bvh`` and ``write_npz``.
-``timeline``     ``plot_timeline``: behaviours, phases, pegs and feedback on one time axis.
+``timeline``     ``plot_timeline``: behaviours, phases, pegs, feedback and the words heard on one time
+                 axis, for a run or a window of it; ``plot_timelines``: a long run as an overview plus
+                 one picture per window.
 ``analysis``     measuring where the motion really has its stroke (ictus, nod bottom, pointing arrival)
                  against the stroke feedback.
 ===============  ========================================================================================
@@ -48,9 +50,9 @@ from agentsim.animation.drivers import Driver
 from agentsim.animation.manager import DriverManager
 from agentsim.animation.output import PoseStream, evaluate_poses, write_bvh, write_npz
 from agentsim.animation.time_source import TimeSource
-from agentsim.animation.timeline import plot_timeline
+from agentsim.animation.timeline import plot_timeline, plot_timelines
 
 __all__ = [
     "Arbitrator", "Body", "Driver", "DriverManager", "PoseStream", "TimeSource", "evaluate_poses",
-    "plot_timeline", "write_bvh", "write_npz",
+    "plot_timeline", "plot_timelines", "write_bvh", "write_npz",
 ]

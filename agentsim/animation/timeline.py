@@ -1,7 +1,30 @@
-"""The timeline picture: behaviours, phases, sync points, shared pegs and feedback on one time axis (PNG)."""
+"""The timeline pictures: behaviours, phases, sync points, shared pegs, feedback and the words heard on one
+time axis (PNG), for the whole run or a window of it, and for a long run an overview plus one picture per
+window.
+
+=======================  ==========================================================================================
+function                 what it does
+=======================  ==========================================================================================
+``timeline_figure``      the detailed figure of a run or of a window of it (a matplotlib ``Figure``)
+``plot_timeline``        that figure, saved as a PNG
+``overview_figure``      a whole run at a glance: one row per behaviour type, thin bars, strokes as ticks
+``plot_timelines``       a short run as one picture; a long one as an overview plus one picture per window
+``heard_words``          the words each speech made heard, at their onsets on the run's axis
+``layout_words``         which word labels fit (staggered on a few lines) at a given scale, and which do not
+``run_duration``         where the run's axis ends
+``time_windows``         the fixed-length windows that cover a run
+``window_path``          the file of one window next to the overview (``timeline_0000-0030s.png``)
+=======================  ==========================================================================================
+
+Times are seconds on the run's axis (the simulated time of the run, the feedback's ``globalTime``).
+"""
 
 from __future__ import annotations
 
+import glob
+import math
+import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -14,125 +37,523 @@ _PHASE_COLOURS = {
     "retraction": "#c7e9c0", "hold": "#deebf7", "attack": "#9ecae1", "sustain": "#deebf7",
     "transition": "#bcbddc", "speech": "#d9d9d9",
 }
+_TYPE_COLOURS = {
+    "speech": "#969696", "gesture": "#e6550d", "pointing": "#fd8d3c", "head": "#3182bd", "gaze": "#756bb1",
+    "gazeShift": "#9e9ac8", "faceLexeme": "#31a354", "face": "#31a354", "faceShift": "#74c476",
+    "posture": "#8c6d31", "postureShift": "#bd9e39", "locomotion": "#843c39",
+}
+
+#: Runs longer than this (s) are drawn by :func:`plot_timelines` as an overview plus windows.
+LONG_RUN = 60.0
+#: Length (s) of the windows :func:`plot_timelines` draws a long run in.
+WINDOW = 30.0
+#: Font size (points) of the words under a speech row, and how many lines they are staggered on.
+WORD_FONT = 6.0
+WORD_LINES = 3
+#: Space (points) kept between two word labels on one line.
+WORD_GAP = 4.0
+#: Room (inches) right of the axis for the labels of the last words of a window.
+WORD_MARGIN = 0.6
+#: Height of one behaviour row (inches).
+ROW_INCHES = 0.34
+_DPI = 120
 
 
-def plot_timeline(source, out_png: str | Path, stream: PoseStream | None = None, title: str | None = None,
-                  width: float = 12.0) -> Path:
-    """Draw what a run did on one time axis and save it as a PNG.
+@dataclass(frozen=True)
+class HeardWord:
+    """A word as the run made it heard: its speech (``block:behaviour``), text, and its onset and end on
+    the run's axis (s; the end is cut at the speech's stop if an interruption stopped it)."""
 
-    ``source``: its :class:`~agentsim.core.recording.Recording`, or a realizer after ``run()``.
+    behaviour: str
+    text: str
+    onset: float
+    end: float
+
+
+def _recording(source):
+    return source.recording() if hasattr(source, "recording") else source
+
+
+def heard_words(source, start: float | None = None, end: float | None = None) -> list[HeardWord]:
+    """The words of every speech of a run, in order, with their onsets on the run's axis.
+
+    A word of speech time ``s`` is heard at ``t0 + s * (1 + drift_ppm * 1e-6)``; an interrupted speech has
+    no words from its stop on (its ``stopped``, or where its behaviour was dropped or cut, if earlier).
+    With ``start``/``end``, only the words whose onset lies in ``[start, end)``. ``source``: a
+    :class:`~agentsim.core.recording.Recording` or a realizer after ``run()``.
+    """
+    recording = _recording(source)
+    cut = {b.name: b.stopped for b in recording.behaviours if b.stopped is not None}
+    words = []
+    for speech in recording.speech:
+        scale = 1.0 + speech.drift_ppm * 1e-6
+        name = f"{speech.block}:{speech.behaviour}"
+        stops = [t for t in (speech.stopped, cut.get(name)) if t is not None]
+        stop = min(stops) if stops else None
+        for w in speech.utterance.words:
+            onset = speech.t0 + w.start * scale
+            off = speech.t0 + w.end * scale
+            if stop is not None:
+                if onset >= stop:
+                    continue
+                off = min(off, stop)
+            if (start is not None and onset < start) or (end is not None and onset >= end):
+                continue
+            words.append(HeardWord(name, w.text, onset, off))
+    return words
+
+
+def _text_width(text: str, size: float) -> float:
+    """Width (points) of ``text`` in the default font at ``size`` points."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import text_to_path
+
+    return text_to_path.get_text_width_height_descent(text, FontProperties(size=size), ismath=False)[0]
+
+
+def layout_words(words: list[HeardWord], x0: float, x1: float, inches: float, lines: int = WORD_LINES,
+                 size: float = WORD_FONT, margin: float = WORD_MARGIN) -> tuple[list[tuple[HeardWord, int]],
+                                                                                list[HeardWord]]:
+    """Where the labels of ``words`` go on an axis from ``x0`` to ``x1`` seconds drawn ``inches`` wide.
+
+    Each label starts at its word's onset; in onset order, a word takes the first of ``lines`` lines on
+    which it does not overlap the label before it (``WORD_GAP`` points apart), or is left out if none is
+    free or its label would reach further than ``margin`` inches past the axis. Returns ``(word, line)``
+    of the labels drawn and the words left out.
+    """
+    per_point = (x1 - x0) / (inches * 72.0) if inches > 0 and x1 > x0 else 0.0
+    limit = x1 + margin * 72.0 * per_point
+    ends = [-math.inf] * lines
+    placed, skipped = [], []
+    for word in sorted(words, key=lambda w: w.onset):
+        right = word.onset + _text_width(word.text, size) * per_point
+        line = next((k for k in range(lines) if ends[k] + WORD_GAP * per_point <= word.onset), None)
+        if line is None or right > limit:
+            skipped.append(word)
+            continue
+        ends[line] = right
+        placed.append((word, line))
+    return placed, skipped
+
+
+def run_duration(source) -> float:
+    """Where a run's axis ends (s): the latest of the recording's time, every known sync point, feedback
+    and the end of every speech heard."""
+    recording = _recording(source)
+    ends = [float(recording.now), 0.0]
+    for b in recording.behaviours:
+        ends += [t for t in b.times if t is not None and math.isfinite(t)]
+    ends += [f["globalTime"] for f in recording.feedback if math.isfinite(f.get("globalTime", math.nan))]
+    for s in recording.speech:
+        end = s.t0 + s.utterance.duration * (1.0 + s.drift_ppm * 1e-6)
+        ends.append(end if s.stopped is None else min(end, s.stopped))
+    return max(e for e in ends if math.isfinite(e))
+
+
+def time_windows(duration: float, window: float = WINDOW) -> list[tuple[float, float]]:
+    """The windows ``[k * window, (k + 1) * window)`` that cover ``[0, duration]``: ``ceil(duration / window)``
+    of them (one at least)."""
+    if not window > 0:
+        raise ValueError(f"a window must last a positive number of seconds, not {window}")
+    n = max(1, math.ceil(duration / window - 1e-9))
+    return [(k * window, (k + 1) * window) for k in range(n)]
+
+
+def _seconds_tag(x: float) -> str:
+    return f"{int(round(x)):04d}" if abs(x - round(x)) < 1e-9 else f"{x:06.1f}"
+
+
+def window_path(png: str | Path, start: float, end: float) -> Path:
+    """The file of one window next to the overview ``png``: ``timeline.png`` gives
+    ``timeline_0000-0030s.png`` for 0 to 30 s."""
+    png = Path(png)
+    return png.with_name(f"{png.stem}_{_seconds_tag(start)}-{_seconds_tag(end)}s{png.suffix or '.png'}")
+
+
+def _span(times) -> tuple[float, float] | None:
+    known = [t for t in times if t is not None and math.isfinite(t)]
+    return (min(known), max(known)) if known else None
+
+
+def _visible(record, start: float | None, end: float | None) -> bool:
+    span = _span(record.times)
+    if span is None:
+        return False
+    return (start is None or span[1] >= start) and (end is None or span[0] < end)
+
+
+def _label(record) -> str:
+    label = f"{record.name} ({record.behaviour.type}"
+    lex = record.behaviour.attributes.get("lexeme")
+    label += f" {lex})" if lex else ")"
+    if record.state == "dropped":
+        label += " dropped"
+    return label
+
+
+def _extent(recording, stream: PoseStream | None) -> tuple[float, float]:
+    """The x range that shows all of a run: every known sync point, feedback and pose, a little padded."""
+    times = [t for b in recording.behaviours for t in b.times if t is not None and math.isfinite(t)]
+    times += [f["globalTime"] for f in recording.feedback if math.isfinite(f.get("globalTime", math.nan))]
+    if stream is not None and len(stream.times):
+        times += [float(stream.times[0]), float(stream.times[-1])]
+    if not times:
+        return 0.0, 1.0
+    a, b = min(times), max(times)
+    pad = 0.03 * max(b - a, 1.0)
+    return a - pad, b + pad
+
+
+def _new_figure(width: float, height: float, rows: int = 1, ratios=None, sharex: bool = True):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height), dpi=_DPI)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, 1, sharex=sharex, squeeze=False, gridspec_kw={"height_ratios": ratios})
+    return fig, [a[0] for a in axes]
+
+
+def timeline_figure(source, stream: PoseStream | None = None, title: str | None = None, width: float = 12.0,
+                    start: float | None = None, end: float | None = None):
+    """The detailed figure of what a run did (a matplotlib ``Figure``; :func:`plot_timeline` saves it).
+
+    ``source``: its :class:`~agentsim.core.recording.Recording`, or a realizer after ``run()``. With
+    ``start`` and/or ``end`` (s on the run's axis), only that window is drawn: behaviours wholly outside
+    it are left out (no row), feedback outside it too, and the axis spans exactly the window.
 
     One row per behaviour (block:behaviour) with its phases shaded between its sync points (dropped
-    behaviours hatched up to where they stopped), a tick and label at every sync point, dashed lines
-    joining sync points that share a time peg, block starts and ends, and a feedback row with every
-    sync point progress (dots), prediction (diamonds) and warning (red triangles). With ``stream``, a
-    panel below shows the wrist heights and head pitch of the evaluated poses with the stroke feedback.
-    """
-    import matplotlib
+    behaviours hatched from where they stopped), a tick at every sync point and a label at every stroke,
+    dashed lines joining sync points that share a time peg, block starts and ends, and a feedback row
+    with every sync point progress (dots), prediction (diamonds) and warning (red triangles). Under each
+    speech row, the words heard (:func:`heard_words`), each label starting at its word's onset (a tick
+    marks every onset), staggered on up to ``WORD_LINES`` lines; labels that would overlap at this width
+    are left out, and a note above the axis says how many. With ``stream``, a panel below shows the
+    wrist heights and head pitch of the evaluated poses with the stroke feedback.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Artists a reader (or a test) can find by ``get_gid()``: ``"word"`` (a word's label, at its onset),
+    ``"word-note"``, ``"behaviour:<block:behaviour>"`` (a row's bars).
+    """
+    from matplotlib.collections import LineCollection
     from matplotlib.patches import Patch
 
-    out_png = Path(out_png)
-    recording = source.recording() if hasattr(source, "recording") else source
-    items = list(recording.feedback)
-    rows = list(recording.behaviours)
-    n_rows = len(rows) + 1
+    recording = _recording(source)
+    window = start is not None or end is not None
+    if window:
+        lo = 0.0 if start is None else float(start)
+        hi = run_duration(recording) if end is None else float(end)
+        if not hi > lo:
+            raise ValueError(f"a window must end after it starts ({lo:g} s to {hi:g} s)")
+    rows = [r for r in recording.behaviours if _visible(r, start, end)]
+    words_by_row: dict[str, list[HeardWord]] = {}
+    for w in heard_words(recording, start, end):
+        words_by_row.setdefault(w.behaviour, []).append(w)
+    if window:
+        x0, x1 = lo, hi
+    else:
+        x0, x1 = _extent(recording, stream)
+    # lines of words each speech row needs, at the axis width the labels on the left are likely to leave
+    labels_width = max([_text_width(_label(r), 6.5) for r in rows] + [0.0]) / 72.0
+    guess = width - labels_width - 0.6 - WORD_MARGIN - (0.6 if stream is not None else 0.1)
+    lines_of = {name: max([line + 1 for _, line in layout_words(words, x0, x1, guess)[0]] + [1])
+                for name, words in words_by_row.items()}
+    line_step = 8.5 / (72.0 * ROW_INCHES)  # data units between two lines of words
+    band_of = {name: 0.4 + lines * line_step for name, lines in lines_of.items()}
+    # y of each row, bottom up: the feedback row below 0, each behaviour 1 higher, a speech with words
+    # another band for them
+    ys: list[float] = []
+    y = 0.0
+    for record in reversed(rows):
+        y += 1.0 + band_of.get(record.name, 0.0)
+        ys.append(y)
+    ys.reverse()
+    top = y + 1.0
+    units = top + 1.3
     panels = 2 if stream is not None else 1
-    height = max(2.5, 0.42 * n_rows + 1.5) + (2.2 if stream is not None else 0.0)
-    fig, axes = plt.subplots(panels, 1, figsize=(width, height), sharex=True, squeeze=False,
-                             gridspec_kw={"height_ratios": [max(3, n_rows), 3][:panels]})
-    ax = axes[0][0]
-    all_times: list[float] = []
+    height = max(2.5, ROW_INCHES * units + 1.6) + (2.2 if stream is not None else 0.0)
+    fig, axes = _new_figure(width, height, panels, [max(3.0, units), 3.0][:panels])
+    ax = axes[0]
     peg_points: dict[int, list[tuple[float, float]]] = {}
     labels: list[tuple[float, str]] = [(-0.45, "feedback")]
-    for row, timed in enumerate(rows):
-        y = n_rows - 1 - row
-        times = timed.times
-        known = [(s, t) for s, t in zip(timed.sync_ids, times) if t is not None]
-        if not known:
-            continue
+    bars: list[tuple[float, float, float, str, bool, str]] = []  # y, left, width, colour, dropped, row
+    ticks: list[list[tuple[float, float]]] = []
+    speech_ticks: list[list[tuple[float, float]]] = []
+    for record, y in zip(rows, ys):
+        times = record.times
+        known = [(s, t) for s, t in zip(record.sync_ids, times) if t is not None and math.isfinite(t)]
         stop = None
-        if timed.state == "dropped":
-            passed = [t for t, p in zip(times, timed.passed) if p]
+        if record.state == "dropped":
+            passed = [t for t, p in zip(times, record.passed) if p and t is not None]
             stop = passed[-1] if passed else known[0][1]
+        is_speech = record.behaviour.type == "speech"
         for (s0, t0), (s1, t1) in zip(known, known[1:]):
-            phase = PHASE_NAMES.get((s0, s1), "speech" if timed.behaviour.type == "speech" else "hold")
-            if timed.behaviour.type == "speech":
-                phase = "speech"
-            dropped_part = stop is not None and t0 >= stop
-            ax.barh(y, t1 - t0, left=t0, height=0.6, color=_PHASE_COLOURS.get(phase, "#eeeeee"),
-                    edgecolor="#555555", linewidth=0.4, hatch="///" if dropped_part else None,
-                    alpha=0.35 if dropped_part else 1.0)
-        for i, (s, t) in enumerate(zip(timed.sync_ids, times)):
-            if t is None:
+            if window and (t1 < lo or t0 > hi):
                 continue
-            all_times.append(t)
-            ax.plot([t, t], [y - 0.32, y + 0.32], color="black", linewidth=0.8)
-            if s == "stroke" or (timed.behaviour.type == "speech" and 0 < i < len(times) - 1):
-                ax.text(t, y + 0.33, s, fontsize=5.5, ha="center", va="bottom", color="#444444")
-            group = timed.peg_groups[i] if i < len(timed.peg_groups) else None
-            if group is not None:
-                peg_points.setdefault(group, []).append((t, y))
-        label = f"{timed.name} ({timed.behaviour.type}"
-        lex = timed.behaviour.attributes.get("lexeme")
-        label += f" {lex})" if lex else ")"
-        if timed.state == "dropped":
-            label += " dropped"
-        labels.append((y, label))
+            phase = "speech" if is_speech else PHASE_NAMES.get((s0, s1), "hold")
+            bars.append((y, t0, t1 - t0, _PHASE_COLOURS.get(phase, "#eeeeee"), stop is not None and t0 >= stop,
+                         record.name))
+        has_words = record.name in words_by_row
+        for i, (s, t) in enumerate(zip(record.sync_ids, times)):
+            if t is None or not math.isfinite(t):
+                continue
+            inside = not window or lo - 1.0 <= t <= hi + 1.0
+            if is_speech and 0 < i < len(times) - 1:
+                if inside:
+                    speech_ticks.append([(t, y - 0.3), (t, y + 0.3)])
+                    if not has_words:
+                        ax.text(t, y + 0.33, s, fontsize=5.5, ha="center", va="bottom", color="#444444",
+                                clip_on=True)
+            elif inside:
+                ticks.append([(t, y - 0.32), (t, y + 0.32)])
+                if s == "stroke":
+                    ax.text(t, y + 0.33, s, fontsize=5.5, ha="center", va="bottom", color="#444444",
+                            clip_on=True)
+            group = record.peg_groups[i] if i < len(record.peg_groups) else None
+            if group is not None:  # a speech's pegs are joined from under its words, not across them
+                peg_points.setdefault(group, []).append((t, y - band_of[record.name] if has_words else y))
+        labels.append((y, _label(record)))
+    for dropped in (False, True):
+        part = [b for b in bars if b[4] == dropped]
+        if not part:
+            continue
+        patches = ax.barh([b[0] for b in part], [b[2] for b in part], left=[b[1] for b in part], height=0.6,
+                          color=[b[3] for b in part], edgecolor="#555555", linewidth=0.4,
+                          hatch="///" if dropped else None, alpha=0.35 if dropped else 1.0)
+        for patch, b in zip(patches, part):
+            patch.set_gid(f"behaviour:{b[5]}")
+    pegs = []
     for pts in peg_points.values():
         if len(pts) > 1:
             for t in sorted({round(p[0], 9) for p in pts}):
-                ys = [p[1] for p in pts if abs(p[0] - t) < 1e-9]
-                if len(ys) > 1:
-                    ax.plot([t, t], [min(ys), max(ys)], color="#3182bd", linestyle="--", linewidth=0.8)
+                ys_t = [p[1] for p in pts if abs(p[0] - t) < 1e-9]
+                if len(ys_t) > 1 and (not window or lo <= t <= hi):
+                    pegs.append([(t, min(ys_t)), (t, max(ys_t))])
+    ax.add_collection(LineCollection(pegs, colors="#3182bd", linestyles="--", linewidths=0.6, alpha=0.6))
+    ax.add_collection(LineCollection(ticks, colors="black", linewidths=0.8))
+    ax.add_collection(LineCollection(speech_ticks, colors="#888888", linewidths=0.4))
     y_fb = -0.2
-    for f in items:
+    marks: dict[str, list[float]] = {}
+    for f in recording.feedback:
         t = f.get("globalTime")
-        if t is None:
+        if t is None or not math.isfinite(t) or (window and not lo <= t <= hi):
             continue
-        all_times.append(t)
         kind = f["type"]
-        if kind == "syncPointProgress":
-            ax.plot(t, y_fb, "o", color="#636363", markersize=2.5)
-        elif kind == "predictionFeedback":
-            ax.plot(t, y_fb - 0.25, "D", color="#756bb1", markersize=3)
-        elif kind == "warningFeedback":
-            ax.plot(t, y_fb - 0.5, "^", color="#de2d26", markersize=5)
-            ax.text(t, y_fb - 0.75, str(f.get("warningType", "")), fontsize=5.5, color="#de2d26", ha="center",
-                    va="top")
+        marks.setdefault(kind, []).append(t)
+        if kind == "warningFeedback":
+            ax.text(t, y_fb - 0.75, str(f.get("warningType") or "warning"), fontsize=5.5, color="#de2d26",
+                    ha="center", va="top", clip_on=True)
         elif kind == "blockProgress":
-            ax.axvline(t, color="#bdbdbd", linewidth=0.6, linestyle=":")
-            ax.text(t, n_rows - 0.4, str(f.get("id", "")), fontsize=6, rotation=90, va="top", color="#777777")
+            ax.text(t, top - 0.1, str(f.get("id") or ""), fontsize=6, rotation=90, va="top", color="#777777",
+                    clip_on=True)
+    for kind, dy, style, colour, size in (("syncPointProgress", 0.0, "o", "#636363", 2.5),
+                                          ("predictionFeedback", 0.25, "D", "#756bb1", 3),
+                                          ("warningFeedback", 0.5, "^", "#de2d26", 5)):
+        if marks.get(kind):
+            ax.plot(marks[kind], [y_fb - dy] * len(marks[kind]), style, color=colour, markersize=size,
+                    linestyle="none")
+    if marks.get("blockProgress"):
+        ax.vlines(marks["blockProgress"], -1.3, top, colors="#bdbdbd", linewidths=0.6, linestyles=":")
     ax.set_yticks([y for y, _ in labels], [lab for _, lab in labels], fontsize=6.5)
-    ax.set_ylim(-1.3, n_rows)
-    ax.legend(handles=[Patch(color=c, label=n) for n, c in _PHASE_COLOURS.items() if n not in ("hold",)],
-              loc="upper right", fontsize=6, ncol=5, framealpha=0.8)
-    ax.set_title(title or "behaviours, phases, pegs and feedback")
+    ax.set_ylim(-1.3, top)
+    fig.legend(handles=[Patch(color=c, label=n) for n, c in _PHASE_COLOURS.items() if n != "hold"],
+               loc="lower center", fontsize=6.5, ncol=10, frameon=False, handlelength=1.2, columnspacing=1.2)
+    ax.set_title(title or "behaviours, phases, pegs and feedback", loc="left", fontsize=10,
+                 pad=15 if words_by_row else 6)
+    note = ax.text(0.0, 1.005, "", transform=ax.transAxes, ha="left", va="bottom", fontsize=6.5,
+                   color="#555555", gid="word-note")
     if stream is not None:
-        bx = axes[1][0]
+        bx = axes[1]
+        times = np.asarray(stream.times)
+        sel = slice(None) if not window else (times >= lo - 0.5) & (times <= hi + 0.5)
         for joint, colour in (("l_wrist", "#31a354"), ("r_wrist", "#e6550d")):
-            bx.plot(stream.times, stream.position(joint)[:, 1], color=colour, linewidth=0.9,
+            bx.plot(times[sel], stream.position(joint)[sel, 1], color=colour, linewidth=0.9,
                     label=f"{joint} height (m)")
         bx.set_ylabel("height (m)", fontsize=7)
         cx = bx.twinx()
-        fwd = stream.forward("skullbase")
-        cx.plot(stream.times, -np.degrees(np.arcsin(np.clip(fwd[:, 1], -1, 1))), color="#756bb1", linewidth=0.8,
+        fwd = stream.forward("skullbase")[sel]
+        cx.plot(times[sel], -np.degrees(np.arcsin(np.clip(fwd[:, 1], -1, 1))), color="#756bb1", linewidth=0.8,
                 label="head pitch down (deg)")
         cx.set_ylabel("head pitch (deg)", fontsize=7)
-        for f in items:
-            if f["type"] == "syncPointProgress" and f["id"].endswith(":stroke"):
-                bx.axvline(f["globalTime"], color="#de2d26", linewidth=0.6, linestyle="--")
+        strokes = [f["globalTime"] for f in recording.feedback if f["type"] == "syncPointProgress"
+                   and f["id"].endswith(":stroke") and (not window or lo <= f["globalTime"] <= hi)]
+        if strokes:
+            bx.vlines(strokes, 0, 1, transform=bx.get_xaxis_transform(), colors="#de2d26", linewidths=0.6,
+                      linestyles="--")
         bx.legend(loc="upper left", fontsize=6)
         cx.legend(loc="upper right", fontsize=6)
-        all_times.extend([float(stream.times[0]), float(stream.times[-1])])
-    if all_times:
-        lo, hi = min(all_times), max(all_times)
-        pad = 0.03 * max(hi - lo, 1.0)
-        axes[-1][0].set_xlim(lo - pad, hi + pad)
-    axes[-1][0].set_xlabel("global time (s)")
-    fig.tight_layout()
-    fig.savefig(out_png, dpi=120)
-    plt.close(fig)
+    axes[-1].set_xlim(x0, x1)
+    axes[-1].set_xlabel("time of the run (s)")
+    fig.tight_layout(rect=(0.0, 0.3 / height, 1.0, 1.0))
+    if words_by_row:
+        _draw_words(fig, ax, dict(zip((r.name for r in rows), ys)), words_by_row, lines_of, x0, x1, line_step, note)
+    return fig
+
+
+def _draw_words(fig, ax, row_y: dict[str, float], words_by_row: dict[str, list[HeardWord]],
+                lines_of: dict[str, int], x0: float, x1: float, line_step: float, note) -> None:
+    """Label the words under their speech rows (after the layout is final: the labels depend on the axis'
+    width) and say in ``note`` how many were left out."""
+    from matplotlib.collections import LineCollection
+
+    right = fig.subplotpars.right
+    fig.subplots_adjust(right=min(right, 1.0 - WORD_MARGIN / fig.get_figwidth()))
+    inches = ax.get_position().width * fig.get_figwidth()
+    drawn = left_out = 0
+    lines_used = 0
+    for name, words in words_by_row.items():
+        y = row_y[name]
+        placed, skipped = layout_words(words, x0, x1, inches, lines=lines_of[name])
+        ax.add_collection(LineCollection([[(w.onset, y - 0.3), (w.onset, y - 0.42)] for w in words],
+                                         colors="#252525", linewidths=0.5))
+        for w, line in placed:
+            ax.text(w.onset, y - 0.42 - line * line_step, w.text, fontsize=WORD_FONT, ha="left", va="top",
+                    color="#252525", clip_on=False, gid="word")
+            lines_used = max(lines_used, line + 1)
+        drawn += len(placed)
+        left_out += len(skipped)
+    total = drawn + left_out
+    lines = f" on {lines_used} lines" if lines_used > 1 else ""
+    if left_out:
+        text = (f"words: {drawn} of {total} labelled at their onsets{lines}; {left_out} left out where they would "
+                f"overlap at this width (a tick marks every onset)")
+    else:
+        text = f"words: all {total} labelled at their onsets{lines}"
+    note.set_text(text)
+
+
+def plot_timeline(source, out_png: str | Path, stream: PoseStream | None = None, title: str | None = None,
+                  width: float = 12.0, start: float | None = None, end: float | None = None) -> Path:
+    """Draw what a run did on one time axis (:func:`timeline_figure`) and save it as a PNG.
+
+    ``start``/``end``: draw only that window of the run's axis (s). Returns the file written.
+    """
+    out_png = Path(out_png)
+    fig = timeline_figure(source, stream=stream, title=title, width=width, start=start, end=end)
+    fig.savefig(out_png, dpi=_DPI)
     return out_png
+
+
+def _lanes(spans: list[tuple[float, float]], most: int = 8) -> list[int]:
+    """A lane for each span so that spans of one lane do not overlap (at most ``most`` lanes: past that, a
+    span goes where the lane ends first)."""
+    ends: list[float] = []
+    out = [0] * len(spans)
+    for i in sorted(range(len(spans)), key=lambda i: spans[i]):
+        a, b = spans[i]
+        lane = next((k for k, e in enumerate(ends) if e <= a), None)
+        if lane is None:
+            if len(ends) < most:
+                ends.append(b)
+                lane = len(ends) - 1
+            else:
+                lane = int(np.argmin(ends))
+        ends[lane] = max(ends[lane], b)
+        out[i] = lane
+    return out
+
+
+def overview_figure(source, title: str | None = None, width: float = 16.0, window: float | None = None):
+    """A whole run at a glance (a matplotlib ``Figure``): one row per behaviour type, each behaviour a thin
+    bar from its first to its last sync point (overlapping ones on lanes of their row, dropped ones
+    hatched), strokes as black ticks, warnings as red triangles; no phases. With ``window``, the
+    boundaries of the windows :func:`plot_timelines` draws in detail are marked and named.
+
+    Artists by ``get_gid()``: ``"overview:<type>"`` (a row's bars), ``"overview-stroke"`` (stroke ticks).
+    """
+    from matplotlib.collections import LineCollection
+
+    recording = _recording(source)
+    duration = run_duration(recording)
+    by_type: dict[str, list] = {}
+    for record in recording.behaviours:
+        if _span(record.times) is not None:
+            by_type.setdefault(record.behaviour.type, []).append(record)
+    types = sorted(by_type, key=lambda t: (t != "speech", list(by_type).index(t)))
+    warnings = [f for f in recording.feedback if f["type"] == "warningFeedback"
+                and math.isfinite(f.get("globalTime", math.nan))]
+    n_rows = len(types) + (1 if warnings else 0)
+    fig, (ax,) = _new_figure(width, max(2.2, 0.55 * n_rows + 1.5))
+    ticks, names = [], []
+    for row, kind in enumerate(types):
+        y = n_rows - 1 - row
+        records = by_type[kind]
+        spans = [_span(r.times) for r in records]
+        lanes = _lanes(spans)
+        n_lanes = max(lanes) + 1
+        lane_h = 0.8 / n_lanes
+        colour = _TYPE_COLOURS.get(kind, "#737373")
+        strokes = []
+        for record, (a, b), lane in zip(records, spans, lanes):
+            yc = y + 0.4 - (lane + 0.5) * lane_h
+            dropped = record.state == "dropped"
+            ax.barh(yc, max(b - a, 1e-3), left=a, height=0.75 * lane_h, color=colour,
+                    alpha=0.35 if dropped else 0.8, hatch="///" if dropped else None, linewidth=0,
+                    gid=f"overview:{kind}")
+            for s, t in zip(record.sync_ids, record.times):
+                if s == "stroke" and t is not None and math.isfinite(t):
+                    strokes.append([(t, yc - 0.45 * lane_h), (t, yc + 0.45 * lane_h)])
+        if strokes:
+            ax.add_collection(LineCollection(strokes, colors="black", linewidths=0.6, gid="overview-stroke"))
+        n_strokes = len(strokes)
+        ticks.append(y)
+        names.append(f"{kind} ({len(records)}" + (f", {n_strokes} strokes)" if n_strokes else ")"))
+    if warnings:
+        ax.plot([f["globalTime"] for f in warnings], [0.0] * len(warnings), "^", color="#de2d26", markersize=5)
+        ticks.append(0)
+        names.append(f"warnings ({len(warnings)})")
+    if window:
+        for a, b in time_windows(duration, window):
+            ax.axvline(a, color="#bdbdbd", linewidth=0.6, linestyle=":")
+            ax.text(0.5 * (a + min(b, duration)), n_rows - 0.45, f"{a:g}-{b:g} s", fontsize=6, ha="center",
+                    va="bottom", color="#777777")
+    ax.set_yticks(ticks, names, fontsize=7)
+    ax.set_ylim(-0.6, n_rows - 0.2)
+    ax.set_xlim(0.0, max(duration, 1e-3))
+    ax.set_xlabel("time of the run (s)")
+    n = sum(len(v) for v in by_type.values())
+    head = f"{title}: " if title else ""
+    detail = f"; the detail is drawn per {window:g} s window" if window else ""
+    ax.set_title(f"{head}overview of {n} behaviours over {duration:.1f} s (strokes as ticks{detail})",
+                 loc="left", fontsize=10)
+    ax.grid(axis="x", alpha=0.25)
+    fig.tight_layout()
+    return fig
+
+
+_WINDOW_FILE = re.compile(r"_\d{4,}(?:\.\d)?-\d{4,}(?:\.\d)?s")
+
+
+def plot_timelines(source, out: str | Path, stream: PoseStream | None = None, window: float = WINDOW,
+                   threshold: float | None = None, title: str | None = None, width: float = 16.0) -> list[Path]:
+    """The timeline of a run as pictures that read: one if it is short, an overview plus windows if long.
+
+    ``out``: the overview's file (``.png``, or another format matplotlib writes) or a folder (a path
+    without a suffix: ``timeline.png`` inside). A run no longer than
+    ``threshold`` seconds (default ``LONG_RUN``) is drawn whole in that file by :func:`plot_timeline`. A
+    longer one gets :func:`overview_figure` there, and each of its :func:`time_windows` of ``window``
+    seconds in detail in its own file next to it (:func:`window_path`: ``timeline_0000-0030s.png``, ...);
+    window files of an earlier, longer run left in the folder are removed. Returns the files written,
+    the overview (or the one picture) first.
+    """
+    if not window > 0:
+        raise ValueError(f"a window must last a positive number of seconds, not {window}")
+    recording = _recording(source)
+    out = Path(out)
+    png = out if out.suffix else out / "timeline.png"
+    png.parent.mkdir(parents=True, exist_ok=True)
+    duration = run_duration(recording)
+    limit = LONG_RUN if threshold is None else threshold
+    written: list[Path] = []
+    if duration <= limit:
+        written.append(plot_timeline(recording, png, stream=stream, title=title, width=width))
+    else:
+        overview_figure(recording, title=title, width=width, window=window).savefig(png, dpi=_DPI)
+        written.append(png)
+        for a, b in time_windows(duration, window):
+            part = f"{a:g}-{b:g} s of {duration:.0f} s"
+            written.append(plot_timeline(recording, window_path(png, a, b), stream=stream, width=width,
+                                         title=f"{title}: {part}" if title else part, start=a, end=b))
+    for old in png.parent.glob(f"{glob.escape(png.stem)}_*s{glob.escape(png.suffix)}"):
+        if _WINDOW_FILE.fullmatch(old.name[len(png.stem):-len(png.suffix)]) and old not in written:
+            old.unlink()
+    return written

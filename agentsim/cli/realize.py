@@ -42,10 +42,19 @@ def add_parsers(commands) -> None:
     options.add_seed(realize, "the background motion (blinks, sway)")
     realize.set_defaults(handler=realize_files)
 
-    plot = commands.add_parser("plot", help="pictures of a realisation")
+    plot = commands.add_parser(
+        "plot", help="pictures of a realisation",
+        description="Realise FILE and draw its timeline: behaviours, phases, pegs, feedback, the words heard "
+                    "and the poses. --from/--to draw only that window of the run; without them a run longer "
+                    "than 60 s is drawn as an overview in OUT.png plus one picture per 30 s next to it "
+                    "(OUT_0000-0030s.png, ...).")
     plot.add_argument("what", choices=["timeline"])
     plot.add_argument("file", metavar="FILE", help="a BML file")
     options.add_out(plot, None, "the picture to write", metavar="OUT.png")
+    plot.add_argument("--from", dest="start", metavar="SECONDS",
+                      help="draw the run from this time on (seconds of the run; default its start)")
+    plot.add_argument("--to", dest="end", metavar="SECONDS",
+                      help="draw the run up to this time (seconds of the run; default its end)")
     options.add_anticipators(plot)
     plot.set_defaults(handler=plot_timeline)
 
@@ -150,14 +159,45 @@ def realize_files(args: argparse.Namespace) -> int:
 
 
 def plot_timeline(args: argparse.Namespace) -> int:
-    from agentsim.animation import evaluate_poses, plot_timeline as draw
+    """``agentsim plot timeline``: realise the file and draw its timeline, or the ``--from``/``--to`` window
+    of it (a usage error, before anything runs, if the window is not seconds that end after they start)."""
+    import math
+
+    from agentsim.animation import evaluate_poses, plot_timeline as draw, plot_timelines
+    from agentsim.animation.timeline import run_duration
     from agentsim.realizer import Realizer
 
+    def seconds(option: str, text: str | None) -> float | None:
+        if text is None:
+            return None
+        try:
+            value = float(text)
+        except ValueError:
+            raise UsageError(f"{option} expects seconds, got {text!r}") from None
+        if not (value >= 0 and math.isfinite(value)):
+            raise UsageError(f"{option} must be a non-negative number of seconds, got {text}")
+        return value
+
+    start, end = seconds("--from", args.start), seconds("--to", args.end)
+    if start is not None and end is not None and not end > start:
+        raise UsageError(f"--to ({end:g} s) must come after --from ({start:g} s)")
     realizer = Realizer(anticipators=options.anticipators(args))
     realizer.submit(read_document(args.file), source=args.file)
     realizer.run()
     recording = realizer.recording()
-    draw(recording, args.out, stream=evaluate_poses(recording), title=Path(args.file).name)
+    stream = evaluate_poses(recording)
+    title = Path(args.file).name
+    if start is None and end is None:
+        written = plot_timelines(recording, args.out, stream=stream, title=title, width=12.0)
+        if len(written) > 1:
+            print(f"the run lasts {run_duration(recording):.1f} s: {args.out} is its overview, "
+                  f"{len(written) - 1} windows are next to it ({written[1].name}, ...)", file=sys.stderr)
+        return 0
+    duration = run_duration(recording)
+    start = 0.0 if start is None else start
+    if start >= duration:
+        raise UsageError(f"--from {start:g} s is after the end of the run ({duration:.2f} s)")
+    draw(recording, args.out, stream=stream, title=title, start=start, end=duration if end is None else end)
     return 0
 
 

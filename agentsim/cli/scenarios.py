@@ -87,7 +87,9 @@ def add_storytelling(scenarios) -> argparse.ArgumentParser:
     parser.add_argument("--cache", metavar="DIR", help="cache of synthesised speech (default ~/.cache/agentsim/tts)")
     parser.add_argument("--no-cache", action="store_true", help="synthesise again; write no cache")
     options.add_fps(parser, "story.bvh")
-    parser.add_argument("--window", type=float, default=30.0, help="seconds drawn in timeline.png (30)")
+    parser.add_argument("--window", type=float, default=30.0,
+                        help="seconds of each detailed timeline picture, timeline_0000-0030s.png, ... "
+                             "(30); timeline.png is the overview of the whole story")
     options.add_delivery(parser)
     parser.set_defaults(handler=run_storytelling)
     return parser

@@ -104,24 +104,68 @@ def tempo_summary(beat_times: np.ndarray, target_bpm: np.ndarray, first_index: i
     return {"tempo": tempo, "beats_to_recover": rec, "final_tempo_error_pct": final}
 
 
-def plot_tempo(path: str | Path, beat_times, ensemble_bpm, target_bpm, ictus: dict[int, float],
-               title: str = "", events: list[tuple[float, str]] = ()) -> Path:
-    """Target, conductor and ensemble tempo over time, as a PNG."""
-    import matplotlib
+def recovery_index(tempo: np.ndarray, target: np.ndarray, first: int, tolerance: float = TOLERANCE) -> int | None:
+    """Index of the beat from which ``tempo`` stays within ``tolerance`` of ``target`` to the end: ``first``
+    plus :func:`beats_to_recover` (None: never)."""
+    beats = beats_to_recover(tempo, target, first, tolerance)
+    return None if beats is None else first + beats
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    path = Path(path)
-    fig, ax = plt.subplots(figsize=(10, 4.2))
+def recovery_phrase(beats: int | None, tolerance: float = TOLERANCE) -> str:
+    """How a title says :func:`beats_to_recover`: ``"recovered in 6 beats"``, or ``"did not recover to
+    within 2 %"`` when it is None (never a "None")."""
+    if beats is None:
+        return f"did not recover to within {tolerance * 100:g} %"
+    return f"recovered in {beats} beat{'' if beats == 1 else 's'}"
+
+
+def asynchrony_series(onsets: np.ndarray, ictus: dict[int, float]) -> dict:
+    """The asynchrony of every conducted beat that was played, as :func:`asynchrony` measures it: each
+    musician's onset minus the ictus of its beat (ms).
+
+    ``onsets`` holds musicians in rows and beats (index 0 is beat 1) in columns. Returns ``beats`` (beat
+    numbers), ``times`` (their ictus, s), ``musicians`` (ms, one row per musician, NaN where one did not
+    play) and ``mean`` (ms, the mean over the musicians who played), for the beats at least one played.
+    """
+    onsets = np.atleast_2d(np.asarray(onsets, float))
+    beats = [b for b in sorted(ictus) if 1 <= b <= onsets.shape[1] and np.isfinite(onsets[:, b - 1]).any()]
+    times = np.array([ictus[b] for b in beats], float)
+    per = (onsets[:, [b - 1 for b in beats]] - times[None, :]) * 1000.0 if beats else np.empty((onsets.shape[0], 0))
+    with np.errstate(invalid="ignore"):
+        mean = np.nanmean(per, axis=0) if beats else np.empty(0)
+    return {"beats": np.array(beats, int), "times": times, "musicians": per, "mean": mean}
+
+
+def tempo_figure(beat_times, ensemble_bpm, target_bpm, ictus: dict[int, float], title: str = "",
+                 events: list[tuple[float, str]] = (), first_index: int | None = None, onsets=None):
+    """The tempo figure (a matplotlib ``Figure``; :func:`plot_tempo` saves it).
+
+    Top panel: target, conductor and ensemble tempo over time, the tolerance band, and, with
+    ``first_index`` (index of the first conducted beat), a vertical line at the beat from which the
+    ensemble's tempo stays within the tolerance (:func:`recovery_index`, the beat ``beats_to_recover``
+    counts to). With ``onsets`` (musicians by beats), a panel below shows the asynchrony of each beat
+    (:func:`asynchrony_series`: onset minus ictus, ms), every musician's and their mean.
+
+    Artists by ``get_gid()``: ``"recovery"`` (the line), ``"asynchrony"`` (the mean's line),
+    ``"asynchrony-musicians"``.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    below = onsets is not None
+    fig = Figure(figsize=(10, 6.4 if below else 4.2), dpi=110)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2 if below else 1, 1, sharex=True, squeeze=False,
+                        gridspec_kw={"height_ratios": [2.2, 1.0][:2 if below else 1]})
+    ax = axes[0][0]
     bt = np.asarray(beat_times, float)
-    n = min(bt.size, len(target_bpm))
+    target = np.asarray(target_bpm, float)
+    n = min(bt.size, target.size)
     ok = np.isfinite(bt[:n])
-    ax.plot(bt[:n][ok], np.asarray(target_bpm)[:n][ok], color="black", linestyle="--", linewidth=1.2,
-            label="target (score)")
-    band = np.asarray(target_bpm)[:n][ok]
+    ax.plot(bt[:n][ok], target[:n][ok], color="black", linestyle="--", linewidth=1.2, label="target (score)")
+    band = target[:n][ok]
     ax.fill_between(bt[:n][ok], band * (1 - TOLERANCE), band * (1 + TOLERANCE), color="#dddddd", alpha=0.6,
-                    label="target +-2 %")
+                    label=f"target +-{TOLERANCE * 100:g} %")
     if ictus:
         beats = np.array(sorted(ictus))
         times = np.array([ictus[b] for b in beats])
@@ -131,22 +175,65 @@ def plot_tempo(path: str | Path, beat_times, ensemble_bpm, target_bpm, ictus: di
             ax.plot(mid[consecutive], 60.0 / np.diff(times)[consecutive], color="#e6550d", marker=".",
                     markersize=3, linewidth=0.8, label="conductor (ictus intervals)")
     eb = np.asarray(ensemble_bpm, float)[:n]
-    good = np.isfinite(eb) & ok
-    ax.plot(bt[:n][good], eb[good], color="#3182bd", linewidth=1.8, label="ensemble (9-beat fit)")
+    good = np.isfinite(eb) & ok[:eb.size]
+    ax.plot(bt[:eb.size][good], eb[good], color="#3182bd", linewidth=1.8, label="ensemble (9-beat fit)")
     if bt.size > 1:
-        raw = 60.0 / np.diff(bt)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            raw = 60.0 / np.diff(bt)
         mids = 0.5 * (bt[1:] + bt[:-1])
         fine = np.isfinite(raw)
         ax.plot(mids[fine], raw[fine], color="#9ecae1", linewidth=0.6, label="ensemble (beat intervals)")
+    panels = [a[0] for a in axes]
+    recovered = None
+    if first_index is not None and eb.size:
+        recovered = recovery_index(eb, target[:eb.size], first_index)
+    if recovered is not None and recovered < bt.size and np.isfinite(bt[recovered]):
+        t = float(bt[recovered])
+        for k, p in enumerate(panels):
+            p.axvline(t, color="#31a354", linewidth=1.2, gid="recovery" if k == 0 else "recovery-below")
+        after = recovered - first_index
+        ax.annotate(f"recovered: within {TOLERANCE * 100:g} % from beat {recovered + 1} on\n"
+                    f"({after} beat{'' if after == 1 else 's'} after the first ictus)", (t, 0.04),
+                    xycoords=("data", "axes fraction"), xytext=(4, 0), textcoords="offset points", fontsize=7,
+                    color="#31a354", ha="left", va="bottom", gid="recovery-label")
     for t, label in events:
-        ax.axvline(t, color="#756bb1", linewidth=0.8, linestyle=":")
+        for p in panels:
+            p.axvline(t, color="#756bb1", linewidth=0.8, linestyle=":")
         ax.text(t, ax.get_ylim()[1], label, fontsize=7, rotation=90, va="top", ha="right", color="#756bb1")
-    ax.set_xlabel("time (s)")
     ax.set_ylabel("tempo (BPM)")
     ax.set_title(title or "tempo")
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3)
+    if below:
+        bx = panels[1]
+        series = asynchrony_series(onsets, ictus)
+        if series["beats"].size:
+            for row in series["musicians"]:
+                fine = np.isfinite(row)
+                bx.plot(series["times"][fine], row[fine], ".", color="#9ecae1", markersize=2.5, linestyle="none",
+                        gid="asynchrony-musicians")
+            bx.plot(series["times"], series["mean"], color="#08519c", linewidth=1.0, marker=".", markersize=3,
+                    gid="asynchrony", label="ensemble mean")
+            bx.plot([], [], ".", color="#9ecae1", label="each musician")
+            mean = float(np.nanmean(series["musicians"]))
+            bx.axhline(mean, color="#08519c", linewidth=0.6, linestyle="--", label=f"overall mean {mean:+.1f} ms")
+            bx.legend(fontsize=7, loc="upper right", ncol=3)
+        else:
+            bx.text(0.5, 0.5, "no conducted beat was played", transform=bx.transAxes, ha="center", va="center",
+                    fontsize=8, color="#777777")
+        bx.axhline(0.0, color="black", linewidth=0.6)
+        bx.set_ylabel("asynchrony (ms)\nonset - ictus")
+        bx.grid(alpha=0.3)
+    panels[-1].set_xlabel("time (s)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def plot_tempo(path: str | Path, beat_times, ensemble_bpm, target_bpm, ictus: dict[int, float],
+               title: str = "", events: list[tuple[float, str]] = (), first_index: int | None = None,
+               onsets=None) -> Path:
+    """Target, conductor and ensemble tempo over time, with the recovery point and the asynchrony
+    (:func:`tempo_figure`), as a PNG."""
+    path = Path(path)
+    tempo_figure(beat_times, ensemble_bpm, target_bpm, ictus, title, events, first_index, onsets).savefig(path)
     return path

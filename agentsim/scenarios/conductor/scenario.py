@@ -6,8 +6,9 @@ pushed into the conductor's ears (the beat tracker); the conductor knows nothing
 Live (:func:`listen_live`): the ears listen to an input device in real time and the conductor conducts
 whatever it hears; there is no simulated ensemble and no ground truth.
 
-:func:`write_outputs` writes ``metrics.json``, ``tempo.png``, ``timeline.png``, ``ensemble.wav``,
-``conductor.bvh`` and ``feedback.jsonl``.
+:func:`write_outputs` writes ``metrics.json``, ``tempo.png`` (tempo, recovery and asynchrony),
+``timeline.png`` (an overview of the run, with ``timeline_0000-0015s.png``, ... the detail of each
+``TIMELINE_WINDOW`` seconds), ``ensemble.wav``, ``conductor.bvh`` and ``feedback.jsonl``.
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ from agentsim.scenarios.conductor.strategies import make_strategy
 
 #: Seconds rendered after the ensemble's last beat.
 TAIL_SECONDS = 1.0
+#: Seconds of each detailed timeline picture (two beats a second make one row each).
+TIMELINE_WINDOW = 15.0
 
 
 @dataclass
@@ -236,7 +239,8 @@ def collect_metrics(run: Run) -> dict:
     target = np.resize(target, beats.size) if beats.size else target
     if run.live and beats.size:
         target = np.full(beats.size, piece.tempo)
-    summary = M.tempo_summary(beats, target, (first - 1) if first else beats.size)
+    first_index = (first - 1) if first else beats.size
+    summary = M.tempo_summary(beats, target, first_index)
     early = M.local_tempo(beats)
     measured_start = None
     if first and np.isfinite(early[: max(first - 1, 0)]).any():
@@ -264,6 +268,8 @@ def collect_metrics(run: Run) -> dict:
     run.extra["tempo"] = summary["tempo"]
     run.extra["beats"] = beats
     run.extra["target"] = target
+    run.extra["first_index"] = first_index
+    run.extra["onsets"] = onsets
     return _clean(out)
 
 
@@ -335,14 +341,30 @@ def beat_rows(run: Run) -> list[dict]:
     return rows
 
 
+def run_tempo_figure(run: Run, metrics: dict):
+    """The tempo figure of a finished run (:func:`~agentsim.scenarios.conductor.metrics.tempo_figure`):
+    its tempo curves, where it recovered (or a title that says it did not), its asynchrony, and the
+    conductor's "play louder" and stop gestures."""
+    from agentsim.scenarios.conductor.metrics import recovery_phrase, tempo_figure
+
+    if "tempo" not in run.extra:
+        collect_metrics(run)
+    events = [(g["time"], "louder") for g in run.conductor.louder]
+    if run.conductor.stopped_at is not None:
+        events.append((run.conductor.stopped_at, "stop"))
+    title = (f"{run.config.piece.title}: {run.strategy_name}, seed {run.seed} "
+             f"({recovery_phrase(metrics.get('beats_to_recover'))})")
+    return tempo_figure(run.extra["beats"], run.extra["tempo"], run.extra["target"], run.conductor.ictus, title,
+                        events, first_index=run.extra["first_index"], onsets=run.extra["onsets"])
+
+
 def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True) -> Path:
     """Write the run's files into the folder ``out`` (created if needed)."""
-    from agentsim.animation import evaluate_poses, plot_timeline, write_bvh
+    from agentsim.animation import evaluate_poses, plot_timelines, write_bvh
     from agentsim.core.feedback import to_json
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_wav
     from agentsim.media.tables import gesture_rows, write_csv
-    from agentsim.scenarios.conductor.metrics import plot_tempo
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -360,16 +382,8 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     write_bvh(out / "conductor.bvh", stream)
     write_csv(out / "beats.csv", beat_rows(run))
     write_csv(out / "gestures.csv", gesture_rows(recording, beat_sounded(run)))
-    if "tempo" not in run.extra:
-        collect_metrics(run)
-    events = [(g["time"], "louder") for g in run.conductor.louder]
-    if run.conductor.stopped_at is not None:
-        events.append((run.conductor.stopped_at, "stop"))
-    title = (f"{run.config.piece.title}: {run.strategy_name}, seed {run.seed} "
-             f"(recovered in {metrics.get('beats_to_recover')} beats)")
-    plot_tempo(out / "tempo.png", run.extra["beats"], run.extra["tempo"], run.extra["target"],
-               run.conductor.ictus, title, events)
+    run_tempo_figure(run, metrics).savefig(out / "tempo.png")
     if pictures:
-        plot_timeline(recording, out / "timeline.png", stream=stream,
-                      title=f"conductor ({run.strategy_name}): behaviours, pegs and feedback")
+        plot_timelines(recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW,
+                       threshold=TIMELINE_WINDOW, title=f"conductor ({run.strategy_name})")
     return out

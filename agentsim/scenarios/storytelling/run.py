@@ -11,7 +11,8 @@ animator-time strategy under an event-delivery condition, and writes to ``--out`
 ``story.TextGrid``     words, phones, gestures (planned), strokes (realised)
 ``story.bvh``          the body's motion
 ``gestures.csv``       one row per gesture: its word, when it sounded, when its stroke came, the error
-``timeline.png``       behaviours, phases, pegs and feedback of the first ``--window`` seconds
+``timeline.png``       an overview of the behaviours of the whole story, and ``timeline_0000-0030s.png``,
+                       ... behaviours, phases, pegs, feedback and words of each ``--window`` seconds
 ``sync_errors.png``    every gesture's sync error over the whole story
 ``feedback.jsonl``     the BML feedback, one JSON object per line
 ``story.bml``          the BML block that was realised
@@ -32,7 +33,6 @@ import json
 import math
 import time
 from collections import OrderedDict
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -262,18 +262,15 @@ def motion_strokes(telling: Telling, stream) -> "OrderedDict":
     return summary
 
 
-def plot_window(telling: Telling, png: Path, stream, window: float = 30.0) -> Path:
-    """``plot_timeline`` of the behaviours that start in the first ``window`` seconds, with the poses of
-    that window (a whole story would need one row per gesture, hundreds of rows)."""
-    from agentsim.animation import plot_timeline
+def plot_window(telling: Telling, png: Path, stream, window: float = 30.0) -> list[Path]:
+    """The telling's timeline as pictures that read (:func:`~agentsim.animation.plot_timelines`): in ``png``
+    an overview of the whole story, and next to it each ``window`` seconds in detail, with the words
+    heard under the speech and the poses of that window (a whole story in one picture would need one row
+    per gesture, hundreds of rows). Returns the files written, the overview first."""
+    from agentsim.animation import plot_timelines
 
-    n = int(np.searchsorted(stream.times, window, side="right"))
-    part = replace(stream, times=stream.times[:n], values=stream.values[:n], positions=stream.positions[:n],
-                   writers=stream.writers[:n] if stream.writers is not None else None)
-    total = float(telling.utterance.duration)
-    return plot_timeline(telling.recording.until(window), png, stream=part, width=16.0,
-                         title=f"{telling.story.title}: the first {window:g} s of {total:.0f} s "
-                               f"(strategy {telling.strategy})")
+    return plot_timelines(telling.recording, png, stream=stream, window=window, threshold=window, width=16.0,
+                          title=f"{telling.story.title} (strategy {telling.strategy})")
 
 
 def plot_errors(telling: Telling, png: Path) -> Path:
@@ -283,7 +280,7 @@ def plot_errors(telling: Telling, png: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    ok = np.isfinite(telling.passed)
+    ok = np.isfinite(telling.passed) & np.isfinite(telling.heard)  # a NaN would reach the p95 in the legend
     heard = telling.heard[ok]
     errors = 1000.0 * (telling.passed[ok] - heard)
     kinds = np.array([g.kind for g in telling.story.gestures])[ok]
