@@ -176,3 +176,16 @@ def test_the_conductor_writes_the_ensemble_and_its_beats_on_the_motion_axis(tmp_
     common = set(strokes) & {str(k) for k in ictus}
     assert common and all(strokes[k] == pytest.approx(ictus[int(k)], abs=1e-6) for k in common)
     assert json.loads((out / "metrics.json").read_text())["time_axis"].startswith("simulated time")
+
+
+def test_a_speech_cut_by_replace_is_silent_from_the_cut():
+    realizer = Realizer(tts=EspeakBackend())
+    realizer.submit(f'<bml {NS} id="long"><speech id="s"><text>This goes on and on for a good while, and then on '
+                    'some more.</text></speech></bml>')
+    realizer.submit_at(1.0, f'<bml {NS} id="other" composition="REPLACE"><head id="h" lexeme="NOD"/></bml>')
+    realizer.run()
+    (heard,) = realizer.recording().speech
+    assert heard.stopped == 1.0
+    track = run_track(realizer.recording())
+    cut = int(1.0 * track.rate)
+    assert np.abs(track.samples[:cut]).max() > 0.05 and not np.abs(track.samples[cut:]).any()

@@ -265,8 +265,11 @@ class Scheduler(Composition, Interruption, Retiming):
         """End a block now (composition REPLACE): its behaviours stop where they are."""
         now = self.env.now
         for timed in run.live():
+            started = timed.state == "active" and timed.passed[0] is not None
             timed.state = "dropped"
             timed.stopped = now
+            if started:  # what it makes (its sound) stops here too
+                timed.engine.stopped(timed, now)
             timed.engine.remove(timed)
             self.drops.append(DropRecord(run.id, timed.id, now, "INTERRUPTED", "its block was replaced"))
         if run.state == "pending":
