@@ -30,7 +30,7 @@ BML = (f'<bml {NS} id="b1"><speech id="s1"><text>The <sync id="w1"/>lighthouse k
        '<gesture id="g1" lexeme="BEAT" stroke="s1:w1"/>'
        '<gesture id="g2" lexeme="BEAT" mode="LEFT_HAND" stroke="s1:w2"/>'
        '<head id="h1" lexeme="NOD" stroke="s1:end"/></bml>')
-#: The largest inline text the HTML may hold (its one-line error catcher is about 150 characters).
+#: The largest inline text the HTML may hold (its error catcher is about 250 characters).
 INLINE_BOUND = 1000
 
 

@@ -13,7 +13,7 @@
 
 Everything is loaded by ``<script src>`` and ``<audio src>`` relative to the HTML file, because a browser
 refuses ``fetch()`` and ES modules from ``file://``; nothing is fetched from the network. The HTML itself
-holds only the page's structure, the title and notes, and a one-line error catcher: no data.
+holds only the page's structure, the title and notes, and a two-line error catcher: no data.
 """
 
 from __future__ import annotations
@@ -156,7 +156,8 @@ def page_html(folder: str, title: str, notes: list[str], data: dict) -> str:
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <meta name="generator" content="agentsim.media.report">
 <title>{esc(title)}</title>
-<script>window.reportErrors=[];window.onerror=function(m,s,l){{window.reportErrors.push(m+" ("+String(s).split("/").pop()+":"+l+")")}};</script>
+<script>window.reportErrors=[];window.onerror=function(m,s,l){{window.reportErrors.push(m+" ("+String(s).split("/").pop()+":"+l+")")}};
+window.addEventListener("unhandledrejection",function(e){{window.reportErrors.push("unhandled rejection: "+e.reason)}});</script>
 <link rel="stylesheet" href="{base}/report.css">
 </head>
 <body>
