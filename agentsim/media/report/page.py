@@ -1,0 +1,199 @@
+"""Write a run report: one HTML file and a folder of the files it loads, opened from ``file://`` offline.
+
+``write_report("run.html", ...)`` writes ``run.html`` and ``run_files/``:
+
+===================  ====================================================================================
+``three.min.js``     three.js with OrbitControls as one classic script (vendored, see ``vendor/``)
+``report.js``        the page: player, 3D skeleton, timeline, gesture table, ``window.report``
+``report.css``       its style
+``data.js``          ``window.REPORT_DATA``: timeline, table, skeleton (:mod:`~agentsim.media.report.data`)
+``poses.js``         ``window.REPORT_POSES``: quantized joint positions (only when the run has motion)
+``audio.ogg``        the run's track, Ogg Vorbis (``audio.wav`` if Vorbis cannot be written); only with sound
+===================  ====================================================================================
+
+Everything is loaded by ``<script src>`` and ``<audio src>`` relative to the HTML file, because a browser
+refuses ``fetch()`` and ES modules from ``file://``; nothing is fetched from the network. The HTML itself
+holds only the page's structure, the title and notes, and a two-line error catcher: no data.
+"""
+
+from __future__ import annotations
+
+import html
+import shutil
+from pathlib import Path
+from urllib.parse import quote
+
+import numpy as np
+
+from agentsim.media import AXIS
+from agentsim.media.report.data import (FACE, pose_payload, js_assignment, point_names, run_duration,
+                                        stroke_times, timeline_payload)
+
+HERE = Path(__file__).resolve().parent
+#: The vendored three.js bundle and its licence (``scripts/vendor_three.sh`` makes them).
+VENDOR = HERE / "vendor"
+#: The page's own script and style.
+ASSETS = HERE / "assets"
+#: Files of the folder that :func:`write_report` writes or removes (a report written again over an older one).
+OWN_FILES = ("three.min.js", "LICENSE-three.txt", "report.js", "report.css", "data.js", "poses.js", "audio.ogg",
+             "audio.wav")
+#: Samples handed to the audio encoder at a time.
+AUDIO_BLOCK = 65536
+
+
+def write_audio(folder: Path, track) -> str:
+    """Write ``track`` into ``folder`` as ``audio.ogg`` (Ogg Vorbis), or ``audio.wav`` if libsndfile cannot
+    write Vorbis; returns the file's name."""
+    import soundfile
+
+    samples = np.clip(np.asarray(track.samples, dtype=np.float32), -1.0, 1.0)
+    try:
+        if not soundfile.check_format("OGG", "VORBIS"):
+            raise ValueError("this libsndfile writes no Ogg Vorbis")
+        # in blocks: libsndfile 1.2 crashes when one write hands its Vorbis encoder more than about 2^20 samples
+        with soundfile.SoundFile(folder / "audio.ogg", "w", int(track.rate), 1, format="OGG",
+                                 subtype="VORBIS") as out:
+            for start in range(0, len(samples), AUDIO_BLOCK):
+                out.write(samples[start:start + AUDIO_BLOCK])
+        return "audio.ogg"
+    except (RuntimeError, ValueError, TypeError):  # libsndfile without Vorbis
+        (folder / "audio.ogg").unlink(missing_ok=True)
+        soundfile.write(folder / "audio.wav", samples, int(track.rate), format="WAV", subtype="PCM_16")
+        return "audio.wav"
+
+
+def write_report(path, *, recording, stream=None, track=None, gestures=(), title: str = "", notes=()) -> Path:
+    """Write an HTML report of a run that a researcher watches and hears: its audio, a 3D skeleton driven by
+    the poses, a timeline of behaviours, words and feedback with a cursor that follows the audio, and the
+    per-gesture error table.
+
+    Parameters
+    ----------
+    path : str or Path
+        The HTML file to write; its files go into ``<stem>_files/`` beside it.
+    recording : Recording
+        The run (or anything with a ``recording()`` method, such as a realizer after ``run()``).
+    stream : PoseStream, optional
+        Its poses (:func:`~agentsim.animation.output.evaluate_poses`); None: the run has no motion.
+    track : Track, optional
+        Its sound (:func:`~agentsim.media.audio.run_track`); None (or an empty track): the run has no sound.
+    gestures : sequence of GestureRow
+        The per-gesture table (:func:`~agentsim.media.tables.gesture_rows`).
+    title : str
+        The page's title (default: the HTML file's stem).
+    notes : iterable of str
+        Lines shown under the title (what was run, with which settings).
+
+    Returns
+    -------
+    Path
+        The HTML file.
+    """
+    if hasattr(recording, "recording") and callable(recording.recording):
+        recording = recording.recording()
+    path = Path(path)
+    if path.suffix.lower() not in (".html", ".htm"):
+        path = path.with_name(path.name + ".html")
+    folder = path.with_name(f"{path.stem}_files")
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in OWN_FILES:
+        (folder / name).unlink(missing_ok=True)
+    if track is not None and len(track.samples) == 0:
+        track = None
+    if stream is not None and stream.n_frames == 0:
+        stream = None
+    gestures = list(gestures)
+    title = title or path.stem
+    notes = [str(n) for n in notes]
+
+    shutil.copyfile(VENDOR / "three.min.js", folder / "three.min.js")
+    shutil.copyfile(VENDOR / "LICENSE-three.txt", folder / "LICENSE-three.txt")
+    shutil.copyfile(ASSETS / "report.js", folder / "report.js")
+    shutil.copyfile(ASSETS / "report.css", folder / "report.css")
+
+    duration = run_duration(recording, stream, track)
+    data = timeline_payload(recording, gestures, duration)
+    data.update(title=title, notes=notes, axis=AXIS, audio=None, motion=None)
+    if track is not None:
+        data["audio"] = {"src": write_audio(folder, track), "duration": track.duration, "rate": int(track.rate)}
+    if stream is not None:
+        names, parents = point_names(stream.body)
+        poses = pose_payload(stream, keep=stroke_times(recording, gestures))
+        (folder / "poses.js").write_text(js_assignment(
+            "REPORT_POSES", poses, f"agentsim run report: joint positions of {title!r}, see "
+            "agentsim.media.report.data"), encoding="utf-8")
+        data["motion"] = {
+            "fps": float(stream.fps), "frames": int(stream.n_frames), "sent": poses["count"],
+            "start": float(stream.times[0]), "end": float(stream.times[-1]),
+            "points": names, "parents": parents,
+            "face": [i for i, n in enumerate(names) if n.split(".")[0] in FACE],
+            "ends": [i for i, n in enumerate(names) if n.endswith(".end")],
+        }
+    (folder / "data.js").write_text(js_assignment(
+        "REPORT_DATA", data, f"agentsim run report: timeline and tables of {title!r}, see "
+        "agentsim.media.report.data"), encoding="utf-8")
+    path.write_text(page_html(folder.name, title, notes, data), encoding="utf-8")
+    return path
+
+
+def page_html(folder: str, title: str, notes: list[str], data: dict) -> str:
+    """The HTML of a report whose files are in the folder named ``folder`` beside it."""
+    base = quote(folder)
+    esc = html.escape
+    audio = data["audio"]
+    if audio is not None:
+        sound = (f'<audio id="audio" controls preload="auto" src="{base}/{quote(audio["src"])}"></audio>')
+    else:
+        sound = '<p id="nosound" class="missing">no sound in this run</p>'
+    motion = "" if data["motion"] is not None else '<p id="nomotion" class="missing">no motion in this run</p>'
+    note_items = "".join(f"<li>{esc(n)}</li>" for n in notes)
+    scripts = ["three.min.js", "data.js"] + (["poses.js"] if data["motion"] is not None else []) + ["report.js"]
+    script_tags = "\n".join(f'<script src="{base}/{s}"></script>' for s in scripts)
+    return f"""<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<meta name="generator" content="agentsim.media.report">
+<title>{esc(title)}</title>
+<script>window.reportErrors=[];window.onerror=function(m,s,l){{window.reportErrors.push(m+" ("+String(s).split("/").pop()+":"+l+")")}};
+window.addEventListener("unhandledrejection",function(e){{window.reportErrors.push("unhandled rejection: "+e.reason)}});</script>
+<link rel="stylesheet" href="{base}/report.css">
+</head>
+<body>
+<header>
+<h1>{esc(title)}</h1>
+<ul class="notes">{note_items}</ul>
+<p id="summary"></p>
+</header>
+<main>
+<section id="stage">
+<div id="view">{motion}</div>
+<div id="side">
+<div id="transport">
+{sound}
+<div class="controls"><button id="play" type="button">&#9654; play</button>
+<span id="clock">0.000 s</span></div>
+<input id="scrub" type="range" min="0" max="1" step="0.001" value="0" aria-label="time">
+</div>
+<div id="now"></div>
+<div id="legend"></div>
+</div>
+</section>
+<section id="timeline-section">
+<canvas id="timeline"></canvas>
+<canvas id="overview"></canvas>
+<div id="hover">&nbsp;</div>
+</section>
+<section id="table-section">
+<h2>Gestures pegged to words and beats</h2>
+<p class="hint">Click a row to go to its stroke; click a heading to sort.</p>
+<div id="table-wrap"><table id="gestures"><thead></thead><tbody></tbody></table></div>
+</section>
+<footer>Time axis: {esc(AXIS)}. three.js under the MIT licence (<a href="{base}/LICENSE-three.txt">LICENSE</a>).</footer>
+</main>
+<noscript>This report needs JavaScript.</noscript>
+{script_tags}
+</body>
+</html>
+"""
