@@ -8,7 +8,8 @@ whatever it hears; there is no simulated ensemble and no ground truth.
 
 :func:`write_outputs` writes ``metrics.json``, ``tempo.png`` (tempo, recovery and asynchrony),
 ``timeline.png`` (an overview of the run, with ``timeline_0000-0015s.png``, ... the detail of each
-``TIMELINE_WINDOW`` seconds), ``ensemble.wav``, ``conductor.bvh`` and ``feedback.jsonl``.
+``TIMELINE_WINDOW`` seconds), ``ensemble.wav``, ``conductor.bvh``, ``beats.csv``, ``gestures.csv``,
+``report.html`` and ``feedback.jsonl``.
 """
 
 from __future__ import annotations
@@ -364,6 +365,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     from agentsim.core.feedback import to_json
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_wav
+    from agentsim.media.report import write_report
     from agentsim.media.tables import gesture_rows, write_csv
 
     out = Path(out)
@@ -381,7 +383,10 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
     write_bvh(out / "conductor.bvh", stream)
     write_csv(out / "beats.csv", beat_rows(run))
-    write_csv(out / "gestures.csv", gesture_rows(recording, beat_sounded(run)))
+    gestures = gesture_rows(recording, beat_sounded(run))
+    write_csv(out / "gestures.csv", gestures)
+    write_report(out / "report.html", recording=recording, stream=stream, track=track, gestures=gestures,
+                 title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})")
     run_tempo_figure(run, metrics).savefig(out / "tempo.png")
     if pictures:
         plot_timelines(recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW,

@@ -11,6 +11,7 @@ animator-time strategy under an event-delivery condition, and writes to ``--out`
 ``story.TextGrid``     words, phones, gestures (planned), strokes (realised)
 ``story.bvh``          the body's motion
 ``gestures.csv``       one row per gesture: its word, when it sounded, when its stroke came, the error
+``report.html``        the run to watch and hear in a browser (with ``report_files/``)
 ``timeline.png``       an overview of the behaviours of the whole story, and ``timeline_0000-0030s.png``,
                        ... behaviours, phases, pegs, feedback and words of each ``--window`` seconds
 ``sync_errors.png``    every gesture's sync error over the whole story
@@ -208,6 +209,7 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     from agentsim.scenarios.storytelling.praat import export_textgrid
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_wav
+    from agentsim.media.report import write_report
     from agentsim.media.tables import gesture_rows, write_csv
 
     stages: OrderedDict[str, float] = OrderedDict()
@@ -229,15 +231,20 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     telling.extra["motion_strokes"] = motion_strokes(telling, stream)
     t = stage("motion check", t)
     utterance = telling.utterance
-    if utterance.audio is not None:  # where the listener heard it: late by the playback latency, drifting
-        write_wav(out / "narration.wav", run_track(telling.recording))
+    track = run_track(telling.recording) if utterance.audio is not None else None
+    if track is not None:  # where the listener heard it: late by the playback latency, drifting
+        write_wav(out / "narration.wav", track)
     t = stage("wav", t)
     speech = telling.speech
     _, planned, _ = syllable_times(telling.story, utterance)
     export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, telling.passed, telling.ids,
                     to_axis=speech.true_time, axis=AXIS)
-    write_csv(out / "gestures.csv", gesture_rows(telling.recording))
+    gestures = gesture_rows(telling.recording)
+    write_csv(out / "gestures.csv", gestures)
     t = stage("textgrid", t)
+    write_report(out / "report.html", recording=telling.recording, stream=stream, track=track, gestures=gestures,
+                 title=f"{telling.story.title} (strategy {telling.strategy})")
+    t = stage("report", t)
     plot_window(telling, out / "timeline.png", stream, window)
     plot_errors(telling, out / "sync_errors.png")
     stage("plots", t)
