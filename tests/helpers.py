@@ -40,12 +40,12 @@ def realize(*documents, at=None, until=None, **kwargs) -> Result:
     return Result(realizer)
 
 
-def bvh_positions(path, names: list[str]) -> dict:
-    """World positions (frames, 3) of joints as a BVH reader (bvhio) reads the file: its rotations and
-    offsets composed from the root, independently of our own forward kinematics."""
+def bvh_reader(path):
+    """A BVH file as a reader (bvhio) reads it: the container, its joints by name, each joint's parent, and
+    ``world(name, k)``: the joint's world rotation and position at frame k, its rotations and offsets
+    composed from the root, independently of our own forward kinematics."""
     import bvhio
     import glm
-    import numpy as np
 
     container = bvhio.readAsBvh(str(path))
     parent, by_name = {}, {}
@@ -65,4 +65,19 @@ def bvh_positions(path, names: list[str]) -> dict:
         rot, pos = world(parent[name].Name, k)
         return rot * j.Keyframes[k].Rotation, pos + rot * glm.vec3(j.Offset)
 
+    return container, by_name, parent, world
+
+
+def bvh_positions(path, names: list[str]) -> dict:
+    """World positions (frames, 3) of joints as a BVH reader reads the file (:func:`bvh_reader`)."""
+    import numpy as np
+
+    container, _, _, world = bvh_reader(path)
     return {name: np.array([list(world(name, k)[1]) for k in range(container.FrameCount)]) for name in names}
+
+
+#: A conductor's configuration whose ensemble ignores the conductor and falls apart (it is stopped).
+FALLS_APART = {
+    "piece": {"title": "short", "meter": "4/4", "bars": 12, "tempo": 120.0},
+    "ensemble": {"model": {"timekeeper_sd": 0.05, "alpha_partner": 0.0, "alpha_conductor": 0.0,
+                           "beta_conductor": 0.0}}}

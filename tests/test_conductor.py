@@ -197,10 +197,9 @@ def test_too_soft_ensemble_gets_a_play_louder_gesture(default_run):
 
 
 def test_an_ensemble_that_falls_apart_is_stopped(tmp_path):
-    config = config_from_dict({
-        "piece": {"title": "short", "meter": "4/4", "bars": 12, "tempo": 120.0},
-        "ensemble": {"model": {"timekeeper_sd": 0.05, "alpha_partner": 0.0, "alpha_conductor": 0.0,
-                               "beta_conductor": 0.0}}})
+    from helpers import FALLS_APART
+
+    config = config_from_dict(FALLS_APART)
     run = simulate(config, "best", 1)
     metrics = collect_metrics(run)
     assert metrics["stopped"] and metrics["ensemble_stopped_at_beat"] is not None

@@ -268,22 +268,16 @@ def test_monotone_cubic_passes_through_its_keys_without_overshoot():
 
 # --------------------------------------------------------------------------------------------- BVH
 def test_bvh_carries_the_lip_joints_and_reads_back_with_an_independent_reader(tmp_path):
-    bvhio = pytest.importorskip("bvhio")
-    glm = pytest.importorskip("glm")
+    import glm
+
+    from helpers import bvh_reader
+
     r = realise(viseme("lips1", "BMP", 0.2, 0.3, 0.5, 0.6), viseme("lips2", "Aa", 0.6, 0.7, 0.9, 1.0),
                 viseme("lips3", "Iy", 1.0, 1.1, 1.3, 1.4))
     s = evaluate_poses(r, fps=FPS)
     path = write_bvh(tmp_path / "lips.bvh", s)
-    container = bvhio.readAsBvh(str(path))
-    joints, parent = [], {}
-
-    def walk(j, up=None):
-        joints.append(j)
-        parent[j.Name] = up
-        for c in j.Children:
-            walk(c, j)
-
-    walk(container.Root)
+    container, by_name, parent, world = bvh_reader(path)
+    joints = list(by_name.values())
     names = [j.Name for j in joints]
     assert names == [j.name for j in s.body.joints]
     assert {n: parent[n].Name for n in ("lower_lip", "upper_lip", "l_lip_corner", "r_lip_corner")} == {
@@ -292,16 +286,6 @@ def test_bvh_carries_the_lip_joints_and_reads_back_with_an_independent_reader(tm
     assert all(list(j.Channels) == ["Zrotation", "Xrotation", "Yrotation"] for j in joints[1:])
     assert sum(len(j.Channels) for j in joints) == len(s.channels)
     assert container.FrameCount == s.n_frames
-    by_name = {j.Name: j for j in joints}
-
-    def world(name, k):
-        """World rotation and position of a joint at frame k, from the reader's rotations and offsets."""
-        j = by_name[name]
-        if parent[name] is None:
-            return j.Keyframes[k].Rotation, glm.vec3(j.Keyframes[k].Position)
-        rot, pos = world(parent[name].Name, k)
-        return rot * j.Keyframes[k].Rotation, pos + rot * glm.vec3(j.Offset)
-
     # the lip edges and mouth corners (end sites) where our own forward kinematics puts them
     for t in (0.4, 0.8, 1.2):
         k = int(round(t * FPS))

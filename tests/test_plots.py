@@ -248,10 +248,9 @@ def test_the_conductors_tempo_figure_of_a_run_that_falls_apart():
     from agentsim.scenarios.conductor.config import config_from_dict
     from agentsim.scenarios.conductor.scenario import collect_metrics, run_tempo_figure, simulate
 
-    config = config_from_dict({
-        "piece": {"title": "short", "meter": "4/4", "bars": 12, "tempo": 120.0},
-        "ensemble": {"model": {"timekeeper_sd": 0.05, "alpha_partner": 0.0, "alpha_conductor": 0.0,
-                               "beta_conductor": 0.0}}})
+    from helpers import FALLS_APART
+
+    config = config_from_dict(FALLS_APART)
     run = simulate(config, "best", 1)
     metrics = collect_metrics(run)
     assert metrics["beats_to_recover"] is None and metrics["stopped"]

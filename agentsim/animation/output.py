@@ -187,15 +187,16 @@ def write_bvh(path: str | Path, stream: PoseStream, precision: int = 5) -> Path:
     return path
 
 
-def write_npz(path: str | Path, stream: PoseStream) -> Path:
+def write_npz(path: str | Path, stream: PoseStream, **extra) -> Path:
     """Write ``stream`` as a compressed npz: ``times``, ``channels``, ``values`` (frames x channels,
     degrees and metres), ``joints``, ``positions`` (frames x joints x 3), ``fps``, ``writers`` and
-    ``driver_uids`` / ``driver_names``."""
+    ``driver_uids`` / ``driver_names``, and the ``extra`` arrays given by name."""
     path = Path(path)
     uids = sorted(stream.driver_names)
     np.savez_compressed(
         path, times=stream.times, channels=np.array(stream.channels), values=stream.values,
         joints=np.array(stream.joints), positions=stream.positions, fps=np.array(stream.fps),
         writers=stream.writers if stream.writers is not None else np.empty((0, 0), dtype=np.int32),
-        driver_uids=np.array(uids, dtype=np.int64), driver_names=np.array([stream.driver_names[u] for u in uids]))
+        driver_uids=np.array(uids, dtype=np.int64), driver_names=np.array([stream.driver_names[u] for u in uids]),
+        **{k: np.asarray(v) for k, v in extra.items()})
     return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")

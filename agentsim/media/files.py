@@ -9,7 +9,6 @@ import os
 from pathlib import Path
 from typing import Iterable
 
-import numpy as np
 
 from agentsim.core.errors import UsageError
 from agentsim.media import AXIS
@@ -56,15 +55,9 @@ def write_wav(path: str | Path, track: Track) -> Path:
 
 def write_npz(path: str | Path, stream) -> Path:
     """The poses as :func:`agentsim.animation.write_npz` writes them, plus ``time_axis``."""
-    path = Path(path)
-    uids = sorted(stream.driver_names)
-    np.savez_compressed(
-        path, times=stream.times, channels=np.array(stream.channels), values=stream.values,
-        joints=np.array(stream.joints), positions=stream.positions, fps=np.array(stream.fps),
-        writers=stream.writers if stream.writers is not None else np.empty((0, 0), dtype=np.int32),
-        driver_uids=np.array(uids, dtype=np.int64), driver_names=np.array([stream.driver_names[u] for u in uids]),
-        time_axis=np.array(AXIS))
-    return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+    from agentsim.animation import write_npz as write_poses
+
+    return write_poses(path, stream, time_axis=AXIS)
 
 
 def heard_words(heard) -> list[tuple[str, float, float]]:
