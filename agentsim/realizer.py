@@ -90,7 +90,7 @@ class Realizer:
         if isinstance(bml, Block):
             return [self._submit_block(bml, source)]
         runs: list[BlockRun | None] = []
-        for block in parse_document(bml, strict=self.strict, name_block=self._name_block):
+        for block in parse_document(bml, strict=self.strict, name_block=self.name_block):
             if isinstance(block, Refused):
                 where = f" in {source}" if source else ""
                 error = block.error
@@ -101,7 +101,7 @@ class Realizer:
                 runs.append(self._submit_block(block, source))
         return runs
 
-    def _name_block(self) -> str:
+    def name_block(self) -> str:
         """The next free ``bml<n>`` for a block without id."""
         used = {run.id for run in self.scheduler.all_runs}
         while True:

@@ -8,6 +8,7 @@ module                 commands
 ``speech``             ``eval speech-sync``, ``speech calibrate``, ``speech export``
 ``beats``              ``anticipate beats``
 ``scenarios``          ``run conductor``, ``run storytelling``, ``demo``
+``serve``              ``serve``
 ``options``            the options several commands share (speech backend, event delivery, seed, ...)
 =====================  =================================================================================
 """
@@ -26,7 +27,7 @@ INTERNAL_ERROR = 70
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of every command; each command's ``handler`` (set with ``set_defaults``) runs it."""
-    from agentsim.cli import beats, realize, scenarios, speech
+    from agentsim.cli import beats, realize, scenarios, serve, speech
 
     parser = argparse.ArgumentParser(prog="agentsim", description="A BML realizer on a discrete-event clock.")
     commands = parser.add_subparsers(dest="command", required=True)
@@ -34,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     beats.add_parsers(commands)
     speech.add_parsers(commands)
     scenarios.add_parsers(commands)
+    serve.add_parsers(commands)
     return parser
 
 

@@ -78,17 +78,24 @@ def to_json(feedback: Feedback) -> str:
 
 
 class FeedbackLog:
-    """Collects feedback in the order it was sent and passes each one to the listeners."""
+    """Collects feedback in the order it was sent and passes each one to the listeners.
 
-    def __init__(self) -> None:
+    ``keep``: how many items to keep (None: all); a long-running server forgets the oldest, its listeners
+    still get everything.
+    """
+
+    def __init__(self, keep: int | None = None) -> None:
         self.items: list[Feedback] = []
         self._listeners: list[Callable[[Feedback], None]] = []
+        self.keep = keep
 
     def listen(self, listener: Callable[[Feedback], None]) -> None:
         self._listeners.append(listener)
 
     def send(self, feedback: Feedback) -> None:
         self.items.append(feedback)
+        if self.keep is not None and len(self.items) > 2 * self.keep:
+            del self.items[:len(self.items) - self.keep]
         for listener in self._listeners:
             listener(feedback)
 

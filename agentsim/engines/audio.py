@@ -90,15 +90,21 @@ class AudioEngine(Engine):
 
     def __init__(self, context: EngineContext):
         super().__init__(context, AudioPlanner())
+        #: who hears the files as they play: ``file_started(heard)``, ``sound_stopped(block, behaviour, at)``
+        self.listeners: list = []
         self.played: list[HeardAudio] = []
 
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
         if index == 0:
             path, duration = self.planner.sound(timed.behaviour)
             self.played.append(HeardAudio(timed.block_id, timed.id, str(path), time, duration))
+            for listener in self.listeners:
+                listener.file_started(self.played[-1])
         super().sync_passed(timed, index, time)
 
     def stopped(self, timed: TimedBehaviour, now: float) -> None:
+        for listener in self.listeners:
+            listener.sound_stopped(timed.block_id, timed.id, now)
         for i, heard in enumerate(self.played):
             if (heard.block, heard.behaviour) == (timed.block_id, timed.id) and heard.stopped is None:
                 self.played[i] = HeardAudio(heard.block, heard.behaviour, heard.path, heard.start, heard.duration,

@@ -312,6 +312,9 @@ class SpeechEngine(Engine):
         #: every speech that started, in order: the behaviour, its utterance, when it started, its playback
         self._started: list[tuple[TimedBehaviour, Utterance, float, Playback | None]] = []
         self._stopped: dict[int, float] = {}
+        #: who hears the speech as it plays (a live loudspeaker): ``sound_started(heard)`` when a speech
+        #: starts (its HeardSpeech), ``sound_stopped(block, behaviour, at)`` when an interruption cuts it
+        self.listeners: list = []
 
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
         if index == 0:
@@ -323,6 +326,10 @@ class SpeechEngine(Engine):
                 self.play(timed, time)
                 playback = self.playbacks[-1]
                 self._started.append((timed, playback.utterance, time, playback))
+            if self.listeners:
+                heard = self.heard_one(*self._started[-1])
+                for listener in self.listeners:
+                    listener.sound_started(heard)
         super().sync_passed(timed, index, time)
 
     def stopped(self, timed: TimedBehaviour, now: float) -> None:
@@ -331,6 +338,8 @@ class SpeechEngine(Engine):
         for playback in self.playbacks:
             if playback.timed is timed:
                 playback.finished = True
+        for listener in self.listeners:
+            listener.sound_stopped(timed.block_id, timed.id, now)
 
     def apply_rate(self, timed: TimedBehaviour, start: float) -> None:
         """A BMLA rate change in effect when the speech starts: speak it at that rate (the backend speaks a
@@ -355,19 +364,19 @@ class SpeechEngine(Engine):
 
     def heard(self) -> list[HeardSpeech]:
         """Every speech that started so far, as it was heard."""
-        found = []
-        for timed, utterance, start, playback in self._started:
-            volume = tuple((c.start, c.end, c.kind, c.initial, c.target) for c in timed.parameters
-                           if c.param == "volume")
-            stopped = self._stopped.get(id(timed))
-            if playback is None:
-                found.append(HeardSpeech(timed.block_id, timed.id, utterance, start, start, stopped=stopped,
-                                         volume=volume))
-            else:
-                found.append(HeardSpeech(timed.block_id, timed.id, utterance, playback.t_request, playback.t0,
-                                         playback.drift_ppm, self.config.strategy, tuple(playback.delivered),
-                                         tuple(playback.trace), playback.plan, stopped, volume))
-        return found
+        return [self.heard_one(*started) for started in self._started]
+
+    def heard_one(self, timed: TimedBehaviour, utterance: Utterance, start: float,
+                  playback: Playback | None) -> HeardSpeech:
+        """One started speech as it was heard (so far)."""
+        volume = tuple((c.start, c.end, c.kind, c.initial, c.target) for c in timed.parameters
+                       if c.param == "volume")
+        stopped = self._stopped.get(id(timed))
+        if playback is None:
+            return HeardSpeech(timed.block_id, timed.id, utterance, start, start, stopped=stopped, volume=volume)
+        return HeardSpeech(timed.block_id, timed.id, utterance, playback.t_request, playback.t0, playback.drift_ppm,
+                           self.config.strategy, tuple(playback.delivered), tuple(playback.trace), playback.plan,
+                           stopped, volume)
 
     def take_timing(self, timed: TimedBehaviour, start: float) -> None:
         """From its start on, the speech runs on its own audio timeline: detach its pegs from whatever

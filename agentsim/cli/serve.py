@@ -1,0 +1,39 @@
+"""``agentsim serve``: a live realizer behind a WebSocket endpoint (see :mod:`agentsim.live.server`)."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+
+from agentsim.cli import options
+
+
+def add_parsers(commands) -> None:
+    serve = commands.add_parser(
+        "serve", help="a live realizer that programs send BML to over a WebSocket and people watch",
+        description="Realize BML live on the real-time clock: each text message sent to ws://HOST:PORT/ is one "
+                    "BML document; every feedback goes to every client as one JSON message (the objects "
+                    "'agentsim realize' prints). http://HOST:PORT/ shows the agent moving.")
+    serve.add_argument("--host", default="127.0.0.1", help="address to listen on (127.0.0.1)")
+    serve.add_argument("--port", type=int, default=8765, help="port to listen on (8765; 0: any free port)")
+    serve.add_argument("--audio", default="default", metavar="DEVICE|none",
+                       help="where speech and sound files play: a sounddevice output device, or none (default: "
+                            "the default device)")
+    options.add_tts(serve, default="espeak")
+    serve.add_argument("--strict", action="store_true", help="read pure BML 1.0 only")
+    serve.add_argument("--fps", type=float, default=30.0, help="poses per second streamed to viewers (30)")
+    serve.set_defaults(handler=run_server)
+
+
+def run_server(args: argparse.Namespace) -> int:
+    from agentsim.live.service import Service
+
+    service = Service(host=args.host, port=args.port, audio=args.audio, tts=options.backend(args.tts),
+                      strict=args.strict, fps=args.fps)
+    print(f"speech: {options.describe_backend(service.live.realizer.speech.planner.backend)}", file=sys.stderr)
+    try:
+        asyncio.run(service.serve(ready=lambda: print(service.describe(), file=sys.stderr, flush=True)))
+    finally:
+        service.close()
+    return 0

@@ -1,0 +1,311 @@
+"""``agentsim serve``: a live realizer behind a WebSocket endpoint, which programs drive and people watch.
+
+The realizer is the one simulated runs use, on SimPy's real-time clock, in a thread of its own
+(:class:`LiveRealizer`); the network is an asyncio loop in the main thread (:class:`Server`, on the
+``websockets`` library). Neither blocks the other: BML reaches the realizer through a bounded queue that a
+SimPy process empties every :data:`POLL` seconds, and feedback reaches the loop through
+``call_soon_threadsafe``.
+
+Protocol, at ``ws://HOST:PORT/``:
+
+* each text message a client sends is one BML document (any form ``agentsim realize`` reads); a message
+  that is not BML, or that the full queue cannot take, is answered to that client alone with a
+  ``warningFeedback``;
+* every feedback is sent to every client as one JSON text message, the objects ``agentsim realize`` prints,
+  :attr:`Server.delay` seconds after its ``globalTime`` on the realizer's clock (so that it arrives when
+  its sound is heard, when the server plays sound);
+* a JSON message ``{"subscribe": "poses"}`` asks for the poses as well (see :mod:`agentsim.live.poses`).
+
+``http://HOST:PORT/`` serves the viewer page (the report's viewer, connected live).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import queue
+import threading
+import time
+from pathlib import Path
+from typing import Callable
+
+from agentsim.core import feedback as fb
+from agentsim.core.clock import make_environment
+from agentsim.core.errors import UsageError
+
+#: How often the realizer's thread takes what clients sent (s): a block waits at most this long.
+POLL = 0.005
+#: How many documents may wait for the realizer; more are refused with a warning.
+QUEUE = 256
+#: How many feedback items the realizer keeps (older ones are forgotten: a server runs for hours).
+KEEP_FEEDBACK = 10_000
+
+
+class LiveRealizer:
+    """A :class:`~agentsim.realizer.Realizer` on the real-time clock, in a thread of its own.
+
+    ``offer(text, reply)`` hands it a BML document from any thread (False if the queue is full); what
+    cannot be read is answered through ``reply(feedback)`` (in the realizer's thread); every feedback goes
+    to each function in :attr:`listeners` (in the realizer's thread: they must not block). ``every(period,
+    fn)`` calls ``fn(now)`` every ``period`` simulated seconds while it runs. Realizer options (``tts``,
+    ``strict``, ``speech``, ``anticipators``) are passed on.
+    """
+
+    def __init__(self, queue_size: int = QUEUE, poll: float = POLL, **realizer_options):
+        from agentsim.realizer import Realizer
+
+        self.env = make_environment(realtime=True)
+        self.realizer = Realizer(env=self.env, **realizer_options)
+        self.realizer.feedback.keep = KEEP_FEEDBACK
+        self.inbox: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.poll = poll
+        self.listeners: list[Callable[[dict], None]] = []
+        self.realizer.feedback.listen(self.emit)
+        self.periodic: list[tuple[float, Callable[[float], None]]] = []
+        self.closing = False
+        self.started = threading.Event()
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self.run, name="agentsim-realizer", daemon=True)
+
+    # ------------------------------------------------------------------------------------------- threads
+    def start(self) -> None:
+        """Start the clock (simulated time 0 is now) and the realizer's thread."""
+        self.thread.start()
+        self.started.wait(5.0)
+
+    def close(self, timeout: float = 5.0) -> None:
+        self.closing = True
+        self.thread.join(timeout)
+
+    def run(self) -> None:
+        """The realizer's thread: the SimPy real-time loop, until :meth:`close`."""
+        self.env.sync()
+        self.env.process(self.pump())
+        for period, fn in self.periodic:
+            self.env.process(self.tick(period, fn))
+        self.started.set()
+        try:
+            self.env.run()
+        except Exception as exc:  # reported by the server; the realizer's own faults are issue of their own
+            self.error = exc
+
+    def pump(self):
+        """Take what clients sent, every :attr:`poll` seconds."""
+        while not self.closing:
+            while True:
+                try:
+                    text, reply = self.inbox.get_nowait()
+                except queue.Empty:
+                    break
+                self.take(text, reply)
+            yield self.env.timeout(self.poll)
+
+    def tick(self, period: float, fn: Callable[[float], None]):
+        while not self.closing:
+            yield self.env.timeout(period)
+            try:
+                fn(self.env.now)
+            except Exception:  # a viewer's fault must not stop the realizer
+                pass
+
+    def every(self, period: float, fn: Callable[[float], None]) -> None:
+        """Call ``fn(now)`` every ``period`` seconds in the realizer's thread (set before :meth:`start`)."""
+        self.periodic.append((period, fn))
+
+    # ------------------------------------------------------------------------------------------- input
+    def offer(self, text: str | bytes, reply: Callable[[dict], None]) -> bool:
+        """Hand a document to the realizer; False if the queue is full."""
+        try:
+            self.inbox.put_nowait((text, reply))
+            return True
+        except queue.Full:
+            return False
+
+    def take(self, text: str | bytes, reply: Callable[[dict], None]) -> None:
+        """Read one document and submit its blocks (in the realizer's thread)."""
+        from agentsim.bml.parser import Refused, parse_document
+
+        realizer = self.realizer
+        now = self.env.now
+        try:
+            blocks = parse_document(text, strict=realizer.strict, name_block=realizer.name_block)
+        except Exception as exc:  # the reader's own fault: the client hears of it, nothing else
+            reply(fb.warning("", "PARSING_FAILURE", f"document refused: the reader failed ({exc})", now, "agent"))
+            return
+        for block in blocks:
+            if isinstance(block, Refused):
+                error = block.error
+                reply(fb.warning(block.block_id, "PARSING_FAILURE", f"block refused: {error}", now, "agent",
+                                 line=error.line, column=error.column))
+                continue
+            try:
+                realizer.submit(block)
+            except Exception as exc:
+                reply(fb.warning(block.id, "IMPOSSIBLE_TO_SCHEDULE", f"block refused: the realizer failed to "
+                                 f"plan it ({type(exc).__name__}: {exc})", now, block.character_id))
+
+    def emit(self, item: dict) -> None:
+        for listener in self.listeners:
+            listener(item)
+
+    def wall_time(self, t: float) -> float:
+        """The ``time.monotonic()`` time at which simulated time ``t`` happens."""
+        return self.env.real_start + t * self.env.factor
+
+
+VIEWER_DIR = Path(__file__).resolve().parent / "viewer"
+TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8", ".css": "text/css",
+         ".txt": "text/plain; charset=utf-8"}
+
+
+class Server:
+    """The WebSocket endpoint (and the viewer page) in front of a :class:`LiveRealizer`.
+
+    ``delay`` (s): feedback is sent this long after its ``globalTime`` on the realizer's clock (the
+    loudspeaker's latency, when the server plays sound, so that feedback arrives when it is heard).
+    """
+
+    def __init__(self, live: LiveRealizer, host: str = "127.0.0.1", port: int = 8765, delay: float = 0.0,
+                 files: dict[str, Path] | None = None):
+        self.live = live
+        self.host, self.port = host, port
+        self.delay = delay
+        self.clients: set = set()
+        self.subscribers: dict[object, set[str]] = {}
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.files = files if files is not None else {}
+        self.sent = 0
+        self.refused = 0
+        live.listeners.append(self.from_realizer)
+
+    # ------------------------------------------------------------------------------------------- output
+    def from_realizer(self, item: dict) -> None:
+        """A feedback from the realizer's thread: send it to everyone when its time (plus the delay) comes."""
+        if self.loop is not None:
+            self.loop.call_soon_threadsafe(self.schedule, item)
+
+    def schedule(self, item: dict) -> None:
+        when = self.live.wall_time(item.get("globalTime", 0.0)) + self.delay
+        if when > self.loop.time() + 0.0005:
+            self.loop.call_at(when, self.broadcast, item)
+        else:
+            self.broadcast(item)
+
+    def broadcast(self, item: dict, only: set[str] | None = None) -> None:
+        message = fb.to_json(item)
+        for client in list(self.clients):
+            if only is not None and not only & self.subscribers.get(client, set()):
+                continue
+            self.send(client, message)
+
+    def send(self, client, message: str) -> None:
+        async def deliver():
+            try:
+                await client.send(message)
+                self.sent += 1
+            except Exception:  # a client that went away: it is forgotten when its handler ends
+                pass
+
+        asyncio.ensure_future(deliver())
+
+    def reply_to(self, client) -> Callable[[dict], None]:
+        """A ``reply`` for the realizer's thread that reaches ``client`` alone."""
+
+        def reply(item: dict) -> None:
+            if self.loop is not None:
+                self.loop.call_soon_threadsafe(self.send, client, fb.to_json(item))
+
+        return reply
+
+    # ------------------------------------------------------------------------------------------- input
+    async def handler(self, client) -> None:
+        self.clients.add(client)
+        try:
+            async for message in client:
+                self.receive(client, message)
+        except Exception:  # the connection broke: nothing else is disturbed
+            pass
+        finally:
+            self.clients.discard(client)
+            self.subscribers.pop(client, None)
+
+    def receive(self, client, message: str | bytes) -> None:
+        text = message.decode("utf-8", "replace") if isinstance(message, bytes) else message
+        if text.lstrip().startswith("{"):
+            self.control(client, text)
+            return
+        if not self.live.offer(text, self.reply_to(client)):
+            self.refused += 1
+            self.send(client, fb.to_json(fb.warning(
+                "", "PARSING_FAILURE", f"document refused: {self.live.inbox.maxsize} documents are already "
+                "waiting for the realizer; send fewer at once", self.live.env.now, "agent")))
+
+    def control(self, client, text: str) -> None:
+        try:
+            request = json.loads(text)
+            wanted = request["subscribe"]
+        except (ValueError, KeyError, TypeError):
+            self.send(client, fb.to_json(fb.warning(
+                "", "PARSING_FAILURE", "a JSON message must be {\"subscribe\": \"poses\"}; BML is sent as XML",
+                self.live.env.now, "agent")))
+            return
+        wanted = {wanted} if isinstance(wanted, str) else set(wanted)
+        self.subscribers.setdefault(client, set()).update(wanted)
+        for hello in self.greetings(wanted):
+            self.send(client, json.dumps(hello))
+
+    def greetings(self, wanted: set[str]) -> list[dict]:
+        """What a new subscriber is told first (set by whoever publishes what it subscribes to)."""
+        return [self.hello[w] for w in wanted if w in getattr(self, "hello", {})]
+
+    def request(self, connection, request):
+        """Plain HTTP requests get the viewer's files; WebSocket upgrades go on to :meth:`handler`."""
+        if request.headers.get("Upgrade", "").lower() == "websocket":
+            return None
+        from websockets.datastructures import Headers
+        from websockets.http11 import Response
+
+        path = request.path.split("?", 1)[0]
+        name = "index.html" if path in ("", "/") else path.lstrip("/")
+        file = self.files.get(name)
+        if file is None or not file.is_file():
+            return connection.respond(404, f"no such file: {path}\n")
+        body = file.read_bytes()
+        headers = Headers([("Content-Type", TYPES.get(file.suffix, "application/octet-stream")),
+                           ("Content-Length", str(len(body))), ("Cache-Control", "no-store")])
+        return Response(200, "OK", headers, body)
+
+    # ------------------------------------------------------------------------------------------- serving
+    async def serve(self, ready: Callable[[], None] | None = None, stop: asyncio.Event | None = None) -> None:
+        """Serve until ``stop`` is set (or forever). Raises :class:`UsageError` if the port is taken."""
+        from websockets.asyncio.server import serve
+
+        self.loop = asyncio.get_running_loop()
+        try:
+            server = await serve(self.handler, self.host, self.port, process_request=self.request,
+                                 max_size=2 ** 22, ping_interval=20)
+        except OSError as exc:
+            raise UsageError(f"cannot listen on {self.host}:{self.port}: {exc.strerror or exc} (is another "
+                             f"server running there? choose another with --port)") from None
+        self.port = server.sockets[0].getsockname()[1]
+        if ready is not None:
+            ready()
+        async with server:
+            if stop is None:
+                await server.serve_forever()
+            else:
+                await stop.wait()
+
+
+def wait_for_port(host: str, port: int, timeout: float = 10.0) -> bool:
+    """Whether something listens on ``host:port`` within ``timeout`` s (for clients that start a server)."""
+    import socket
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            with socket.create_connection((host, port), timeout=0.2):
+                return True
+        except OSError:
+            time.sleep(0.05)
+    return False

@@ -1,0 +1,81 @@
+"""The live service: a :class:`~agentsim.live.server.LiveRealizer`, its WebSocket :class:`~agentsim.live.server.
+Server`, its loudspeaker (:mod:`agentsim.live.sound`) and its viewer (:mod:`agentsim.live.poses`), put
+together as ``agentsim serve`` runs them."""
+
+from __future__ import annotations
+
+import asyncio
+
+from agentsim.live.server import LiveRealizer, Server
+
+
+class Loudspeaker:
+    """Plays what the realizer's speech and audio engines start, where the plan says, on a
+    :class:`~agentsim.live.sound.LiveSound`; an interruption cuts it where it was cut."""
+
+    def __init__(self, sound):
+        self.sound = sound
+
+    def sound_started(self, heard) -> None:
+        audio = getattr(heard.utterance, "audio", None)
+        if audio is not None and len(audio):
+            self.sound.add(audio, int(heard.utterance.sample_rate), heard.t0, 1.0 + heard.drift_ppm * 1e-6,
+                           label=f"{heard.block}:{heard.behaviour}")
+
+    def file_started(self, played) -> None:
+        import soundfile
+
+        data, rate = soundfile.read(played.path, dtype="float32", always_2d=True)
+        self.sound.add(data.mean(axis=1), int(rate), played.start, label=f"{played.block}:{played.behaviour}")
+
+    def sound_stopped(self, block: str, behaviour: str, at: float) -> None:
+        self.sound.stop(f"{block}:{behaviour}", at)
+
+
+class Service:
+    """``agentsim serve``: the live realizer, its endpoint, its sound (``audio``: a device, or ``"none"``) and
+    its viewer (poses at ``fps``)."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, audio: str = "none", fps: float = 30.0,
+                 **realizer_options):
+        self.live = LiveRealizer(**realizer_options)
+        self.audio = audio
+        self.sound = None
+        self.poses = None
+        files = {}
+        if fps > 0:
+            from agentsim.live.poses import LivePoses
+
+            self.poses = LivePoses(self.live, fps)
+            files = self.poses.files()
+        self.server = Server(self.live, host, port, files=files)
+        if self.poses is not None:
+            self.poses.publish(self.server)
+        if audio != "none":
+            from agentsim.live.sound import open_device
+
+            open_device(audio)  # says before anything starts if there is no such device
+        self.live.start()
+        if audio != "none":
+            from agentsim.live.sound import LiveSound
+
+            self.sound = LiveSound(None if audio == "default" else audio, real_start=self.live.env.real_start,
+                                   factor=self.live.env.factor)
+            self.server.delay = self.sound.delay
+            speaker = Loudspeaker(self.sound)
+            self.live.realizer.speech.listeners.append(speaker)
+            self.live.realizer.audio.listeners.append(speaker)
+
+    def describe(self) -> str:
+        sound = "no sound" if self.sound is None else f"sound on {self.audio} (feedback {1000 * self.server.delay:.0f} " \
+                                                      "ms after its time, when it is heard)"
+        return (f"agentsim serve: ws://{self.server.host}:{self.server.port}/ for BML, "
+                f"http://{self.server.host}:{self.server.port}/ to watch; {sound}")
+
+    async def serve(self, ready=None, stop: asyncio.Event | None = None) -> None:
+        await self.server.serve(ready, stop)
+
+    def close(self) -> None:
+        self.live.close()
+        if self.sound is not None:
+            self.sound.close()
