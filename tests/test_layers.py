@@ -28,7 +28,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("core", ("agentsim", "agentsim.core")),
     ("libraries", ("agentsim.bml", "agentsim.speech", "agentsim.beats", "agentsim.music", "agentsim.animation")),
     ("realizer parts", ("agentsim.engines", "agentsim.anticipators", "agentsim.media")),
-    ("realizer", ("agentsim.realizer",)),
+    ("realizer", ("agentsim.realizer", "agentsim.live")),
     ("scenarios", ("agentsim.scenarios",)),
     ("command line", ("agentsim.cli", "agentsim.__main__")),
 ]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agentsim.core.errors import AgentsimError
+from agentsim.core.errors import AgentsimError, Unavailable
 from agentsim.core.anticipator import Anticipator
 
 _BEAT = re.compile(r"^beat(\d+)$")
@@ -186,6 +186,9 @@ class AudioBeatAnticipator(Anticipator):
         # callback) is the best evidence.
         recent: list[float] = []
         heard = 0
+        opened = env.now
+        last_block = env.now
+        sounded = False
         with self.source.open() as blocks:
             while True:
                 yield env.timeout(self.block / self.sample_rate)
@@ -195,9 +198,12 @@ class AudioBeatAnticipator(Anticipator):
                     except queue.Empty:
                         break
                     heard += len(block)
+                    last_block = env.now
+                    sounded = sounded or bool(len(block)) and float(np.max(np.abs(block))) > SILENCE
                     recent = (recent + [(stamp - wall_start) / factor - heard / self.sample_rate])[-50:]
                     self.start = min(recent)
                     self.push(block)
+                self.source.watch(env.now - last_block, env.now - opened, sounded)
 
 
 def read_audio(path: str | Path) -> tuple[np.ndarray, int]:
@@ -214,13 +220,37 @@ def read_audio(path: str | Path) -> tuple[np.ndarray, int]:
     return data.mean(axis=1), int(sample_rate)
 
 
-class DeviceSource:
-    """A live audio input device (sounddevice/PortAudio), delivering mono blocks through a queue."""
+#: Below this peak (about -80 dBFS) an input is silent.
+SILENCE = 1e-4
+#: How long an input may be dead (no audio arriving at all) or, from the start, silent (s).
+DEAD_AFTER = 2.0
 
-    def __init__(self, device: str | int | None = None, sample_rate: int = 44100, block_seconds: float = 0.02):
+
+class DeviceSource:
+    """A live audio input device (sounddevice/PortAudio), delivering mono blocks through a queue.
+
+    An input that delivers nothing for :data:`DEAD_AFTER` seconds, or only silence from the start for that
+    long, stops the run with an :class:`~agentsim.core.errors.Unavailable` saying so (a machine without a
+    sound card records zeros; listening to them would only give empty results).
+    """
+
+    def __init__(self, device: str | int | None = None, sample_rate: int = 44100, block_seconds: float = 0.02,
+                 dead_after: float = DEAD_AFTER):
         self.device = device
         self.sample_rate = int(sample_rate)
         self.block = max(1, int(round(block_seconds * self.sample_rate)))
+        self.dead_after = dead_after
+
+    def watch(self, since_block: float, since_open: float, sounded: bool) -> None:
+        """Raise :class:`Unavailable` if the input is dead or has been silent since it opened."""
+        name = "the default input" if self.device is None else f"input device {self.device!r}"
+        if since_block > self.dead_after:
+            raise Unavailable(f"{name} delivered no audio for {since_block:.1f} s: it is not working (check "
+                              "the device, or choose another with --input)")
+        if not sounded and since_open > self.dead_after:
+            raise Unavailable(f"{name} has been silent for {since_open:.1f} s since it opened (nothing above "
+                              f"{20 * np.log10(SILENCE):.0f} dBFS): nothing plays into it, or the machine has no "
+                              "sound card; play into it, or choose another with --input")
 
     def check(self):
         """The sounddevice module and the device's info; AgentsimError saying what to do if missing."""

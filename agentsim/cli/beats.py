@@ -24,7 +24,9 @@ def add_parsers(commands) -> None:
     beats.add_argument("--lookahead", type=float, default=0.2, help="prediction lead scored, seconds (0.2)")
     beats.add_argument("--skip", type=float, default=8.0, help="leave out true beats before this time (8 s)")
     beats.add_argument("--block", type=int, default=512, help="samples per block fed to the tracker")
-    beats.add_argument("--input", metavar="DEVICE", help="track a live input device instead of a file")
+    beats.add_argument("--input", metavar="DEVICE", help="track a live input device instead of a file (a name or number; "
+                                                          "'default': the system's default input); a dead or silent "
+                                                          "input stops it within 2 s")
     beats.add_argument("--seconds", type=float, default=10.0, help="how long to listen with --input")
     beats.add_argument("--sample-rate", type=int, default=44100, help="sample rate for --input")
     beats.set_defaults(handler=track_beats)
@@ -78,7 +80,7 @@ def listen(args: argparse.Namespace) -> dict:
     from agentsim.core.pegboard import PegBoard
     from agentsim.anticipators.audio import AudioBeatAnticipator, DeviceSource
 
-    device = int(args.input) if args.input.isdigit() else args.input
+    device = None if args.input == "default" else int(args.input) if args.input.isdigit() else args.input
     source = DeviceSource(device, args.sample_rate)
     source.check()
     env = make_environment(realtime=True)

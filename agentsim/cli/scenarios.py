@@ -42,12 +42,16 @@ def add_conductor(scenarios) -> argparse.ArgumentParser:
     which.add_argument("--compare", action="store_true", help="run every strategy on the same seed and print a table")
     options.add_seed(parser, "the musicians' noise")
     options.add_out(parser, DEFAULT_OUT)
-    parser.add_argument("--live", action="store_true",
-                        help="conduct a live input device in real time instead of the simulated ensemble")
-    parser.add_argument("--device", metavar="DEVICE", help="--live: the input device (name or number; default: "
-                                                          "the system's default input)")
+    parser.add_argument("--input", metavar="DEVICE", dest="device",
+                        help="conduct what a live input device plays (a name or number, as 'anticipate beats "
+                             "--input' takes; 'default': the system's default input) instead of the simulated "
+                             "ensemble; a dead or silent input stops the run within 2 s")
+    parser.add_argument("--live", action="store_true", help="--input default (also: --live --device DEVICE)")
+    parser.add_argument("--device", metavar="DEVICE", dest="device", help=argparse.SUPPRESS)
     parser.add_argument("--seconds", type=float, metavar="S",
-                        help="--live: how long to listen (default: the piece's length at its tempo)")
+                        help="--input: how long to listen (default: the piece's length at its tempo)")
+    parser.add_argument("--sample-rate", type=int, metavar="HZ",
+                        help="--input: the sample rate to record at (default: the configuration's)")
     parser.set_defaults(handler=run_conductor)
     return parser
 

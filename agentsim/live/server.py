@@ -2,9 +2,9 @@
 
 The realizer is the one simulated runs use, on SimPy's real-time clock, in a thread of its own
 (:class:`LiveRealizer`); the network is an asyncio loop in the main thread (:class:`Server`, on the
-``websockets`` library). Neither blocks the other: BML reaches the realizer through a bounded queue that a
-SimPy process empties every :data:`POLL` seconds, and feedback reaches the loop through
-``call_soon_threadsafe``.
+``websockets`` library). Neither blocks the other: documents go through a bounded queue to a reader thread
+that parses them and has their speech synthesised, then to a SimPy process that submits the blocks every
+:data:`POLL` seconds; feedback reaches the loop through ``call_soon_threadsafe``.
 
 Protocol, at ``ws://HOST:PORT/``:
 
@@ -57,8 +57,11 @@ class LiveRealizer:
         self.env = make_environment(realtime=True)
         self.realizer = Realizer(env=self.env, **realizer_options)
         self.realizer.feedback.keep = KEEP_FEEDBACK
-        self.inbox: queue.Queue = queue.Queue(maxsize=queue_size)
+        #: documents as clients sent them, for the reader; blocks read and ready, for the realizer
+        self.incoming: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.inbox: queue.Queue = queue.Queue()
         self.poll = poll
+        self.reader = threading.Thread(target=self.read, name="agentsim-reader", daemon=True)
         self.listeners: list[Callable[[dict], None]] = []
         self.realizer.feedback.listen(self.emit)
         self.periodic: list[tuple[float, Callable[[float], None]]] = []
@@ -71,11 +74,14 @@ class LiveRealizer:
     def start(self) -> None:
         """Start the clock (simulated time 0 is now) and the realizer's thread."""
         self.thread.start()
+        self.reader.start()
         self.started.wait(5.0)
 
     def close(self, timeout: float = 5.0) -> None:
         self.closing = True
+        self.incoming.put(None)
         self.thread.join(timeout)
+        self.reader.join(timeout)
 
     def run(self) -> None:
         """The realizer's thread: the SimPy real-time loop, until :meth:`close`."""
@@ -94,10 +100,10 @@ class LiveRealizer:
         while not self.closing:
             while True:
                 try:
-                    text, reply = self.inbox.get_nowait()
+                    block, reply = self.inbox.get_nowait()
                 except queue.Empty:
                     break
-                self.take(text, reply)
+                self.submit(block, reply)
             yield self.env.timeout(self.poll)
 
     def tick(self, period: float, fn: Callable[[float], None]):
@@ -116,33 +122,57 @@ class LiveRealizer:
     def offer(self, text: str | bytes, reply: Callable[[dict], None]) -> bool:
         """Hand a document to the realizer; False if the queue is full."""
         try:
-            self.inbox.put_nowait((text, reply))
+            self.incoming.put_nowait((text, reply))
             return True
         except queue.Full:
             return False
 
-    def take(self, text: str | bytes, reply: Callable[[dict], None]) -> None:
-        """Read one document and submit its blocks (in the realizer's thread)."""
+    def read(self) -> None:
+        """The reader's thread: parse each document in the order it came and have its speech synthesised,
+        so that the realizer's thread (whose clock the feedback keeps) only plans and plays."""
         from agentsim.bml.parser import Refused, parse_document
 
         realizer = self.realizer
-        now = self.env.now
-        try:
-            blocks = parse_document(text, strict=realizer.strict, name_block=realizer.name_block)
-        except Exception as exc:  # the reader's own fault: the client hears of it, nothing else
-            reply(fb.warning("", "PARSING_FAILURE", f"document refused: the reader failed ({exc})", now, "agent"))
-            return
-        for block in blocks:
-            if isinstance(block, Refused):
-                error = block.error
-                reply(fb.warning(block.block_id, "PARSING_FAILURE", f"block refused: {error}", now, "agent",
-                                 line=error.line, column=error.column))
-                continue
+        while True:
+            entry = self.incoming.get()
+            if entry is None or self.closing:
+                return
+            text, reply = entry
             try:
-                realizer.submit(block)
-            except Exception as exc:
-                reply(fb.warning(block.id, "IMPOSSIBLE_TO_SCHEDULE", f"block refused: the realizer failed to "
-                                 f"plan it ({type(exc).__name__}: {exc})", now, block.character_id))
+                blocks = parse_document(text, strict=realizer.strict, name_block=realizer.name_block)
+            except Exception as exc:  # the reader's own fault: the client hears of it, nothing else
+                reply(fb.warning("", "PARSING_FAILURE", f"document refused: the reader failed ({exc})",
+                                 self.env.now, "agent"))
+                continue
+            for block in blocks:
+                if isinstance(block, Refused):
+                    error = block.error
+                    reply(fb.warning(block.block_id, "PARSING_FAILURE", f"block refused: {error}", self.env.now,
+                                     "agent", line=error.line, column=error.column))
+                    continue
+                self.prepare(block)
+                self.inbox.put((block, reply))
+
+    def prepare(self, block) -> None:
+        """Synthesise a block's speeches ahead (a backend that remembers what it said, as espeak-ng's does,
+        then answers the planner at once)."""
+        from agentsim.engines.speech import speech_text
+
+        backend = self.realizer.speech.planner.backend
+        for behaviour in block.behaviours:
+            if behaviour.type == "speech" and getattr(backend, "remembers", False):
+                try:
+                    backend.synthesize(speech_text(behaviour))
+                except Exception:  # the planner will meet the same problem, and report it
+                    pass
+
+    def submit(self, block, reply: Callable[[dict], None]) -> None:
+        """Submit a block that was read (in the realizer's thread)."""
+        try:
+            self.realizer.submit(block)
+        except Exception as exc:
+            reply(fb.warning(block.id, "IMPOSSIBLE_TO_SCHEDULE", f"block refused: the realizer failed to plan it "
+                             f"({type(exc).__name__}: {exc})", self.env.now, block.character_id))
 
     def emit(self, item: dict) -> None:
         for listener in self.listeners:
@@ -222,7 +252,11 @@ class Server:
         self.clients.add(client)
         try:
             async for message in client:
-                self.receive(client, message)
+                try:
+                    self.receive(client, message)
+                except Exception as exc:  # whatever a message does, the connection goes on
+                    self.send(client, fb.to_json(fb.warning("", "PARSING_FAILURE", f"message refused: {exc}",
+                                                            self.live.env.now, "agent")))
         except Exception:  # the connection broke: nothing else is disturbed
             pass
         finally:
@@ -237,19 +271,20 @@ class Server:
         if not self.live.offer(text, self.reply_to(client)):
             self.refused += 1
             self.send(client, fb.to_json(fb.warning(
-                "", "PARSING_FAILURE", f"document refused: {self.live.inbox.maxsize} documents are already "
+                "", "PARSING_FAILURE", f"document refused: {self.live.incoming.maxsize} documents are already "
                 "waiting for the realizer; send fewer at once", self.live.env.now, "agent")))
 
     def control(self, client, text: str) -> None:
         try:
-            request = json.loads(text)
-            wanted = request["subscribe"]
+            wanted = json.loads(text)["subscribe"]
+            wanted = {wanted} if isinstance(wanted, str) else set(wanted)
+            if not wanted or not all(isinstance(w, str) for w in wanted):
+                raise TypeError
         except (ValueError, KeyError, TypeError):
             self.send(client, fb.to_json(fb.warning(
                 "", "PARSING_FAILURE", "a JSON message must be {\"subscribe\": \"poses\"}; BML is sent as XML",
                 self.live.env.now, "agent")))
             return
-        wanted = {wanted} if isinstance(wanted, str) else set(wanted)
         self.subscribers.setdefault(client, set()).update(wanted)
         for hello in self.greetings(wanted):
             self.send(client, json.dumps(hello))

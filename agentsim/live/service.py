@@ -79,3 +79,52 @@ class Service:
         self.live.close()
         if self.sound is not None:
             self.sound.close()
+
+
+class Background:
+    """A :class:`Service` serving from a thread of its own (for tests, benchmarks and programs that embed
+    it): ``with Background(Service(...)) as service: ...``; ``url`` is its WebSocket address."""
+
+    def __init__(self, service: Service, timeout: float = 10.0):
+        import threading
+
+        self.service = service
+        self.loop = asyncio.new_event_loop()
+        self.ready = threading.Event()
+        self.stop_event: asyncio.Event | None = None
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self.run, name="agentsim-serve", daemon=True)
+        self.thread.start()
+        if not self.ready.wait(timeout):
+            raise RuntimeError(f"the service did not start: {self.error}")
+
+    def run(self) -> None:
+        asyncio.set_event_loop(self.loop)
+
+        async def main():
+            self.stop_event = asyncio.Event()
+            await self.service.serve(ready=self.ready.set, stop=self.stop_event)
+
+        try:
+            self.loop.run_until_complete(main())
+        except BaseException as exc:
+            self.error = exc
+            self.ready.set()
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.service.server.host}:{self.service.server.port}/"
+
+    def close(self) -> None:
+        if self.stop_event is not None:
+            self.loop.call_soon_threadsafe(self.stop_event.set)
+        self.thread.join(10.0)
+        self.service.close()
+
+    def __enter__(self) -> "Background":
+        if self.error is not None:
+            raise self.error
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

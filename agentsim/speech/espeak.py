@@ -705,6 +705,8 @@ class EspeakBackend:
     """
 
     name = "espeak"
+    #: it says a text it was asked for before as it said it then (see :meth:`synthesize`)
+    remembers = True
 
     def __init__(self, voice: str = "en", rate: int = 175) -> None:
         if not _RATE_MINIMUM <= rate <= _RATE_MAXIMUM:
@@ -716,6 +718,7 @@ class EspeakBackend:
         # espeak-ng carries state from one utterance to the next (the same text spoken again can come out
         # some milliseconds longer): a text is synthesised once per backend, and said the same every time
         self._spoken: OrderedDict[SpeechText, Utterance] = OrderedDict()
+        self._remembered = threading.Lock()
 
     @property
     def sample_rate(self) -> int:
@@ -736,14 +739,16 @@ class EspeakBackend:
             Times in seconds from the start of ``audio`` (float32 mono in [-1, 1]). The same ``speech``
             asked for again gets the same utterance (the last :data:`REMEMBERED` are kept).
         """
-        spoken = self._spoken.get(speech)
-        if spoken is not None:
-            self._spoken.move_to_end(speech)
-            return spoken
-        utterance = self._synthesize(speech)
-        self._spoken[speech] = utterance
-        if len(self._spoken) > REMEMBERED:
-            self._spoken.popitem(last=False)
+        with self._remembered:  # what it said is looked up without waiting for the engine
+            spoken = self._spoken.get(speech)
+            if spoken is not None:
+                self._spoken.move_to_end(speech)
+                return spoken
+        utterance = self._synthesize(speech)  # under the engine's lock: one engine for every thread
+        with self._remembered:
+            utterance = self._spoken.setdefault(speech, utterance)
+            if len(self._spoken) > REMEMBERED:
+                self._spoken.popitem(last=False)
         return utterance
 
     def _synthesize(self, speech: SpeechText) -> Utterance:

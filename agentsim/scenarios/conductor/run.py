@@ -1,7 +1,7 @@
 """The ``agentsim run conductor`` command's run: simulate (or listen live), measure, write the files.
 
 :func:`main` takes the parsed options of ``agentsim run conductor [--config FILE] [--strategy S |
---compare] [--seed N] [--out DIR] [--live]`` (declared in :mod:`agentsim.cli.scenarios`): it runs the
+--compare] [--seed N] [--out DIR] [--input DEVICE]`` (declared in :mod:`agentsim.cli.scenarios`): it runs the
 conductor scenario (the default configuration: a 4/4 piece with a 120 BPM target and an ensemble that
 starts and drags 10 % below it) and writes ``metrics.json``, ``tempo.png``, ``timeline.png``,
 ``ensemble.wav``, ``conductor.bvh`` and ``feedback.jsonl`` to ``--out``. Without ``--strategy`` the
@@ -51,22 +51,27 @@ def main(args: argparse.Namespace) -> int:
 
     config = load_config(args.config)  # a bad configuration fails here, before anything runs
     out = Path(args.out)
-    if args.seconds is not None and not args.live:
-        raise AgentsimError("--seconds only applies to --live")
-    if args.live:
+    live = args.live or args.device is not None
+    if args.seconds is not None and not live:
+        raise AgentsimError("--seconds only applies to --input")
+    if getattr(args, "sample_rate", None) is not None and not live:
+        raise AgentsimError("--sample-rate only applies to --input")
+    if live:
         if args.compare:
-            raise AgentsimError("--compare cannot be used with --live (a live ensemble plays once)")
-        device = args.device
+            raise AgentsimError("--compare cannot be used with --input (a live ensemble plays once)")
+        device = None if args.device in (None, "default") else args.device
         if device is not None and str(device).isdigit():
             device = int(device)
+        if getattr(args, "sample_rate", None):
+            from dataclasses import replace
+
+            config = replace(config, audio=replace(config.audio, sample_rate=args.sample_rate))
         started = time.perf_counter()
         run = listen_live(config, args.strategy, args.seconds, device)
         metrics = collect_metrics(run)
         write_outputs(run, metrics, out)
         _report(metrics, out, time.perf_counter() - started)
         return 0
-    if args.device is not None:
-        raise AgentsimError("--device only applies to --live")
     strategies = STRATEGIES if args.compare else (args.strategy or config.conductor.strategy,)
     rows = []
     for name in strategies:

@@ -1,0 +1,69 @@
+"""A live input that is dead, or silent from the start, stops the run within two seconds with a message that
+says so (a machine without a sound card records zeros; listening to them would only give empty results)."""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from agentsim.anticipators.audio import AudioBeatAnticipator, DeviceSource
+from agentsim.core.clock import make_environment
+from agentsim.core.errors import Unavailable
+from agentsim.core.pegboard import PegBoard
+
+
+class FakeInput(DeviceSource):
+    """An input device that delivers ``level`` (zeros: silence) every block, or nothing at all (dead)."""
+
+    def __init__(self, level: float | None):
+        super().__init__(None, 8000, 0.02)
+        self.level = level
+
+    def check(self):
+        return None, {}
+
+    def open(self):
+        source = self
+
+        class Stream:
+            def __enter__(self):
+                self.blocks = queue.Queue()
+                self.running = True
+
+                def feed():
+                    rng = np.random.default_rng(0)
+                    while self.running and source.level is not None:
+                        self.blocks.put((time.monotonic(), (source.level * rng.standard_normal(source.block))
+                                         .astype(np.float32)))
+                        time.sleep(source.block / source.sample_rate)
+
+                threading.Thread(target=feed, daemon=True).start()
+                return self.blocks
+
+            def __exit__(self, *exc):
+                self.running = False
+
+        return Stream()
+
+
+@pytest.mark.parametrize("level, what", [(0.0, "silent"), (None, "delivered no audio")])
+def test_a_silent_or_dead_input_stops_within_two_seconds(level, what):
+    env = make_environment(realtime=True)
+    anticipator = AudioBeatAnticipator("live", source=FakeInput(level))
+    anticipator.attach(env, PegBoard())
+    env.sync()  # simulated time 0 is now (attaching may take a while: the tracker's first import)
+    with pytest.raises(Unavailable, match=what):
+        env.run(until=10.0)
+    assert 2.0 <= time.monotonic() - env.real_start < 2.5
+
+
+def test_an_input_that_sounds_goes_on():
+    env = make_environment(realtime=True)
+    anticipator = AudioBeatAnticipator("live", source=FakeInput(0.01))
+    anticipator.attach(env, PegBoard())
+    env.run(until=2.6)
+    assert anticipator.tracker.time > 2.0

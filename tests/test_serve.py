@@ -1,0 +1,142 @@
+"""``agentsim serve`` with a real WebSocket client: feedback on time, interruptions at once, bad input answered
+to its sender alone, two clients, a client that leaves, a storm of blocks, a port in use."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+from websockets.sync.client import connect
+
+from agentsim.live.service import Background, Service
+from agentsim.speech.builtin import BuiltinBackend
+
+NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0" xmlns:bmla="http://www.asap-project.org/bmla"'
+LATENESS_SPREAD = 0.020
+INTERRUPT_LATENCY = 0.100
+
+
+@pytest.fixture
+def service():
+    with Background(Service(port=0, audio="none", fps=0, tts=BuiltinBackend())) as running:
+        yield running
+
+
+def receive_until(ws, done, timeout: float = 10.0) -> list[tuple[float, dict]]:
+    """(arrival on time.monotonic(), feedback) until ``done(feedback)`` or ``timeout``."""
+    got = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            message = ws.recv(timeout=0.2)
+        except TimeoutError:
+            continue
+        item = json.loads(message)
+        got.append((time.monotonic(), item))
+        if done(item):
+            return got
+    raise AssertionError(f"timed out; got {[f['id'] for _, f in got]}")
+
+
+def test_feedback_arrives_on_time_over_a_three_second_block(service):
+    block = (f'<bml {NS} id="b1"><speech id="s"><text>One two three, four five six seven, eight nine ten.</text>'
+             '</speech><wait id="w" start="0" end="3"/>'
+             + "".join(f'<head id="h{i}" lexeme="NOD" start="{0.4 * i}"/>' for i in range(7)) + "</bml>")
+    with connect(service.url) as ws:
+        ws.send(block)
+        got = receive_until(ws, lambda f: f["id"] == "b1:end")
+    timed = [(arrival, f) for arrival, f in got if f["type"] in ("syncPointProgress", "blockProgress")]
+    assert len(timed) > 40 and timed[-1][1]["globalTime"] >= 3.0
+    lateness = [arrival - f["globalTime"] for arrival, f in timed]
+    assert max(lateness) - min(lateness) <= LATENESS_SPREAD, (min(lateness), max(lateness))
+    # in the order the realizer sent them, each once
+    ids = [f["id"] for _, f in timed]
+    assert len(ids) == len(set(ids))
+
+
+def test_an_interrupt_sent_while_a_speech_plays_ends_it_at_once(service):
+    talk = (f'<bml {NS} id="talk"><speech id="s"><text>' + "This goes on and on. " * 20 + "</text></speech></bml>")
+    with connect(service.url) as ws:
+        ws.send(talk)
+        receive_until(ws, lambda f: f["id"] == "talk:s:start")
+        time.sleep(0.8)
+        sent = time.monotonic()
+        ws.send(f'<bml {NS} id="stop"><bmla:interrupt id="i" target="talk"/></bml>')
+        got = receive_until(ws, lambda f: f["id"] == "talk:s:end")
+    arrival, end = got[-1]
+    assert arrival - sent <= INTERRUPT_LATENCY, arrival - sent
+    assert end["globalTime"] < 5.0  # long before the 20 sentences would have ended
+
+
+def test_a_malformed_message_is_answered_to_its_sender_and_the_next_block_runs(service):
+    with connect(service.url) as sender, connect(service.url) as other:
+        sender.send("<bml id='x'><head id='h' lexeme='NOD'></bml>")  # mismatched tag
+        ((_, warning),) = receive_until(sender, lambda f: f["type"] == "warningFeedback")
+        assert warning["warningType"] == "PARSING_FAILURE" and "mismatched tag" in warning["description"]
+        sender.send("not BML at all")
+        ((_, second),) = receive_until(sender, lambda f: f["type"] == "warningFeedback")
+        assert "expected a <bml> element" in second["description"] or "malformed" in second["description"]
+        sender.send('{"subscribe": 3}')
+        receive_until(sender, lambda f: f["type"] == "warningFeedback")
+        sender.send(f'<bml {NS} id="ok"><head id="h" lexeme="NOD"/></bml>')
+        receive_until(sender, lambda f: f["id"] == "ok:end")
+        # the other client heard the block that ran, not the sender's mistakes
+        heard = receive_until(other, lambda f: f["id"] == "ok:end")
+        assert not [f for _, f in heard if f["type"] == "warningFeedback"]
+
+
+def test_two_clients_both_hear_and_one_that_leaves_disturbs_nothing(service):
+    block = f'<bml {NS} id="b"><head id="h1" lexeme="NOD"/><head id="h2" lexeme="NOD" start="1"/></bml>'
+    with connect(service.url) as a:
+        b = connect(service.url)
+        a.send(block)
+        receive_until(b, lambda f: f["id"] == "b:h1:start")
+        b.close()  # mid-block
+        got = receive_until(a, lambda f: f["id"] == "b:end")
+    ids = [f["id"] for _, f in got]
+    assert "b:h2:end" in ids and "b:end" in ids
+
+
+def test_a_storm_of_blocks_is_bounded_and_the_realizer_goes_on(service):
+    import resource
+
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with connect(service.url) as ws:
+        started = time.monotonic()
+        for i in range(1000):
+            ws.send(f'<bml {NS} id="s{i}"><wait id="w" start="0" end="0.01"/></bml>')
+        sending = time.monotonic() - started
+        refused = 0
+        ended = set()
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and len(ended) + refused < 1000:
+            try:
+                item = json.loads(ws.recv(timeout=1.0))
+            except TimeoutError:
+                break
+            if item["type"] == "warningFeedback" and "already waiting" in item["description"]:
+                refused += 1
+            elif item["type"] == "blockProgress" and item["id"].endswith(":end"):
+                ended.add(item["id"])
+        assert sending < 2.0 and len(ended) + refused == 1000, (sending, len(ended), refused)
+        assert len(ended) >= 256  # at least a queue's worth ran
+        ws.send(f'<bml {NS} id="after"><head id="h" lexeme="NOD"/></bml>')
+        receive_until(ws, lambda f: f["id"] == "after:end")
+    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss) / 1024
+    assert grown_mb < 200, grown_mb
+
+
+def test_a_port_in_use_is_one_clear_line():
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        proc = subprocess.run([sys.executable, "-m", "agentsim.cli", "serve", "--port", str(port), "--audio", "none", "--fps", "0",
+                               "--tts", "builtin"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    lines = [line for line in proc.stderr.splitlines() if not line.startswith("speech:")]
+    assert len(lines) == 1 and f"cannot listen on 127.0.0.1:{port}" in lines[0], proc.stderr
