@@ -20,6 +20,10 @@ def add_parsers(commands) -> None:
     serve.add_argument("--audio", default="default", metavar="DEVICE|none",
                        help="where speech and sound files play: a sounddevice output device, or none (default: "
                             "the default device)")
+    serve.add_argument("--calibrate", metavar="INPUT",
+                       help="before serving, play clicks and record them from this input device (the output's "
+                            "loop back: a cable, or a PulseAudio monitor such as 'pulse' with PULSE_SOURCE set) "
+                            "to measure what the device adds to its reported latency, and make up for it")
     options.add_tts(serve, default="espeak")
     serve.add_argument("--strict", action="store_true", help="read pure BML 1.0 only")
     serve.add_argument("--fps", type=float, default=30.0, help="poses per second streamed to viewers (30)")
@@ -30,7 +34,7 @@ def run_server(args: argparse.Namespace) -> int:
     from agentsim.live.service import Service
 
     service = Service(host=args.host, port=args.port, audio=args.audio, tts=options.backend(args.tts),
-                      strict=args.strict, fps=args.fps)
+                      strict=args.strict, fps=args.fps, calibrate=args.calibrate)
     print(f"speech: {options.describe_backend(service.live.realizer.speech.planner.backend)}", file=sys.stderr)
     try:
         asyncio.run(service.serve(ready=lambda: print(service.describe(), file=sys.stderr, flush=True)))

@@ -37,11 +37,19 @@ class Service:
     its viewer (poses at ``fps``)."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, audio: str = "none", fps: float = 30.0,
-                 **realizer_options):
+                 calibrate: str | None = None, **realizer_options):
+        device = None
+        if audio != "none":
+            from agentsim.live.sound import open_device
+
+            device = open_device(audio)  # says before anything starts if there is no such device
+            if calibrate is not None:
+                calibrate = open_device(calibrate, "input")
         self.live = LiveRealizer(**realizer_options)
         self.audio = audio
         self.sound = None
         self.poses = None
+        self.loop_delay: float | None = None
         files = {}
         if fps > 0:
             from agentsim.live.poses import LivePoses
@@ -51,24 +59,30 @@ class Service:
         self.server = Server(self.live, host, port, files=files)
         if self.poses is not None:
             self.poses.publish(self.server)
-        if audio != "none":
-            from agentsim.live.sound import open_device
-
-            open_device(audio)  # says before anything starts if there is no such device
         self.live.start()
         if audio != "none":
             from agentsim.live.sound import LiveSound
 
-            self.sound = LiveSound(None if audio == "default" else audio, real_start=self.live.env.real_start,
-                                   factor=self.live.env.factor)
+            try:
+                self.sound = LiveSound(device, real_start=self.live.env.real_start, factor=self.live.env.factor)
+                if calibrate is not None:
+                    self.loop_delay = self.sound.calibrate(calibrate)
+            except BaseException:
+                self.close()
+                raise
             self.server.delay = self.sound.delay
             speaker = Loudspeaker(self.sound)
             self.live.realizer.speech.listeners.append(speaker)
             self.live.realizer.audio.listeners.append(speaker)
 
     def describe(self) -> str:
-        sound = "no sound" if self.sound is None else f"sound on {self.audio} (feedback {1000 * self.server.delay:.0f} " \
-                                                      "ms after its time, when it is heard)"
+        if self.sound is None:
+            sound = "no sound"
+        else:
+            sound = f"sound on {self.audio} (feedback {1000 * self.server.delay:.0f} ms after its time, when it is heard"
+            if self.loop_delay is not None:
+                sound += f"; the loop to the input measured {1000 * self.loop_delay:.1f} ms and made up for"
+            sound += ")"
         return (f"agentsim serve: ws://{self.server.host}:{self.server.port}/ for BML, "
                 f"http://{self.server.host}:{self.server.port}/ to watch; {sound}")
 
