@@ -8,13 +8,18 @@ latency (from sending a ``bmla:interrupt`` to the arrival of the interrupted spe
 how many blocks ran and how many the server refused. Targets: lateness spread within 20 ms, interrupt
 latency within 100 ms.
 
-    python benchmarks/bench_serve.py [SECONDS] [BLOCKS_PER_SECOND]
+    python benchmarks/bench_serve.py [SECONDS] [BLOCKS_PER_SECOND] [--audio DEVICE] [--fps N]
+
+With ``--audio`` the speech also plays on that device and feedback waits for it to be heard (the lateness
+then centres on the service's ``delay_ms``, printed too); with ``--fps`` a viewer's poses are evaluated and
+streamed as well (a client subscribes to them).
 """
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
+import os
 import threading
 import time
 
@@ -33,14 +38,21 @@ def block(i: int) -> str:
 
 
 def main() -> None:
-    seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 30.0
-    rate = float(sys.argv[2]) if len(sys.argv) > 2 else 20.0
-    with Background(Service(port=0, audio="none", fps=0, tts=EspeakBackend())) as service:
+    parser = argparse.ArgumentParser(description="agentsim serve under a load of blocks")
+    parser.add_argument("seconds", nargs="?", type=float, default=30.0)
+    parser.add_argument("rate", nargs="?", type=float, default=20.0, help="blocks per second")
+    parser.add_argument("--audio", default="none", help="output device for the speech (none)")
+    parser.add_argument("--fps", type=float, default=0.0, help="poses per second for a subscribed viewer (0)")
+    args = parser.parse_args()
+    seconds, rate = args.seconds, args.rate
+    with Background(Service(port=0, audio=args.audio, fps=args.fps, tts=EspeakBackend())) as service:
         live = service.service.live
         arrivals: list[tuple[float, dict]] = []
         done = threading.Event()
 
         with connect(service.url, max_size=2 ** 22) as ws:
+            if args.fps > 0:
+                ws.send(json.dumps({"subscribe": "poses"}))
             def listen():
                 while not done.is_set():
                     try:
@@ -49,7 +61,9 @@ def main() -> None:
                         continue
                     except Exception:
                         return
-                    arrivals.append((time.monotonic(), json.loads(message)))
+                    item = json.loads(message)
+                    if "id" in item:  # feedback, not poses
+                        arrivals.append((time.monotonic(), item))
 
             listener = threading.Thread(target=listen, daemon=True)
             listener.start()
@@ -86,7 +100,9 @@ def main() -> None:
                     "min_ms": round(float(values.min()), 2)}
 
         result = {
-            "benchmark": "serve", "seconds": seconds, "blocks_per_second": rate, "blocks_sent": n,
+            "benchmark": "serve", "seconds": seconds, "blocks_per_second": rate, "audio": args.audio,
+            "fps": args.fps, "delay_ms": round(1000 * service.service.server.delay, 2),
+            "load_average": [round(x, 2) for x in os.getloadavg()], "blocks_sent": n,
             "blocks_ran": ran, "refused": refused, "feedback_received": len(arrivals),
             "lateness": {**summary(lateness), "spread_ms": round(float(np.ptp(lateness)), 2) if lateness.size else None},
             "interrupt_latency": summary(latency),
