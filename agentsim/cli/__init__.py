@@ -29,7 +29,10 @@ def build_parser() -> argparse.ArgumentParser:
     """The parser of every command; each command's ``handler`` (set with ``set_defaults``) runs it."""
     from agentsim.cli import beats, realize, scenarios, serve, speech
 
+    from agentsim import __version__
+
     parser = argparse.ArgumentParser(prog="agentsim", description="A BML realizer on a discrete-event clock.")
+    parser.add_argument("--version", action="version", version=f"agentsim {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
     realize.add_parsers(commands)
     beats.add_parsers(commands)

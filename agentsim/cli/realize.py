@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from agentsim.cli import options
-from agentsim.core.errors import UsageError
+from agentsim.core.errors import AgentsimError, UsageError
 
 
 def _times(text: str) -> list[float]:
@@ -58,9 +58,21 @@ def add_parsers(commands) -> None:
     options.add_anticipators(plot)
     plot.set_defaults(handler=plot_timeline)
 
-    anticipators = commands.add_parser("anticipators", help="installed anticipators")
-    anticipators.add_argument("action", choices=["list"])
-    anticipators.set_defaults(handler=list_anticipators)
+    anticipators = commands.add_parser("anticipators", help="installed anticipators, and a new plugin",
+                                       description="The anticipators BML can peg behaviours to "
+                                                   "(anticipators:ID:SYNC), built in and installed as plugins.")
+    actions = anticipators.add_subparsers(dest="action", required=True)
+    listing = actions.add_parser("list", help="the installed anticipators with their parameters",
+                                 description="Each installed anticipator: its name, its class, and the "
+                                             "parameters --anticipator NAME:ID,KEY=VALUE takes (type = default).")
+    listing.set_defaults(handler=list_anticipators)
+    new = actions.add_parser("new", help="write a complete, installable anticipator plugin",
+                             description="Write the folder agentsim-NAME: a pyproject.toml registering the "
+                                         "anticipator, its module, a test and a README. 'pip install -e "
+                                         "agentsim-NAME' and 'agentsim anticipators list' shows it.")
+    new.add_argument("name", help="the anticipator's name (lower case letters, digits, underscores)")
+    new.add_argument("--dir", default=".", help="where to write the folder (default: here)")
+    new.set_defaults(handler=new_anticipator)
 
 
 def add_outputs(parser: argparse.ArgumentParser) -> None:
@@ -205,5 +217,18 @@ def list_anticipators(args: argparse.Namespace) -> int:
     from agentsim.anticipators import registry
 
     for name, target in sorted(registry.available().items()):
-        print(f"{name}\t{target}")
+        try:
+            declared = ", ".join(p.describe() for p in registry.parameters(registry.load(name)))
+        except AgentsimError as exc:  # a broken plugin is listed with why, the others still are
+            declared = f"(cannot be loaded: {exc})"
+        print(f"{name}\t{target}\t{declared}")
+    return 0
+
+
+def new_anticipator(args: argparse.Namespace) -> int:
+    from agentsim.anticipators.template import write_plugin
+
+    folder = write_plugin(args.name, Path(args.dir))
+    print(f"wrote {folder}/ (pyproject.toml, {folder.name.replace('-', '_')}.py, tests/, README.md); "
+          f"install it with: pip install -e {folder}", file=sys.stderr)
     return 0
