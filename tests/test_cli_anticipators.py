@@ -99,3 +99,19 @@ def test_the_template_writes_a_whole_plugin(tmp_path):
 def test_create_refuses_an_unknown_anticipator_naming_the_installed_ones():
     with pytest.raises(AgentsimError, match=r"no anticipator named 'nope' is installed \(installed: .*metronome"):
         registry.create("nope")
+
+
+def test_an_unknown_lexeme_plays_as_its_default_and_is_named(tmp_path):
+    doc = tmp_path / "lex.xml"
+    doc.write_text(f'<bml {NS} id="b"><gesture id="g" lexeme="WAVE"/><head id="h" lexeme="WIGGLE"/>'
+                   '<gesture id="k" lexeme="BEAT"/><head id="n" lexeme="NOD"/></bml>')
+    for strict in ([], ["--strict"]):
+        proc = agentsim("realize", doc, "--tts", "builtin", *strict)
+        assert proc.returncode == 0, proc.stderr
+        feedback = [json.loads(line) for line in proc.stdout.splitlines()]
+        warnings = {f["id"]: f["description"] for f in feedback if f["type"] == "warningFeedback"}
+        assert warnings == {
+            "b:g": "lexemes with no motion of their own here, played as a generic gesture: WAVE (g)",
+            "b:h": "lexemes with no motion of their own here, played as a nod: WIGGLE (h)"}
+        ends = {f["id"] for f in feedback if f["type"] == "syncPointProgress" and f["id"].endswith(":end")}
+        assert ends == {"b:g:end", "b:h:end", "b:k:end", "b:n:end"}  # all four still play

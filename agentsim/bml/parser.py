@@ -17,6 +17,7 @@ import re
 from dataclasses import dataclass
 from typing import Callable
 
+from agentsim.bml import lexemes
 from agentsim.bml.dialects import Adapter, Notes, find_blocks, fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
 from agentsim.bml.tree import Node, read_forest, read_tree
@@ -109,7 +110,17 @@ class Refused:
 
 def parse_bml(text: str | bytes) -> Block:
     """Parse one BML 1.0 block, strictly. Raises :class:`BMLError` if the block as a whole cannot be used."""
-    return read_block(read_tree(text), None)
+    return warn_lexemes(read_block(read_tree(text), None))
+
+
+def warn_lexemes(block: Block) -> Block:
+    """Add a warning for each kind of lexeme in ``block`` that no motion here is made for (it plays as its
+    type's default, :mod:`agentsim.bml.lexemes`); the block itself."""
+    found = lexemes.fallbacks((b.type, b.id, b.attributes) for b in block.behaviours)
+    for (instead, items), line in zip(found.items(), lexemes.describe(found)):
+        ids = [item.rsplit(" (", 1)[1][:-1] for item in items]
+        block.warnings.append(ParseWarning("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", line, ids))
+    return block
 
 
 def parse_document(text: str | bytes, strict: bool = False,
@@ -155,6 +166,8 @@ def parse_document(text: str | bytes, strict: bool = False,
         except BMLError as exc:
             results.append(Refused(envelope.node.attrs.get("id", ""), exc))
             continue
+        if not envelope.notes:  # a foreign document's lexemes are among its adaptations
+            warn_lexemes(block)
         if envelope.notes:
             lines = envelope.notes.lines()
             block.warnings.insert(0, ParseWarning(
