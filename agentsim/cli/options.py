@@ -4,6 +4,7 @@ strategy and timing, seed, output, frame rate and anticipators, with what turns 
 from __future__ import annotations
 
 import argparse
+import math
 
 from agentsim.core.errors import AgentsimError, UsageError
 from agentsim.speech.delivery import CONDITIONS
@@ -99,8 +100,10 @@ def _metronome(text: str) -> tuple[float, float]:
         start = float(parts[1]) if len(parts) > 1 else 0.0
     except (ValueError, IndexError):
         raise argparse.ArgumentTypeError(f"expected BPM[,START], got {text!r}") from None
-    if not bpm > 0:
-        raise argparse.ArgumentTypeError("the metronome tempo must be positive")
+    if not (bpm > 0 and math.isfinite(bpm)):
+        raise argparse.ArgumentTypeError(f"the metronome tempo must be a positive number of BPM, got {parts[0]}")
+    if not math.isfinite(start):
+        raise argparse.ArgumentTypeError(f"the metronome start must be a number of seconds, got {parts[1]}")
     return bpm, start
 
 
@@ -125,3 +128,24 @@ def anticipators(args: argparse.Namespace) -> list:
         name, anticipator_id, params = registry.parse_spec(spec)
         found.append(registry.create(name, anticipator_id, **params))
     return found
+
+
+#: Where every JSON the commands print or write points for what its fields mean.
+GLOSSARY = "README.md#glossary"
+
+
+def tidy(value, digits: int = 6):
+    """``value`` with every float rounded to ``digits`` decimals (a microsecond of seconds, a nanosecond of
+    milliseconds): what a figure means, without ``3.2410000000000005``. Non-finite floats stay."""
+    if isinstance(value, float):
+        return round(value, digits) if math.isfinite(value) else value
+    if isinstance(value, dict):
+        return {k: tidy(v, digits) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [tidy(v, digits) for v in value]
+    return value
+
+
+def explained(result: dict, units: dict[str, str]) -> dict:
+    """``result`` tidied, with the ``units`` of its fields and a pointer to the glossary."""
+    return {**tidy(result), "units": units, "glossary": GLOSSARY}

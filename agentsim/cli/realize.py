@@ -190,9 +190,12 @@ def plot_timeline(args: argparse.Namespace) -> int:
             raise UsageError(f"{option} must be a non-negative number of seconds, got {text}")
         return value
 
+    from agentsim.media.files import check_writable
+
     start, end = seconds("--from", args.start), seconds("--to", args.end)
     if start is not None and end is not None and not end > start:
         raise UsageError(f"--to ({end:g} s) must come after --from ({start:g} s)")
+    check_writable([args.out])
     realizer = Realizer(anticipators=options.anticipators(args))
     realizer.submit(read_document(args.file), source=args.file)
     realizer.run()
@@ -202,14 +205,18 @@ def plot_timeline(args: argparse.Namespace) -> int:
     if start is None and end is None:
         written = plot_timelines(recording, args.out, stream=stream, title=title, width=12.0)
         if len(written) > 1:
-            print(f"the run lasts {run_duration(recording):.1f} s: {args.out} is its overview, "
+            print(f"wrote {args.out}: the run lasts {run_duration(recording):.1f} s, so it is its overview, and "
                   f"{len(written) - 1} windows are next to it ({written[1].name}, ...)", file=sys.stderr)
+        else:
+            print(f"wrote {args.out}", file=sys.stderr)
         return 0
     duration = run_duration(recording)
     start = 0.0 if start is None else start
     if start >= duration:
         raise UsageError(f"--from {start:g} s is after the end of the run ({duration:.2f} s)")
-    draw(recording, args.out, stream=stream, title=title, start=start, end=duration if end is None else end)
+    end = duration if end is None else end
+    draw(recording, args.out, stream=stream, title=title, start=start, end=end)
+    print(f"wrote {args.out} ({start:g} to {end:g} s of the run)", file=sys.stderr)
     return 0
 
 

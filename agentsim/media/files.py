@@ -16,8 +16,9 @@ from agentsim.media.audio import Track
 
 
 def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[str | Path | None] = ()) -> None:
-    """Raise :class:`UsageError` naming the first output that cannot be written: a file whose folder does not
-    exist or is not writable, a folder that cannot be made or written. Called before any work is done."""
+    """Raise :class:`UsageError` naming the first output that cannot be written: a file whose folder cannot be
+    made (folders are made on demand) or is not writable, a folder that cannot be made or written. Called
+    before any work is done."""
     for name in files:
         if name is None:
             continue
@@ -26,7 +27,11 @@ def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[st
         if path.is_dir():
             raise UsageError(f"cannot write {path}: it is a folder")
         if not folder.is_dir():
-            raise UsageError(f"cannot write {path}: there is no folder {folder}")
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise UsageError(f"cannot write {path}: cannot make the folder {folder} "
+                                 f"({exc.strerror or exc})") from None
         if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
             raise UsageError(f"cannot write {path}: no permission to write in {folder}")
     for name in folders:
