@@ -317,22 +317,30 @@ class LivePoses:
                     return
                 now, records = self.latest
                 self.latest = None
-            due = int(math.floor(now * self.fps + 1e-9))
-            if not self.subscribed():
-                self.next_frame = due + 1
-                continue
             try:
-                while self.next_frame <= due:
-                    k0 = self.next_frame
-                    k1 = min(due, k0 + MAX_FRAMES - 1)
-                    started = time.perf_counter()
-                    frames, evaluated = self.evaluate(records, k0, k1)
-                    self.costs.append((k1 - k0 + 1, evaluated, time.perf_counter() - started))
-                    self.next_frame = k1 + 1
+                for k0, frames in self.catch_up(now, records):
                     self.send(k0, frames)
             except Exception as exc:  # a fault of the viewer's must not stop the realizer: it is kept
                 self.error = exc
-                self.next_frame = due + 1
+                self.next_frame = int(math.floor(now * self.fps + 1e-9)) + 1
+
+    def catch_up(self, now: float, records, subscribed: bool | None = None):
+        """The messages due at ``now`` given a snapshot's ``records``: ``(first frame, positions)`` for the
+        frames from the last one sent up to ``now``, at most :data:`MAX_FRAMES` at a time; none, and nothing
+        evaluated, while nobody subscribes (``subscribed``, by default :meth:`subscribed`): the frames due
+        meanwhile are skipped."""
+        due = int(math.floor(now * self.fps + 1e-9))
+        if not (self.subscribed() if subscribed is None else subscribed):
+            self.next_frame = due + 1
+            return
+        while self.next_frame <= due:
+            k0 = self.next_frame
+            k1 = min(due, k0 + MAX_FRAMES - 1)
+            started = time.perf_counter()
+            frames, evaluated = self.evaluate(records, k0, k1)
+            self.costs.append((k1 - k0 + 1, evaluated, time.perf_counter() - started))
+            self.next_frame = k1 + 1
+            yield k0, frames
 
     def evaluate(self, records, k0: int, k1: int) -> tuple[np.ndarray, int]:
         """Joint positions (frames, points * 3) of frames ``k0`` to ``k1``, and how many frames it took."""
