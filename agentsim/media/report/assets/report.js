@@ -782,7 +782,9 @@
      of its "poses" messages. A message comes when its last frame is due on the server's clock, a few frames
      at a time; the page plays the frames at a steady delay (hold) behind the newest time it can know, so
      that motion is smooth: the server's clock is read as the page's clock minus the smallest lag seen lately
-     between a message's arrival and the time of what it carries. Feedback, which every client is sent, is
+     between a message's arrival and the time of what it carries. When frames come later than the hold
+     allows for (the buffer runs dry: the last frame is held), the hold grows by 50 ms, up to 1 s; after
+     30 s without that it shrinks again by 50 ms, down to a period and 0.1 s. Feedback, which every client is sent, is
      applied when the play time reaches its globalTime: a timeline of the behaviours (planned phases pale,
      passed ones solid), what plays now, and a list. When the server goes away the page says so, keeps the
      last pose and tries again every few seconds; a new connection starts afresh (a new server has a new
@@ -794,11 +796,13 @@
      frame's index), gaps and repeats (frames missing or sent twice between messages), stalls (the buffer
      ran dry), feedback, warnings, time (the play time, s of the server's clock), latest (the newest
      frame's time), hold (s), lag (s: arrival minus time, the smallest lately). report.time() and
-     report.joint(name) are as in the report; report.watch(name) records [time, x, y, z] of that joint at
-     every frame drawn from then on, report.watched(name) returns them. */
+     report.joint(name) are as in the report; report.watch(name) records [time, x, y, z, between] of that
+     joint at every frame drawn from then on (between: 1 if drawn between two frames received, 0 if held on
+     the first or the last one), report.watched(name) returns them. */
   function live(options) {
     var host = location.host || "127.0.0.1:8765";
     var url = options.url || ((location.protocol === "https:" ? "wss://" : "ws://") + host + "/");
+    var NONE = 0, BETWEEN = 1, HELD = 2;
     var HOLD = 0.2, RETRY = [1, 2, 3, 5], LAGS = 50, KEEP = 3, WINDOW = 10, AHEAD = 2, FEED_ITEMS = 60, WATCH = 50000;
     var state = { url: url, state: "connecting", connected: false, skeleton: false, connections: 0, messages: 0,
       frames: 0, first: null, gaps: 0, repeats: 0, stalls: 0, feedback: 0, warnings: 0, time: null, latest: null,
@@ -806,7 +810,7 @@
     var socket = null, attempt = 0, retryAt = null;
     var M = null, rest = null, pts = null;
     var ft = [], fp = [], next = null, stalled = false;  // frame times and positions; next index expected
-    var lags = [], lastPlay = null;
+    var lags = [], lastPlay = null, base = HOLD, steady = 0;  // steady: since when no frame came late (ms)
     var pending = [], beh = {}, behOrder = 0, ticks = [], blocks = {};
     var watches = {};
     api.live = state;
@@ -895,7 +899,8 @@
       pending = []; beh = {}; ticks = []; blocks = {};
       ["messages", "frames", "gaps", "repeats", "stalls", "feedback", "warnings"].forEach(function (k) { state[k] = 0; });
       state.first = state.time = state.latest = state.lag = null;
-      state.hold = HOLD;
+      state.hold = base = HOLD;
+      steady = performance.now();
       if (state.connections > 1) note("connected again");
     }
     function note(text) {
@@ -925,7 +930,8 @@
       rest = new Float64Array([].concat.apply([], m.rest));
       state.fps = m.fps;
       state.period = m.period;
-      state.hold = Math.max(state.hold, m.period + 0.1);
+      base = Math.max(HOLD, m.period + 0.1);
+      state.hold = Math.max(state.hold, base);
       if (!same) {
         if (three && three.renderer) three.renderer.domElement.remove();
         pts = new Float64Array(rest);
@@ -953,31 +959,36 @@
     }
     function playTime(clock) {
       if (state.lag === null) return null;
+      if (state.hold > base && clock * 1000 - steady > 30000) {  // frames came in time for 30 s: come closer
+        state.hold = Math.max(base, state.hold - 0.05);
+        steady = clock * 1000;
+      }
       var t = clock - state.lag - state.hold;
       if (!state.connected && state.latest !== null && t > state.latest) t = state.latest;  // the server is gone
       if (lastPlay !== null && t < lastPlay) t = lastPlay;  // never backwards
       lastPlay = t;
       return t;
     }
-    function poseAt(t) {  // the buffered frames around t, linearly between them; the rest pose before any
-      var n = ft.length;
-      if (!n || t === null) return false;
-      if (t >= ft[n - 1]) {
-        if (!stalled && state.connected && t > ft[n - 1] + 1 / (state.fps || 30)) {
+    function poseAt(t) {  // the buffered frames around t, linearly between them: BETWEEN; HELD: the first or
+      var n = ft.length;  // the last one, t being outside them; NONE: no frame yet (the rest pose stays)
+      if (!n || t === null) return NONE;
+      if (t > ft[n - 1]) {
+        if (!stalled && state.connected) {
           stalled = true;
           state.stalls++;
           state.hold = Math.min(1.0, state.hold + 0.05);  // the frames came later than the hold allowed for
+          steady = performance.now();
         }
         pts.set(fp[n - 1]);
-        return true;
+        return HELD;
       }
       stalled = false;
-      if (t <= ft[0]) { pts.set(fp[0]); return true; }
+      if (t < ft[0]) { pts.set(fp[0]); return HELD; }
       var lo = 0, hi = n - 1;
       while (hi - lo > 1) { var mid = (lo + hi) >> 1; if (ft[mid] <= t) lo = mid; else hi = mid; }
-      var w = (t - ft[lo]) / (ft[hi] - ft[lo]), a = fp[lo], b = fp[hi];
+      var w = hi > lo ? (t - ft[lo]) / (ft[hi] - ft[lo]) : 0, a = fp[lo], b = fp[hi];
       for (var q = 0; q < pts.length; q++) pts[q] = a[q] * (1 - w) + b[q] * w;
-      return true;
+      return BETWEEN;
     }
     function trim(t) {  // frames older than KEEP s behind the play time go
       var k = 0;
@@ -1114,7 +1125,8 @@
       if (t !== null) {
         state.time = t;
         while (pending.length && pending[0].globalTime <= t) apply(pending.shift());
-        if (three && poseAt(t)) placeSkeleton(three, pts);
+        var how = three ? poseAt(t) : NONE;
+        if (how !== NONE) placeSkeleton(three, pts);
         trim(t);
         forget(t);
         Object.keys(watches).forEach(function (name) {
@@ -1122,7 +1134,7 @@
           if (i < 0 || !three || list.length >= WATCH) return;
           if (list.length && list[list.length - 1][0] === t) return;
           var p = three.spheres[i].position;
-          list.push([t, p.x, p.y, p.z]);
+          list.push([t, p.x, p.y, p.z, how === BETWEEN ? 1 : 0]);
         });
       }
       var rows = drawLive(t === null ? 0 : t);
