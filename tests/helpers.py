@@ -81,3 +81,25 @@ FALLS_APART = {
     "piece": {"title": "short", "meter": "4/4", "bars": 12, "tempo": 120.0},
     "ensemble": {"model": {"timekeeper_sd": 0.05, "alpha_partner": 0.0, "alpha_conductor": 0.0,
                            "beta_conductor": 0.0}}}
+
+
+def whole_run_points(poses, recording, times):
+    """What an evaluation of the whole run gives at ``times`` (s) for a :class:`~agentsim.live.poses.LivePoses`:
+    world positions (frames, points, 3) of its skeleton's points, each time between the two frames of the
+    ``k / fps`` grid around it (linearly, as the viewer draws it), the background's saccades and blinks those
+    the live poses drew (:class:`~agentsim.live.poses.Liveliness`)."""
+    import numpy as np
+
+    from agentsim.animation import evaluate_poses
+    from agentsim.animation.manager import DriverManager
+    from agentsim.media.report.data import body_points
+
+    times = np.asarray(times, dtype=float)
+    n = int(np.ceil(times.max() * poses.fps)) + 2
+    grid = np.arange(n) / poses.fps
+    manager = DriverManager(body=poses.body, seed=poses.seed)
+    poses.liveliness.pin(manager, 0.0, grid[-1] + 1.0)
+    points = body_points(poses.body, evaluate_poses(recording, fps=poses.fps, manager=manager, times=grid).values)
+    flat = points.reshape(n, -1)
+    out = np.stack([np.interp(times, grid, flat[:, q]) for q in range(flat.shape[1])], axis=1)
+    return out.reshape(len(times), -1, 3)

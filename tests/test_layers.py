@@ -6,7 +6,8 @@ The layers, lowest first (the README's "Layout" says the same in prose):
   interface and recording;
 * libraries that know nothing of the realizer: reading BML, speech, beats, music, animation;
 * the realizer's parts: engines and anticipators;
-* the realizer, which wires them together;
+* the realizer, which wires them together, and the live realizer (``agentsim serve``), which runs it on
+  the real-time clock behind a WebSocket endpoint;
 * scenarios, which use the realizer;
 * the command line.
 

@@ -90,7 +90,10 @@ class Service:
         await self.server.serve(ready, stop)
 
     def close(self) -> None:
+        """Stop the realizer, the viewer's worker and the sound."""
         self.live.close()
+        if self.poses is not None:
+            self.poses.close()
         if self.sound is not None:
             self.sound.close()
 
