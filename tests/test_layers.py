@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "agentsim"
 
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
-    ("core", ("agentsim", "agentsim.core")),
+    ("core", ("agentsim", "agentsim.core", "agentsim.examples")),
     ("libraries", ("agentsim.bml", "agentsim.speech", "agentsim.beats", "agentsim.music", "agentsim.animation")),
     ("realizer parts", ("agentsim.engines", "agentsim.anticipators", "agentsim.media")),
     ("realizer", ("agentsim.realizer", "agentsim.live")),

@@ -74,6 +74,14 @@ def add_parsers(commands) -> None:
     new.add_argument("--dir", default=".", help="where to write the folder (default: here)")
     new.set_defaults(handler=new_anticipator)
 
+    examples = commands.add_parser("examples", help="the example documents and programs the README uses",
+                                   description="List the installed examples (a command given examples/NAME "
+                                               "that is not where it runs reads the installed one), or copy "
+                                               "them into DIR/examples.")
+    examples.add_argument("action", nargs="?", choices=["list", "copy"], default="list")
+    examples.add_argument("dir", nargs="?", default=".", help="where 'copy' puts the examples folder (here)")
+    examples.set_defaults(handler=examples_command)
+
 
 def add_outputs(parser: argparse.ArgumentParser) -> None:
     """The files a run can write, all on its time axis (simulated time 0 = WAV sample 0 = frame 0)."""
@@ -132,10 +140,17 @@ def read_document(path: str) -> str | bytes:
     """A BML document from a file, or from standard input for ``-``."""
     if path == "-":
         return sys.stdin.buffer.read()
-    p = Path(path)
+    p = resolve(path)
     if not p.is_file():
         raise UsageError(f"no such file: {path}")
     return p.read_bytes()
+
+
+def resolve(path: str) -> Path:
+    """The file ``path`` names: itself, or for ``examples/...`` not found here the installed example."""
+    from agentsim.examples import resolve as find
+
+    return path if path == "-" else find(path)
 
 
 def realize_files(args: argparse.Namespace) -> int:
@@ -164,7 +179,7 @@ def realize_files(args: argparse.Namespace) -> int:
     realizer.feedback.listen(emit)
     order = sorted(range(len(documents)), key=lambda i: (at[i], i))
     for i in order:
-        realizer.submit_at(at[i], documents[i][1], source=documents[i][0])
+        realizer.submit_at(at[i], documents[i][1], source=str(resolve(documents[i][0])))
     realizer.run(until=args.until)
     write_run_outputs(args, realizer, title=", ".join(Path(f).name for f in args.files))
     return 0
@@ -197,7 +212,7 @@ def plot_timeline(args: argparse.Namespace) -> int:
         raise UsageError(f"--to ({end:g} s) must come after --from ({start:g} s)")
     check_writable([args.out])
     realizer = Realizer(anticipators=options.anticipators(args))
-    realizer.submit(read_document(args.file), source=args.file)
+    realizer.submit(read_document(args.file), source=str(resolve(args.file)))
     realizer.run()
     recording = realizer.recording()
     stream = evaluate_poses(recording)
@@ -238,4 +253,25 @@ def new_anticipator(args: argparse.Namespace) -> int:
     folder = write_plugin(args.name, Path(args.dir))
     print(f"wrote {folder}/ (pyproject.toml, {folder.name.replace('-', '_')}.py, tests/, README.md); "
           f"install it with: pip install -e {folder}", file=sys.stderr)
+    return 0
+
+
+def examples_command(args: argparse.Namespace) -> int:
+    import shutil
+
+    from agentsim.examples import HOME, describe, names
+
+    if args.action == "list":
+        for name in names():
+            about = describe(name)
+            print(f"{name}\t{about}" if about else name)
+        return 0
+    target = Path(args.dir) / "examples"
+    if target.exists():
+        raise UsageError(f"{target} exists already: copy into another folder")
+    try:
+        shutil.copytree(HOME, target, ignore=shutil.ignore_patterns("__init__.py", "__pycache__"))
+    except OSError as exc:
+        raise UsageError(f"cannot copy the examples into {target}: {exc.strerror or exc}") from None
+    print(f"wrote {target}/ ({len(names())} files)", file=sys.stderr)
     return 0
