@@ -115,3 +115,15 @@ def test_an_unknown_lexeme_plays_as_its_default_and_is_named(tmp_path):
             "b:h": "lexemes with no motion of their own here, played as a nod: WIGGLE (h)"}
         ends = {f["id"] for f in feedback if f["type"] == "syncPointProgress" and f["id"].endswith(":end")}
         assert ends == {"b:g:end", "b:h:end", "b:k:end", "b:n:end"}  # all four still play
+
+
+def test_an_attribute_nothing_reads_is_named(tmp_path):
+    doc = tmp_path / "typo.xml"
+    text = f'<bml {NS} id="b"><head id="h" lexme="NOD"/><gaze id="z" target="user" influence="HEAD"/></bml>'
+    doc.write_text(text)
+    proc = agentsim("realize", doc, "--tts", "builtin")
+    assert proc.returncode == 0, proc.stderr
+    warnings = [f for f in map(json.loads, proc.stdout.splitlines()) if f["type"] == "warningFeedback"]
+    assert [(w["id"], w["warningType"], w["description"]) for w in warnings] == [
+        ("b:h", "CUSTOM_ATTRIBUTE_NOT_SUPPORTED",
+         f"attribute 'lexme' of h is not one this realizer reads; ignored (line 1, column {text.index('<head') + 1})")]

@@ -22,7 +22,7 @@ from agentsim.bml.dialects import Adapter, Notes, find_blocks, fold_case, withou
 from agentsim.bml.speech_text import read_speech
 from agentsim.bml.tree import Node, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
-                                     EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN)
+                                     EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
 from agentsim.core.errors import BMLError
 
@@ -293,6 +293,9 @@ class _Reader:
                 self.warn("PARSING_FAILURE", f"{bid}: <{node.tag}> has no sync point {key!r}; behaviour ignored",
                           node, [bid])
                 return
+            elif key not in READ_ATTRIBUTES and key not in beh.sync_ids:
+                self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"attribute {key!r} of {bid} is not one this realizer "
+                          "reads; ignored", node, [bid])
         for child in node.elements():
             extension = child.namespace in EXTENSION_BEHAVIOURS
             if kind.name == "speech" and self.lenient:
