@@ -9,6 +9,7 @@ module                 commands
 ``beats``              ``anticipate beats``
 ``scenarios``          ``run conductor``, ``run storytelling``, ``demo``
 ``serve``              ``serve``
+``sweep``              ``sweep``, ``sweep report``
 ``commands``           the parser of every command but ``sweep`` (which runs those commands)
 ``options``            the options several commands share (speech backend, event delivery, seed, ...)
 =====================  =================================================================================
@@ -28,9 +29,14 @@ INTERNAL_ERROR = 70
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of every command; each command's ``handler`` (set with ``set_defaults``) runs it."""
-    from agentsim.cli import commands
+    from agentsim.cli import commands as work
+    from agentsim.cli import sweep
 
-    return commands.build_parser()
+    parser = argparse.ArgumentParser(prog=work.PROG, description=work.DESCRIPTION)
+    commands = parser.add_subparsers(dest="command", required=True)
+    work.add_parsers(commands)
+    sweep.add_parsers(commands)
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
