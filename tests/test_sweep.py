@@ -19,12 +19,18 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import (
+    SWEEP_GRID,
+    SWEEP_TEXT,
+    row_differences,
+    run_alone,
+    sweep_points,
+    write_sweep_spec,
+)
 
 from agentsim.cli import main
 from agentsim.cli.sweep import runner, spec
 from agentsim.cli.sweep.report import interval
-
-from helpers import SWEEP_GRID, SWEEP_TEXT, row_differences, run_alone, sweep_points, write_sweep_spec
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +117,7 @@ def test_the_cache_key_is_the_command_line_the_files_it_names_and_the_project_ve
     changed = [p.key for p in spec.load(path).points]
     assert not set(changed) & set(keys)
     monkeypatch.setattr(spec, "project_version", lambda: "0.0.0+other")  # another version of the project
-    assert not set(p.key for p in spec.load(path).points) & set(changed)
+    assert not {p.key for p in spec.load(path).points} & set(changed)
 
 
 def test_a_point_that_fails_is_a_row_with_its_error_and_the_sweep_finishes(tmp_path, capsys):
@@ -133,8 +139,8 @@ def test_a_point_that_fails_is_a_row_with_its_error_and_the_sweep_finishes(tmp_p
 
 
 BAD_SPECS = [
-    ('command = ["eval", "nope"]', "unknown command 'eval nope'; a sweep runs one of: anticipate beats, eval speech-sync, "
-                                   "run conductor, run storytelling"),
+    ('command = ["eval", "nope"]', ("unknown command 'eval nope'; a sweep runs one of: anticipate beats, "
+                                    "eval speech-sync, run conductor, run storytelling")),
     ('command = ["realize"]', "'agentsim realize' prints no --json"),
     ('command = ["eval"]', "unknown command 'eval'"),
     ('command = ["eval", "speech-sync"]\n[grid]\njiter = [0.1]', "unknown option 'jiter' of 'agentsim eval speech-sync'"),
