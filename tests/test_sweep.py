@@ -246,7 +246,9 @@ def test_the_interval_is_scipys_bootstrap_of_the_mean():
     assert (cell.mean, cell.low, cell.high, cell.n) == (np.mean(values), ci.low, ci.high, 8)
     assert interval([2.0, 2.0, 2.0], np.random.default_rng(0)).text() == "2 [2, 2]"  # no spread
     assert interval([2.0], np.random.default_rng(0)).text() == "2 (n=1)"  # one replicate: no interval
-    assert interval([None, math.nan], np.random.default_rng(0)).text() == "-"
+    assert interval([None, math.nan], np.random.default_rng(0)).text() == "none"  # null in every replicate
+    assert interval([None, 4.0, None, 6.0], np.random.default_rng(0)).text().endswith(" (2 none)")
+    assert interval([], np.random.default_rng(0)).text() == "-"
 
 
 def test_spec_points_and_their_command_lines(tmp_path):

@@ -1,6 +1,9 @@
 """``agentsim sweep report DIR``: a sweep's results summarised, with 95 % bootstrap confidence intervals of the
 means, as a table per strategy (or as one Markdown table), and drawn as ``summary.png``.
 
+A metric that is null in some replicates (``beats_to_recover`` of a conductor that never recovered) is
+averaged over the others and says how many were null: ``6.2 [5.1, 7.4] (3 none)``; null in all: ``none``.
+
 The points that finished are grouped by every grid key except the replicates (``over``, by default
 ``seed``): each group's mean of each metric gets a 95 % BCa bootstrap interval over its replicates
 (:func:`scipy.stats.bootstrap`, 9,999 resamples, a fixed seed so that the report repeats itself). One table
@@ -40,13 +43,15 @@ class Cell:
     low: float
     high: float
     n: int
+    missing: int = 0  # replicates without a value (null in the JSON: a conductor that never recovered)
 
     def text(self) -> str:
+        none = f" ({self.missing} none)" if self.missing else ""
         if self.n == 0:
-            return "-"
+            return "none" if self.missing else "-"
         if math.isnan(self.low):
-            return f"{number(self.mean)} (n={self.n})"
-        return f"{number(self.mean)} [{number(self.low)}, {number(self.high)}]"
+            return f"{number(self.mean)} (n={self.n}){none}"
+        return f"{number(self.mean)} [{number(self.low)}, {number(self.high)}]{none}"
 
 
 @dataclass
@@ -59,6 +64,7 @@ class Summary:
     axis: str | None
     over: list[str]
     others: list[str]  # grid keys that are neither by, axis nor over
+    keys: list[str]  # the grid keys but the replicates, in the spec's order
     points: int
     failed: int
     groups: list[dict] = field(default_factory=list)  # {"values": {key: value}, "cells": {metric: Cell}}
@@ -78,15 +84,16 @@ def interval(values, rng: np.random.Generator) -> Cell:
     """The mean of the finite ``values`` and its 95 % BCa bootstrap interval (percentile where BCa fails)."""
     from scipy.stats import bootstrap
 
-    x = np.asarray([v for v in values if v is not None], dtype=float)
+    x = np.asarray([math.nan if v is None else v for v in values], dtype=float)
+    missing = int(np.isnan(x).sum())
     x = x[np.isfinite(x)]
     if x.size == 0:
-        return Cell(math.nan, math.nan, math.nan, 0)
+        return Cell(math.nan, math.nan, math.nan, 0, missing)
     mean = float(x.mean())
     if x.size < 2:
-        return Cell(mean, math.nan, math.nan, 1)
+        return Cell(mean, math.nan, math.nan, 1, missing)
     if np.ptp(x) == 0:
-        return Cell(mean, mean, mean, int(x.size))
+        return Cell(mean, mean, mean, int(x.size), missing)
     low = high = math.nan
     for method in ("BCa", "percentile"):
         with warnings.catch_warnings():
@@ -96,7 +103,7 @@ def interval(values, rng: np.random.Generator) -> Cell:
         low, high = float(ci.low), float(ci.high)
         if math.isfinite(low) and math.isfinite(high):
             break
-    return Cell(mean, low, high, int(x.size))
+    return Cell(mean, low, high, int(x.size), missing)
 
 
 def load_sweep(folder: Path) -> dict:
@@ -148,7 +155,7 @@ def summarize(folder: Path, metrics: list[str] | None = None, by: str | None = N
         metrics = [c for c in columns if numeric(table, c) and ok[c].nunique() > 1
                    and "seconds" not in c and "wall" not in c and not c.startswith(TAKEN_PREFIX)][:DEFAULT_METRICS]
     summary = Summary(command=" ".join(sweep["command"]), metrics=metrics, by=by, axis=axis, over=over,
-                      others=[k for k in rest if k != axis], points=len(table),
+                      others=[k for k in rest if k != axis], keys=[k for k in grid if k not in over], points=len(table),
                       failed=int((table["status"] != "ok").sum()))
     keys = ([by] if by else []) + [k for k in rest]
     rng = np.random.default_rng(SEED)
@@ -179,7 +186,7 @@ def text_tables(summary: Summary) -> str:
             f"{summary.failed} failed); mean [95 % bootstrap interval]"
             + (f" over {', '.join(summary.over)}" if summary.over else " (no replicates: set [report] over)"))
     lines = [head]
-    row_keys = ([summary.axis] if summary.axis else []) + summary.others
+    row_keys = [k for k in summary.keys if k == summary.axis or k in summary.others]
     blocks: dict = {}
     for group in summary.groups:
         blocks.setdefault(group["values"].get(summary.by) if summary.by else None, []).append(group)
@@ -199,18 +206,18 @@ def text_tables(summary: Summary) -> str:
 
 
 def markdown_table(summary: Summary) -> str:
-    """One Markdown table: a row per value of ``by`` and the other keys, a column per metric and axis value."""
+    """One Markdown table: a row per value of ``by`` and the other keys, a column per axis value and metric."""
     axis_values = list(dict.fromkeys(g["values"][summary.axis] for g in summary.groups)) if summary.axis else [None]
     row_keys = ([summary.by] if summary.by else []) + summary.others
-    header = row_keys + [m if v is None else f"{m} ({summary.axis} {v})" for m in summary.metrics
-                         for v in axis_values] + ["n"]
+    header = row_keys + [m if v is None else f"{m} ({summary.axis} {v})" for v in axis_values
+                         for m in summary.metrics] + ["n"]
     rows: dict = {}
     for group in summary.groups:
         key = tuple(group["values"][k] for k in row_keys)
         rows.setdefault(key, {})[group["values"].get(summary.axis)] = group["cells"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for key, by_axis in rows.items():
-        cells = [by_axis[v][m].text() if v in by_axis else "-" for m in summary.metrics for v in axis_values]
+        cells = [by_axis[v][m].text() if v in by_axis else "-" for v in axis_values for m in summary.metrics]
         n = max((c.n for cs in by_axis.values() for c in cs.values()), default=0)
         lines.append("| " + " | ".join([str(k) for k in key] + cells + [str(n)]) + " |")
     return "\n".join(lines)
@@ -236,8 +243,13 @@ def plot(summary: Summary, path: Path) -> Path:
     axis_values = list(dict.fromkeys(g["values"][summary.axis] for g in summary.groups)) if summary.axis else []
     numeric_axis = bool(axis_values) and all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
                                              for v in axis_values)
+    palette = plt.get_cmap("tab10" if len(lines) <= 10 else "tab20").colors
     for index, metric in enumerate(metrics):
         ax = axes[index // columns][index % columns]
+        means = np.abs([g["cells"][metric].mean for g in summary.groups])
+        means = means[np.isfinite(means) & (means > 0)]
+        if means.size and means.max() / means.min() > 100:  # a metric over orders of magnitude
+            ax.set_yscale("symlog", linthresh=float(means.min()))
         for n_line, (key, groups) in enumerate(lines.items()):
             name = ", ".join(str(k) for k in key) or "all"
             if summary.axis:
@@ -249,7 +261,8 @@ def plot(summary: Summary, path: Path) -> Path:
                 x, cells = np.array([n_line]), [groups[0]["cells"][metric]]
             mean = np.array([c.mean for c in cells])
             low, high = np.array([c.low for c in cells]), np.array([c.high for c in cells])
-            drawn = ax.plot(x, mean, "o-" if summary.axis else "o", label=name, markersize=4)[0]
+            drawn = ax.plot(x, mean, "o-" if summary.axis else "o", label=name, markersize=4,
+                            color=palette[n_line % len(palette)])[0]
             if summary.axis:
                 ax.fill_between(x, low, high, color=drawn.get_color(), alpha=0.18, linewidth=0)
             else:

@@ -50,6 +50,8 @@ class Outcome:
     seconds: float
     parquet: Path
     csv: Path
+    startup_seconds: float = 0.0  # starting or reaching the cluster and checking its workers
+    compute_seconds: float = 0.0  # from the first point sent to the last result
 
 
 def default_workers() -> int:
@@ -164,11 +166,15 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
             todo.setdefault(point.key, []).append(point)
     total = cached + len(todo)
     failed = 0
+    startup = compute = 0.0
     if todo:
         mine = project_version()
         out_at = len(spec.command) if spec.takes_out else None
         bar = progress_bar(total, cached, quiet)
+        connecting = time.perf_counter()
         with bar, connect(workers, scheduler) as client:
+            sending = time.perf_counter()
+            startup = sending - connecting
             futures = {}
             for key, (point, *_) in todo.items():
                 keep = str((folder / "outputs" / key).resolve()) if spec.keep_outputs else None
@@ -191,6 +197,7 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
                     outcomes[point.key] = outcome
                     bar.set_postfix(failed=failed, refresh=False)
                     bar.update(1)
+                compute = time.perf_counter() - sending
             finally:
                 if pending:  # interrupted: nothing keeps running for a sweep that stopped
                     client.cancel(list(pending))
@@ -198,4 +205,5 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
     parquet, csv = results.write(results.frame(rows, list(spec.grid)), folder)
     return Outcome(points=len(spec.points), computed=len(todo), cached=cached,
                    failed=sum(row["status"] != "ok" for row in rows),
-                   seconds=time.perf_counter() - started, parquet=parquet, csv=csv)
+                   seconds=time.perf_counter() - started, parquet=parquet, csv=csv, startup_seconds=startup,
+                   compute_seconds=compute)
