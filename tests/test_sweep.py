@@ -267,3 +267,14 @@ def test_spec_points_and_their_command_lines(tmp_path):
     conductor.write_text('command = ["run", "conductor"]\n[grid]\nstrategy = ["best"]\n[fixed]\ncompare = false\n')
     assert spec.load(conductor).takes_out and list(spec.load(conductor).points[0].argv) == [
         "run", "conductor", "--strategy", "best", "--json"]
+
+
+def test_the_readmes_example_spec_is_a_valid_spec(tmp_path):
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    example = readme.split("## Sweeps")[1].split("```toml\n")[1].split("```")[0]
+    (tmp_path / "spec.toml").write_text(example)
+    (tmp_path / "story.txt").write_text(SWEEP_TEXT)
+    checked = spec.load(tmp_path / "spec.toml")
+    assert len(checked.points) == 2 * 3 * 2 * 2
+    assert checked.points[-1].values == {"strategy": "chang-naive", "seed": 3, "jitter": 0.1, "channel": "far"}
+    assert "--loss" in checked.points[-1].argv and str(tmp_path / "story.txt") in checked.points[-1].argv

@@ -246,9 +246,11 @@ def plot(summary: Summary, path: Path) -> Path:
     palette = plt.get_cmap("tab10" if len(lines) <= 10 else "tab20").colors
     for index, metric in enumerate(metrics):
         ax = axes[index // columns][index % columns]
-        means = np.abs([g["cells"][metric].mean for g in summary.groups])
-        means = means[np.isfinite(means) & (means > 0)]
-        if means.size and means.max() / means.min() > 100:  # a metric over orders of magnitude
+        signed = np.array([g["cells"][metric].mean for g in summary.groups], dtype=float)
+        signed = signed[np.isfinite(signed)]
+        means = np.abs(signed[signed != 0])
+        one_sign = (signed >= 0).all() or (signed <= 0).all()
+        if one_sign and means.size and means.max() / means.min() > 100:  # a metric over orders of magnitude
             ax.set_yscale("symlog", linthresh=float(means.min()))
         for n_line, (key, groups) in enumerate(lines.items()):
             name = ", ".join(str(k) for k in key) or "all"
