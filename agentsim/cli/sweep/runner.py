@@ -157,7 +157,7 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
         (folder / "points").mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise AgentsimError(f"cannot create the sweep folder {str(folder)!r}: {exc}") from None
-    (folder / "sweep.json").write_text(json.dumps(spec.to_json(), indent=2) + "\n")
+    (folder / "sweep.json").write_text(json.dumps(spec.to_json(), indent=2, default=str) + "\n")
     outcomes = cached_outcomes(folder, spec.points)
     cached = len({p.key for p in spec.points if p.key in outcomes})
     todo: dict[str, list[Point]] = {}
