@@ -52,8 +52,15 @@ def add_conductor(scenarios) -> argparse.ArgumentParser:
                         help="--input: how long to listen (default: the piece's length at its tempo)")
     parser.add_argument("--sample-rate", type=int, metavar="HZ",
                         help="--input: the sample rate to record at (default: the configuration's)")
+    add_json(parser)
     parser.set_defaults(handler=run_conductor)
     return parser
+
+
+def add_json(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true",
+                        help="also print the figures written (metrics.json; compare.json with --compare) as JSON on "
+                             "stdout, and the table on stderr")
 
 
 def run_conductor(args: argparse.Namespace) -> int:
@@ -95,6 +102,7 @@ def add_storytelling(scenarios) -> argparse.ArgumentParser:
                         help="seconds of each detailed timeline picture, timeline_0000-0030s.png, ... "
                              "(30); timeline.png is the overview of the whole story")
     options.add_delivery(parser)
+    add_json(parser)
     parser.set_defaults(handler=run_storytelling)
     return parser
 

@@ -20,6 +20,9 @@ animator-time strategy under an event-delivery condition, and writes to ``--out`
 ``compare.json``       with ``--compare``: the figures of every strategy on the same seed
 =====================  ==============================================================================
 
+With ``--json`` the figures written (``metrics.json``, or with ``--compare`` those of ``compare.json``) are
+printed as JSON on stdout, and what is otherwise printed goes to stderr.
+
 Every file is on the run's one time axis: simulated time 0 is WAV sample 0, BVH frame 0 and feedback
 ``globalTime`` 0 (the TextGrid says so in its ``axis`` tier, ``metrics.json`` in ``time_axis``).
 
@@ -32,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from collections import OrderedDict
 from pathlib import Path
@@ -144,13 +148,16 @@ def main(args: argparse.Namespace) -> int:
     metrics["fps"] = args.fps
     metrics["time_axis"] = AXIS
     metrics.update(telling.extra)
+    as_json = getattr(args, "json", False)
+    printed = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
+    compared = None
     if args.compare:
         rows = OrderedDict((name, _row(t)) for name, t in tellings.items())
-        (out / "compare.json").write_text(json.dumps(_clean(OrderedDict(
-            story=story.title, seed=args.seed, anchor=args.anchor, timing=args.timing,
-            delivery=metrics["delivery"], strategies=rows)), indent=2) + "\n")
+        compared = _clean(OrderedDict(story=story.title, seed=args.seed, anchor=args.anchor, timing=args.timing,
+                                      delivery=metrics["delivery"], strategies=rows))
+        (out / "compare.json").write_text(json.dumps(compared, indent=2) + "\n")
         metrics["compare_wall_seconds"] = wall
-        print(comparison_table(rows))
+        print(comparison_table(rows), file=printed)
     (out / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
     e = metrics["sync_error_ms"]
     print(f"{story.title}: {metrics['words']} words, {metrics['gestures']} gestures, "
@@ -158,7 +165,9 @@ def main(args: argparse.Namespace) -> int:
           f"p95 {e['p95']:.2f} ms, max {e['max']:.2f} ms; {metrics['snaps']} snaps, {metrics['warnings']} warnings, "
           f"{metrics['missed']} missed; wall {metrics['wall_seconds']:.2f} s "
           f"({100 * metrics['wall_fraction_of_story']:.2f} % of the story)"
-          + (f", first synthesis {synthesis:.2f} s" if synthesis else "") + f"; written to {out}/")
+          + (f", first synthesis {synthesis:.2f} s" if synthesis else "") + f"; written to {out}/", file=printed)
+    if as_json:
+        print(json.dumps(compared if compared is not None else _clean(metrics)))
     return 0
 
 

@@ -253,14 +253,14 @@ class CachedBackend:
         if has_audio:
             pcm = np.round(np.asarray(utt.audio, dtype=np.float64) * 32768.0)
             pcm = np.clip(pcm, -32768, 32767).astype(np.int16)
-            tmp = audio_path.with_suffix(".tmp.npy")
+            tmp = audio_path.with_suffix(f".{os.getpid()}.tmp.npy")  # processes that write at once: one each
             np.save(tmp, pcm)
             tmp.replace(audio_path)
         meta = {"format": CACHE_FORMAT, "backend": _identity(self.backend), "text": utt.text,
                 "duration": utt.duration, "sample_rate": utt.sample_rate, "backend_name": utt.backend,
                 "sentences": list(utt.sentences), "audio": has_audio,
                 "words": [asdict(w) for w in utt.words], "phonemes": [asdict(p) for p in utt.phonemes]}
-        tmp = meta_path.with_suffix(".tmp.json")
+        tmp = meta_path.with_suffix(f".{os.getpid()}.tmp.json")
         tmp.write_text(json.dumps(meta, ensure_ascii=False))
         tmp.replace(meta_path)
 
