@@ -76,3 +76,29 @@ def test_speech_calibrate_prints_the_keys_it_saves(tmp_path):
     saved = json.loads(model.read_text())
     assert printed == {**saved, "saved": str(model)}
     assert proc.stderr.strip() == f"wrote {model}"
+
+
+def test_every_command_writes_into_out_slash_its_name_by_default():
+    from agentsim.cli import build_parser
+
+    parser = build_parser()
+    assert parser.parse_args(["run", "conductor"]).out == "out/conductor"
+    assert parser.parse_args(["run", "storytelling"]).out == "out/storytelling"
+    assert parser.parse_args(["demo"]).out == "out/demo"
+
+
+def test_the_conductors_music_on_the_command_line(tmp_path):
+    out = tmp_path / "c"
+    proc = agentsim("run", "conductor", "--target-bpm", 100, "--start-bpm", 90, "--meter", "3/4", "--bars", 12,
+                    "--fps", 60, "--json", "--out", out, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    metrics = json.loads(proc.stdout)
+    assert (metrics["target_bpm"], metrics["start_bpm"], metrics["meter"], metrics["bars"]) == (100.0, 90.0, "3/4", 12)
+    assert metrics["glossary"] == "README.md#glossary"
+    assert "Frame Time: 0.01666667" in (out / "conductor.bvh").read_text()
+    # the progress bar is for terminals: nothing of it in a pipe
+    assert "\r" not in proc.stderr and "it/s" not in proc.stderr
+    bad = agentsim("run", "conductor", "--meter", "5/4", "--out", tmp_path / "never", cwd=tmp_path)
+    assert bad.returncode == 1 and not (tmp_path / "never").exists()
+    assert bad.stderr.strip().endswith("with --meter 5/4: [piece]: meter '5/4' has no conducting pattern: use 2/4, "
+                                       "3/4 or 4/4")

@@ -198,6 +198,7 @@ def test_same_seed_same_metrics(default_run):
     again = collect_metrics(simulate(load_config(), "best", 1))
     written = json.loads((out / "metrics.json").read_text())
     assert written.pop("time_axis").startswith("simulated time")
+    assert written.pop("glossary") == "README.md#glossary"
     assert json.dumps(again, indent=2) == json.dumps(written, indent=2)
 
 

@@ -84,12 +84,14 @@ def add_out(parser: argparse.ArgumentParser, default: str | None, what: str = "o
                         help=what + (f" ({default})" if default else ""))
 
 
-def add_fps(parser: argparse.ArgumentParser, what: str) -> None:
-    parser.add_argument("--fps", type=float, default=60.0, help=f"frame rate of {what} (60)")
+def add_fps(parser: argparse.ArgumentParser, what: str, default: float | None = 60.0) -> None:
+    """``--fps``, the frame rate of the motion a command writes (``default`` None: the configuration's)."""
+    parser.add_argument("--fps", type=float, default=default,
+                        help=f"frame rate of {what}" + (f" ({default:g})" if default is not None else ""))
 
 
 def check_fps(args: argparse.Namespace) -> None:
-    if not args.fps > 0:
+    if args.fps is not None and not (args.fps > 0 and math.isfinite(args.fps)):
         raise UsageError("--fps must be positive")
 
 
@@ -130,8 +132,6 @@ def anticipators(args: argparse.Namespace) -> list:
     return found
 
 
-#: Where every JSON the commands print or write points for what its fields mean.
-GLOSSARY = "README.md#glossary"
 
 
 def tidy(value, digits: int = 6):
@@ -148,4 +148,6 @@ def tidy(value, digits: int = 6):
 
 def explained(result: dict, units: dict[str, str]) -> dict:
     """``result`` tidied, with the ``units`` of its fields and a pointer to the glossary."""
+    from agentsim.media import GLOSSARY
+
     return {**tidy(result), "units": units, "glossary": GLOSSARY}

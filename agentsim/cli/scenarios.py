@@ -42,6 +42,13 @@ def add_conductor(scenarios) -> argparse.ArgumentParser:
     which.add_argument("--compare", action="store_true", help="run every strategy on the same seed and print a table")
     options.add_seed(parser, "the musicians' noise")
     options.add_out(parser, DEFAULT_OUT)
+    knobs = parser.add_argument_group("the music (each overrides the configuration's piece or ensemble)")
+    knobs.add_argument("--target-bpm", type=float, metavar="BPM", help="the score's tempo (the piece's, 120)")
+    knobs.add_argument("--start-bpm", type=float, metavar="BPM",
+                       help="the tempo the ensemble starts at, and drags back to (the ensemble's, 108)")
+    knobs.add_argument("--meter", metavar="N/4", help="2/4, 3/4 or 4/4 (the piece's)")
+    knobs.add_argument("--bars", type=int, metavar="N", help="how many bars the piece lasts (the piece's, 24)")
+    options.add_fps(parser, "conductor.bvh and the timeline (the configuration's, 30)", default=None)
     parser.add_argument("--input", metavar="DEVICE", dest="device",
                         help="conduct what a live input device plays (a name or number, as 'anticipate beats "
                              "--input' takes; 'default': the system's default input) instead of the simulated "

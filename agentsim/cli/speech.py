@@ -9,6 +9,7 @@ from pathlib import Path
 
 from agentsim.cli import options
 from agentsim.core.errors import AgentsimError
+from agentsim.core.progress import progress
 
 DEFAULT_MODEL = Path("linear_model.json")
 
@@ -91,7 +92,7 @@ def speech_sync(args: argparse.Namespace) -> int:
         model = LinearModel.load(args.model)
     text, tts = read_text(args.text), options.backend(args.tts)
     results = []
-    for name in names:
+    for name in progress(names, "strategies", unit="strategy"):
         result = run(text, tts, name, delivery, timing=args.timing, seed=args.seed, linear_model=model)
         results.append(result)
     from dataclasses import asdict
@@ -136,9 +137,8 @@ def plot_errors(results: list[dict], path: str) -> None:
 
 
 def calibrate(args: argparse.Namespace) -> int:
-    from agentsim.speech.linear_model import calibrate as fit
-
     from agentsim.media.files import check_writable
+    from agentsim.speech.linear_model import calibrate as fit
 
     texts = None
     if args.texts:
@@ -152,10 +152,9 @@ def calibrate(args: argparse.Namespace) -> int:
 
 
 def export(args: argparse.Namespace) -> int:
+    from agentsim.media.files import check_writable
     from agentsim.speech.backend import SpeechText
     from agentsim.speech.exports import write_textgrid, write_wav
-
-    from agentsim.media.files import check_writable
 
     if not (args.wav or args.textgrid):
         raise AgentsimError("say what to write: --wav FILE.wav and/or --textgrid FILE.TextGrid")

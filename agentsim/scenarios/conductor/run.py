@@ -23,7 +23,8 @@ import time
 from pathlib import Path
 
 from agentsim.core.errors import AgentsimError
-from agentsim.media import AXIS
+from agentsim.core.progress import progress
+from agentsim.media import AXIS, GLOSSARY
 from agentsim.scenarios.conductor.config import STRATEGIES
 
 DEFAULT_OUT = "out/conductor"
@@ -52,7 +53,16 @@ def main(args: argparse.Namespace) -> int:
     from agentsim.scenarios.conductor.config import load_config
     from agentsim.scenarios.conductor.scenario import collect_metrics, listen_live, simulate, write_outputs
 
-    config = load_config(args.config)  # a bad configuration fails here, before anything runs
+    overrides = {"piece": {"tempo": getattr(args, "target_bpm", None), "meter": getattr(args, "meter", None),
+                           "bars": getattr(args, "bars", None)},
+                 "ensemble": {"start_bpm": getattr(args, "start_bpm", None)},
+                 "conductor": {"fps": getattr(args, "fps", None)}}
+    flags = {"--target-bpm": "target_bpm", "--start-bpm": "start_bpm", "--meter": "meter", "--bars": "bars",
+             "--fps": "fps"}
+    described = " ".join(f"{flag} {getattr(args, key):g}" if isinstance(getattr(args, key), float)
+                         else f"{flag} {getattr(args, key)}" for flag, key in flags.items()
+                         if getattr(args, key, None) is not None)
+    config = load_config(args.config, overrides, described)  # a bad configuration fails here, before anything runs
     out = Path(args.out)
     as_json = getattr(args, "json", False)
     table = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
@@ -77,11 +87,11 @@ def main(args: argparse.Namespace) -> int:
         write_outputs(run, metrics, out)
         _report(metrics, out, time.perf_counter() - started, table)
         if as_json:
-            print(json.dumps({**metrics, "time_axis": AXIS}))  # as metrics.json
+            print(json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}))  # as metrics.json
         return 0
     strategies = STRATEGIES if args.compare else (args.strategy or config.conductor.strategy,)
     rows = []
-    for name in strategies:
+    for name in progress(strategies, "strategies", unit="strategy"):
         started = time.perf_counter()
         run = simulate(config, name, args.seed)
         metrics = collect_metrics(run)
@@ -102,7 +112,7 @@ def main(args: argparse.Namespace) -> int:
         (out / "compare.json").write_text(json.dumps(rows, indent=2) + "\n")
         print(f"written to {out}/<strategy>/ and {out / 'compare.json'}", file=table)
     if as_json:
-        print(json.dumps(rows if args.compare else {**rows[0], "time_axis": AXIS}))  # as compare.json, metrics.json
+        print(json.dumps(rows if args.compare else {**rows[0], "time_axis": AXIS, "glossary": GLOSSARY}))  # as compare.json, metrics.json
     return 0
 
 

@@ -370,9 +370,9 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    from agentsim.media import AXIS
+    from agentsim.media import AXIS, GLOSSARY
 
-    (out / "metrics.json").write_text(json.dumps({**metrics, "time_axis": AXIS}, indent=2) + "\n")
+    (out / "metrics.json").write_text(json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}, indent=2) + "\n")
     recording = run.realizer.recording()
     with open(out / "feedback.jsonl", "w") as f:
         for item in recording.feedback:

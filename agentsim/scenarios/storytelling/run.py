@@ -43,7 +43,8 @@ from pathlib import Path
 import numpy as np
 
 from agentsim.core.errors import AgentsimError
-from agentsim.media import AXIS
+from agentsim.core.progress import progress
+from agentsim.media import AXIS, GLOSSARY
 from agentsim.scenarios.storytelling.markup import Story, StoryError, read_story
 from agentsim.scenarios.storytelling.telling import Telling, make_voice, syllable_times, tell
 
@@ -53,7 +54,7 @@ __all__ = ["STORIES_DIR", "DEFAULT_OUT", "main", "resolve_story", "load_story", 
 #: Where the shipped stories live.
 STORIES_DIR = Path(__file__).resolve().parent / "stories"
 #: Where ``agentsim run storytelling`` writes unless told otherwise.
-DEFAULT_OUT = "storytelling_out"
+DEFAULT_OUT = "out/storytelling"
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -129,7 +130,7 @@ def main(args: argparse.Namespace) -> int:
 
     strategies = list(STRATEGIES) if args.compare else [strategy]
     tellings: dict[str, Telling] = {}
-    for name in strategies:
+    for name in progress(strategies, "strategies", unit="strategy"):
         tellings[name] = tell(story, strategy=name, delivery=delivery, seed=args.seed, voice=voice,
                               anchor=args.anchor, timing=args.timing)
     telling = tellings[strategy]
@@ -147,6 +148,7 @@ def main(args: argparse.Namespace) -> int:
     metrics["stages_seconds"] = OrderedDict([("simulation", telling.wall_seconds)] + list(stages.items()))
     metrics["fps"] = args.fps
     metrics["time_axis"] = AXIS
+    metrics["glossary"] = GLOSSARY
     metrics.update(telling.extra)
     as_json = getattr(args, "json", False)
     printed = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
@@ -215,11 +217,11 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     stage."""
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.core.feedback import to_json
-    from agentsim.scenarios.storytelling.praat import export_textgrid
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_wav
     from agentsim.media.report import write_report
     from agentsim.media.tables import gesture_rows, write_csv
+    from agentsim.scenarios.storytelling.praat import export_textgrid
 
     stages: OrderedDict[str, float] = OrderedDict()
 
