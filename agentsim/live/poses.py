@@ -73,6 +73,13 @@ HOLDS = 8
 FORGET = 2 * LOOKBACK + 1.0
 #: At most this many frames are evaluated at once (a worker that fell behind catches up in steps).
 MAX_FRAMES = 90
+#: At most this share of one core goes to evaluating poses: the worker rests in proportion to what it
+#: worked, so that the realizer's thread, whose clock the feedback keeps, always gets the interpreter.
+#: (20 blocks a second of speech and gestures cost 29 ms per frame: more than a core at 30 fps.)
+SHARE = 0.25
+#: A worker this far behind (s) skips to the last half second of frames due: a viewer under a load it
+#: cannot draw gets fewer frames, counted in :attr:`LivePoses.skipped`, never a late realizer.
+LAG = 1.0
 #: A blink lasts this long (s): a window's evaluation starts this early so that one under way goes on.
 BLINK = 0.3
 #: The viewer's page and the report files it loads.
@@ -196,6 +203,32 @@ class Liveliness:
             blink.forced = [float(t) for t in blinks]
 
 
+_EVALUATORS: dict[tuple[float, int], tuple[Body, Liveliness]] = {}
+
+
+def evaluate_window(records, k0: int, k1: int, fps: float, seed: int) -> tuple[np.ndarray, int]:
+    """Joint positions (frames, points * 3) of frames ``k0`` to ``k1`` of the grid ``k / fps`` given the
+    ``records`` of what the body may be doing, and how many frames it took to evaluate them (those before
+    the window where a motion takes over a joint, :func:`frames_before`, and the start of a blink under
+    way). The body and the background drawn from ``seed`` are kept from one call to the next."""
+    key = (float(fps), int(seed))
+    if key not in _EVALUATORS:
+        _EVALUATORS[key] = (Body(), Liveliness(seed))
+    body, liveliness = _EVALUATORS[key]
+    a, b = k0 / fps, k1 / fps
+    chosen = window_records(records, a, b)
+    frames = set(range(k0, k1 + 1)) | frames_before(chosen, a, fps)
+    frames.add(max(0, k0 - int(math.ceil(BLINK * fps))))
+    frames = np.array(sorted(frames))
+    times = frames / fps
+    manager = DriverManager(body=body, seed=seed)
+    liveliness.pin(manager, float(times[0]), float(times[-1]) + 1.0)
+    stream = evaluate_poses(chosen, fps=fps, manager=manager, times=times)
+    first = int(np.searchsorted(frames, k0))
+    points = body_points(body, stream.values[first:])
+    return points.reshape(len(points), -1), len(frames)
+
+
 class LivePoses:
     """The poses of a live run, streamed: see the module's docstring.
 
@@ -218,6 +251,10 @@ class LivePoses:
         self.server: Server | None = None
         self.next_frame = 0
         self.sent_frames = 0
+        #: the evaluator process (:meth:`start_process`), or None: evaluated in the worker thread
+        self.process = None
+        #: frames skipped because the worker fell more than :data:`LAG` behind
+        self.skipped = 0
         self.costs: collections.deque = collections.deque(maxlen=2000)
         self.snapshots: collections.deque = collections.deque(maxlen=2000)
         self.error: BaseException | None = None
@@ -263,38 +300,56 @@ class LivePoses:
             self.wake.notify()
         if self.worker.is_alive():
             self.worker.join(timeout)
+        if self.process is not None:
+            self.process.shutdown(wait=False, cancel_futures=True)
+            self.process = None
 
     # ------------------------------------------------------------------------------------------- snapshot
     def take_snapshot(self, now: float) -> None:
-        """In the realizer's thread: the records the poses may need, handed to the worker."""
+        """In the realizer's thread: which blocks the poses may need, handed to the worker (nothing while
+        nobody subscribes: nothing is evaluated then). Only references are taken here, a few microseconds
+        a block; the worker reads their records (:meth:`read`)."""
         started = time.perf_counter()
-        records = self.records(now)
+        watched = self.watch(now) if self.subscribed() else None
         with self.wake:
-            self.latest = (now, records)
+            self.latest = (now, watched)
             self.wake.notify()
         self.snapshots.append(time.perf_counter() - started)
 
-    def records(self, now: float) -> list:
-        """Records of the blocks not ended or ended less than :data:`FORGET` s ago, and the latest shifts
-        of the blocks forgotten (in the realizer's thread)."""
+    def watch(self, now: float) -> tuple[list, list]:
+        """The blocks not ended or ended less than :data:`FORGET` s ago, and those forgotten since the last
+        time (whose shifts still hold a pose)."""
         runs = self.live.realizer.scheduler.all_runs
         if len(runs) > self.seen:
             self.watched += runs[self.seen:]
             self.seen = len(runs)
-        kept = []
+        kept, forgotten = [], []
         for run in self.watched:
             if run.state == "refused":
                 continue
             if run.ended_at is not None and run.ended_at < now - FORGET:
-                for record in record_behaviours(t for t in run.timed if t.behaviour.type in HOLDING):
-                    self.held[record.type].append(record)
+                forgotten.append(run)
                 continue
             kept.append(run)
         self.watched = kept
+        return list(kept), forgotten
+
+    def read(self, watched: tuple[list, list]) -> list:
+        """The records of what :meth:`watch` found: of the blocks kept, and the latest shifts of the blocks
+        forgotten (kept from then on)."""
+        kept, forgotten = watched
+        for run in forgotten:
+            for record in record_behaviours(t for t in run.timed if t.behaviour.type in HOLDING):
+                self.held[record.type].append(record)
         records = record_behaviours(t for run in kept for t in run.timed)
         for held in self.held.values():
             records += list(held)
         return records
+
+    def records(self, now: float) -> list:
+        """Records of the blocks not ended or ended less than :data:`FORGET` s ago, and the latest shifts
+        of the blocks forgotten (:meth:`watch` and :meth:`read` at once)."""
+        return self.read(self.watch(now))
 
     # ------------------------------------------------------------------------------------------- worker
     def subscribed(self) -> bool:
@@ -315,24 +370,32 @@ class LivePoses:
                     self.wake.wait(0.2)
                 if self.stopping or self.live.closing:
                     return
-                now, records = self.latest
+                now, watched = self.latest
                 self.latest = None
             try:
-                for k0, frames in self.catch_up(now, records):
+                # the blocks are read while the realizer's thread goes on with them: a block changing under
+                # the reading is read again at the next snapshot, a tenth of a second later
+                records = self.read(watched) if watched is not None else None
+                for k0, frames in self.catch_up(now, records, None if records is not None else False, LAG):
                     self.send(k0, frames)
+                    self.rest(self.costs[-1][2])
             except Exception as exc:  # a fault of the viewer's must not stop the realizer: it is kept
                 self.error = exc
                 self.next_frame = int(math.floor(now * self.fps + 1e-9)) + 1
 
-    def catch_up(self, now: float, records, subscribed: bool | None = None):
+    def catch_up(self, now: float, records, subscribed: bool | None = None, lag: float | None = None):
         """The messages due at ``now`` given a snapshot's ``records``: ``(first frame, positions)`` for the
         frames from the last one sent up to ``now``, at most :data:`MAX_FRAMES` at a time; none, and nothing
         evaluated, while nobody subscribes (``subscribed``, by default :meth:`subscribed`): the frames due
-        meanwhile are skipped."""
+        meanwhile are skipped. More than ``lag`` seconds behind, it skips to the last half second due."""
         due = int(math.floor(now * self.fps + 1e-9))
         if not (self.subscribed() if subscribed is None else subscribed):
             self.next_frame = due + 1
             return
+        if lag is not None and due - self.next_frame + 1 > lag * self.fps:
+            ahead = due - int(0.5 * self.fps) + 1
+            self.skipped += ahead - self.next_frame
+            self.next_frame = ahead
         while self.next_frame <= due:
             k0 = self.next_frame
             k1 = min(due, k0 + MAX_FRAMES - 1)
@@ -342,21 +405,28 @@ class LivePoses:
             self.next_frame = k1 + 1
             yield k0, frames
 
+    def rest(self, worked: float) -> None:
+        """Wait in proportion to ``worked`` seconds of evaluation, keeping to :data:`SHARE` of a core."""
+        deadline = time.monotonic() + worked * (1.0 - SHARE) / SHARE
+        with self.wake:  # snapshots notify it too: wait out the whole rest unless it is stopping
+            while not self.stopping and not self.live.closing and time.monotonic() < deadline:
+                self.wake.wait(deadline - time.monotonic())
+
     def evaluate(self, records, k0: int, k1: int) -> tuple[np.ndarray, int]:
-        """Joint positions (frames, points * 3) of frames ``k0`` to ``k1``, and how many frames it took."""
-        fps = self.fps
-        a, b = k0 / fps, k1 / fps
-        chosen = window_records(records, a, b)
-        frames = set(range(k0, k1 + 1)) | frames_before(chosen, a, fps)
-        frames.add(max(0, k0 - int(math.ceil(BLINK * fps))))
-        frames = np.array(sorted(frames))
-        times = frames / fps
-        manager = DriverManager(body=self.body, seed=self.seed)
-        self.liveliness.pin(manager, float(times[0]), float(times[-1]) + 1.0)
-        stream = evaluate_poses(chosen, fps=fps, manager=manager, times=times)
-        first = int(np.searchsorted(frames, k0))
-        points = body_points(self.body, stream.values[first:])
-        return points.reshape(len(points), -1), len(frames)
+        """Joint positions (frames, points * 3) of frames ``k0`` to ``k1``, and how many frames it took: in
+        the evaluator process if :meth:`start_process` started one, else here."""
+        if self.process is not None:
+            return self.process.submit(evaluate_window, records, k0, k1, self.fps, self.seed).result()
+        return evaluate_window(records, k0, k1, self.fps, self.seed)
+
+    def start_process(self) -> None:
+        """Evaluate in a process of its own from now on (on another core, and not holding this one's
+        interpreter lock, which the realizer's thread needs to keep time); it is started and warmed here."""
+        import concurrent.futures
+        import multiprocessing
+
+        self.process = concurrent.futures.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        self.process.submit(evaluate_window, [], 0, 0, self.fps, self.seed).result()
 
     def send(self, k0: int, frames: np.ndarray) -> None:
         """Hand a message of poses to the server's loop, to be sent when its last frame is due."""
@@ -389,7 +459,7 @@ class LivePoses:
         sent = sum(c[0] for c in costs)
         evaluated = sum(c[1] for c in costs)
         seconds = sum(c[2] for c in costs)
-        return {"messages": len(costs), "frames": sent, "evaluated": evaluated,
+        return {"messages": len(costs), "frames": sent, "evaluated": evaluated, "skipped": self.skipped,
                 "ms_per_message": 1000 * seconds / max(len(costs), 1),
                 "ms_per_frame": 1000 * seconds / max(sent, 1),
                 "ms_max": 1000 * max((c[2] for c in costs), default=0.0),

@@ -55,6 +55,7 @@ class Service:
             from agentsim.live.poses import LivePoses
 
             self.poses = LivePoses(self.live, fps)
+            self.poses.start_process()  # poses are evaluated on another core, never in the realizer's way
             files = self.poses.files()
         self.server = Server(self.live, host, port, files=files)
         if self.poses is not None:
