@@ -65,7 +65,9 @@ def read_text(path: str | None) -> str:
         from agentsim.speech.linear_model import TEXTS_DIR
 
         return (TEXTS_DIR / "clocks.txt").read_text(encoding="utf-8")
-    p = Path(path)
+    from agentsim.examples import resolve
+
+    p = resolve(path)
     if not p.is_file():
         raise AgentsimError(f"no text file {path!r}")
     text = p.read_text(encoding="utf-8")
