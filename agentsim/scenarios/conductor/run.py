@@ -21,9 +21,7 @@ import time
 from pathlib import Path
 
 from agentsim.core.errors import AgentsimError
-from agentsim.scenarios.conductor.config import STRATEGIES
-
-DEFAULT_OUT = "out/conductor"
+from agentsim.scenarios.conductor.names import STRATEGIES
 
 
 def _summary_row(m: dict) -> str:

@@ -48,6 +48,7 @@ from agentsim.animation.scene import DEFAULT_SCENE
 from agentsim.bml.speech_text import normalize_space
 from agentsim.bml.vocabulary import BML_NAMESPACE
 from agentsim.core.errors import AgentsimError
+from agentsim.scenarios.storytelling.names import ANCHORS  # where a gesture's sync point is tied (compile_bml)
 from agentsim.speech.backend import Utterance
 from agentsim.speech.linear_model import written_words
 
@@ -61,8 +62,6 @@ KINDS = {"beat": "gesture", "point": "pointing", "icon": "gesture", "nod": "head
 HANDS = {"left": "LEFT_HAND", "right": "RIGHT_HAND", "both": "BOTH_HANDS"}
 #: Gesture lexemes an ``icon`` may name: the stroke forms of the motion module other than the beat.
 ICON_LEXEMES = tuple(sorted(k for k in GESTURE_FORMS if k not in ("BEAT", "DEFAULT")))
-#: Where a gesture's sync point is tied (see :func:`compile_bml`).
-ANCHORS = ("stress", "offset", "word")
 
 _TAG = re.compile(r"\[([^\[\]\n]*)\]")
 _SCENE = re.compile(r"^(?P<name>[A-Za-z_][\w\-]*)\s*[:=]?\s+(?P<x>\S+)[\s,]+(?P<y>\S+)[\s,]+(?P<z>\S+)\s*$")
