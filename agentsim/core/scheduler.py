@@ -255,7 +255,7 @@ class Scheduler(Composition, Interruption, Retiming):
             self.end_if_done(run, time)
 
     def end_if_done(self, run: BlockRun, time: float) -> None:
-        if run.state == "running" and not run.live():
+        if run.state == "running" and not run.has_live():
             self.end(run, time)
 
     def end(self, run: BlockRun, time: float) -> None:

@@ -37,6 +37,7 @@ tells it; :meth:`Story.to_markup` writes the format back.
 
 from __future__ import annotations
 
+import bisect
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -263,8 +264,8 @@ def parse_story(source: str, name: str = "<story>", title: str = "") -> Story:
     gestures: list[Gesture] = []
     for offset, tag, line_no, col in tags:
         at = positions[offset]
-        k = next((i for i, s in enumerate(starts) if s >= at), None)
-        if k is None:
+        k = bisect.bisect_left(starts, at)  # the words' starts are in order
+        if k == len(starts):
             raise StoryError(f"{name}:{line_no}:{col}: the tag [{tag}] stands in front of no word")
         gestures.append(gesture_from_tag(tag, k, targets, f"{name}:{line_no}:{col}", line_no, col))
     gestures.sort(key=lambda g: g.word)  # stable: tags on one word keep their order
