@@ -62,11 +62,14 @@ class PoseStream:
         """Values of one DOF over all frames."""
         return self.values[:, self.channels.index(name)]
 
-    def position(self, joint: str) -> np.ndarray:
-        """World positions (frames, 3) of a tracked joint (or of any joint, computed on demand)."""
+    def position(self, joint: str, frames: np.ndarray | None = None) -> np.ndarray:
+        """World positions (frames, 3) of a tracked joint (or of any joint, computed on demand), of every
+        frame or of the frames (indices) given."""
         if joint in self.joints:
-            return self.positions[:, self.joints.index(joint)]
-        return self.body.forward_kinematics(self.values, [joint])[joint][1]
+            column = self.positions[:, self.joints.index(joint)]
+            return column if frames is None else column[frames]
+        values = self.values if frames is None else self.values[frames]
+        return self.body.forward_kinematics(values, [joint])[joint][1]
 
     def forward(self, joint: str) -> np.ndarray:
         """World direction (frames, 3) of a joint's local +Z axis (where the face or an eye points)."""

@@ -16,8 +16,8 @@ import math
 import re
 from dataclasses import dataclass, field
 
-from agentsim.animation.arms import GESTURE_FORMS
-from agentsim.animation.pose import POSTURES
+# The body's lexicons (agentsim.animation.arms and .pose, with numpy) are imported where foreign vocabulary
+# is mapped or noted: reading BML 1.0 does without them.
 from agentsim.bml import lexemes
 from agentsim.bml.tree import FOREST, Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
@@ -422,6 +422,8 @@ class Adapter:
             return "head"
         if local == "gesture" and instance and not attrs.get("lexeme"):
             attrs.pop("type")
+            from agentsim.animation.arms import GESTURE_FORMS
+
             attrs["lexeme"] = family if family in GESTURE_FORMS else instance.strip().upper()
             self.notes.add("Greta's lexicon key type=\"class=instance\" read as the lexeme")
         if local == "gesture" and "hand" in attrs and "mode" not in attrs:
@@ -461,6 +463,8 @@ class Adapter:
 
     def map_animation(self, node: Node) -> str:
         """SmartBody/NVBG ``<animation name>``: a gesture of the closest lexeme, or a beat, timing kept."""
+        from agentsim.animation.arms import GESTURE_FORMS
+
         name = node.attrs.pop("name", "")
         low = name.lower()
         lexeme = next((lex for word, lex in CLIP_WORDS if word in low and lex in GESTURE_FORMS), "BEAT")
@@ -473,6 +477,8 @@ class Adapter:
     def map_body(self, node: Node) -> str | None:
         """SmartBody's ``<body posture>``: a posture shift (a lean if the clip's name says so, else a weight
         shift)."""
+        from agentsim.animation.pose import POSTURES
+
         name = node.attrs.pop("posture", None)
         if name is None:
             return None
@@ -484,6 +490,8 @@ class Adapter:
 
     def map_torso(self, node: Node) -> str:
         """Greta's ``<torso>``: a posture shift."""
+        from agentsim.animation.pose import POSTURES
+
         self.notes.add("Greta's <torso> played as a posture shift")
         lexeme = node.attrs.pop("lexeme", "") or node.attrs.pop("type", "")
         reference = next((c.text().strip() for c in node.elements() if c.local == "description"), "")

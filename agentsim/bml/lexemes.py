@@ -9,9 +9,6 @@ from __future__ import annotations
 
 from typing import Iterable, Mapping
 
-from agentsim.animation.arms import GESTURE_FORMS, conducting_meter
-from agentsim.animation.pose import FACE_LEXEMES, FACS_UNITS, POSTURES
-
 #: The lexemes of ``<head>`` (BML 1.0's).
 HEAD_LEXEMES = ("NOD", "SHAKE", "TILT")
 #: Gestures that are signals to the world rather than forms of their own: the conductor's ensemble plays
@@ -23,20 +20,26 @@ def fallback(tag: str, attrs: Mapping[str, str]) -> tuple[str, str] | None:
     """(the lexeme as written, what plays instead) if a behaviour's lexeme has no motion of its own here;
     None if it has one, names none, or its type has no lexemes."""
     lexeme = str(attrs.get("lexeme", "")).strip()
+    if tag == "head":
+        return None if not lexeme or lexeme.upper() in HEAD_LEXEMES else (lexeme, "a nod")
+    if tag not in ("faceFacs", "face", "faceLexeme", "faceShift", "gesture", "posture", "postureShift"):
+        return None
+    if not lexeme and tag != "faceFacs":
+        return None
+    # the body's lexicons come with numpy: imported only when a behaviour has a lexeme to look up there
+    from agentsim.animation.arms import GESTURE_FORMS, conducting_meter
+    from agentsim.animation.pose import FACE_LEXEMES, FACS_UNITS, POSTURES
+
     if tag == "faceFacs":
         au = str(attrs.get("au", "")).strip()
         known = au.isdigit() and int(au) in FACS_UNITS
         return None if known else (f"AU{au}", "no motion")
-    if not lexeme:
-        return None
     if tag in ("face", "faceLexeme", "faceShift"):
         return None if lexeme.upper() in FACE_LEXEMES else (lexeme, "no motion")
     if tag == "gesture":
         known = (lexeme.upper() in GESTURE_FORMS or lexeme.upper() in SIGNALS
                  or conducting_meter(lexeme.upper()) is not None)
         return None if known else (lexeme, "a generic gesture")
-    if tag == "head":
-        return None if lexeme.upper() in HEAD_LEXEMES else (lexeme, "a nod")
     if tag in ("posture", "postureShift"):
         return None if lexeme.upper() in POSTURES else (lexeme, "a weight shift")
     return None

@@ -25,6 +25,7 @@ from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_
                                      EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
 from agentsim.core.errors import BMLError
+from agentsim.core.gcpause import paused_collection
 
 #: Largest time or offset (seconds) accepted in a reference; beyond it a behaviour is refused.
 MAX_TIME = 1.0e6
@@ -74,20 +75,31 @@ def parse_ref(text: str, line: int | None = None, column: int | None = None, len
         raise BMLError(exc.reason, line, column) from None
 
 
+# The usual form (plain names, an offset with no exponent and no spaces) read without backtracking; what it
+# reads, the general pattern reads the same way.
+_PLAIN_REF = re.compile(r"([A-Za-z_]\w*):([A-Za-z_]\w*)(?::([A-Za-z_]\w*))?(?:([+-])(\d+(?:\.\d*)?))?\Z")
+
+
 @functools.lru_cache(maxsize=65536)
 def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
-    if _ABSOLUTE.match(raw):
-        value = float(raw)
-        _check_magnitude(value, raw)
-        return SyncRef("absolute", offset=value, text=raw)
-    match = _REF.match(raw) or (_LENIENT_REF.match(raw) if lenient else None)
-    if not match:
-        raise BMLError(f"invalid sync reference {raw!r}: expected a number, behaviour:sync[+-offset], "
-                       "block:behaviour:sync or anticipators:id:sync")
-    parts = match.group("path").split(":")
+    plain = _PLAIN_REF.match(raw)
+    if plain is not None:
+        first, second, third, sign, number = plain.groups()
+        parts = [first, second] if third is None else [first, second, third]
+    else:
+        if _ABSOLUTE.match(raw):
+            value = float(raw)
+            _check_magnitude(value, raw)
+            return SyncRef("absolute", offset=value, text=raw)
+        match = _REF.match(raw) or (_LENIENT_REF.match(raw) if lenient else None)
+        if not match:
+            raise BMLError(f"invalid sync reference {raw!r}: expected a number, behaviour:sync[+-offset], "
+                           "block:behaviour:sync or anticipators:id:sync")
+        parts = match.group("path").split(":")
+        sign, number = match.group("sign"), match.group("offset")
     offset = 0.0
-    if match.group("offset") is not None:
-        offset = float(match.group("offset")) * (-1.0 if match.group("sign") == "-" else 1.0)
+    if number is not None:
+        offset = float(number) * (-1.0 if sign == "-" else 1.0)
         _check_magnitude(offset, raw)
     if len(parts) == 3 and parts[0] == "anticipators":
         return SyncRef("anticipator", offset=offset, anticipator=parts[1], sync=parts[2], text=raw)
@@ -110,7 +122,8 @@ class Refused:
 
 def parse_bml(text: str | bytes) -> Block:
     """Parse one BML 1.0 block, strictly. Raises :class:`BMLError` if the block as a whole cannot be used."""
-    return warn_lexemes(read_block(read_tree(text), None))
+    with paused_collection():
+        return warn_lexemes(read_block(read_tree(text), None))
 
 
 def warn_lexemes(block: Block) -> Block:
@@ -132,6 +145,11 @@ def parse_document(text: str | bytes, strict: bool = False,
     ``NONSTANDARD_BML`` warning listing the adaptations, first among its warnings. ``name_block`` names the
     blocks that have no id (by default ``bml1``, ``bml2``, ... skipping the ids the document uses).
     """
+    with paused_collection():
+        return _parse_document(text, strict, name_block)
+
+
+def _parse_document(text: str | bytes, strict: bool, name_block: Callable[[], str] | None) -> list[Block | Refused]:
     if strict:
         try:
             return [parse_bml(text)]
@@ -331,24 +349,30 @@ class _Reader:
         return True
 
     def constraint(self, node: Node, required: bool) -> None:
+        lenient = self.lenient
+        owner = node.attrs.get("id", "")
+        constraints = self.block.constraints
         for child in node.elements():
             kind = child.local
             if kind not in ("synchronize", "before", "after"):
                 self.warn("PARSING_FAILURE", f"unknown constraint <{child.tag}> ignored", child)
                 continue
             refs = []
-            for sync in child.elements():
-                if sync.local != "sync" or "ref" not in sync.attrs:
+            for sync in child.children:
+                if isinstance(sync, str):
+                    continue
+                attrs = sync.attrs
+                if sync.local != "sync" or "ref" not in attrs:
                     self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
                     continue
                 try:
-                    refs.append(parse_ref(sync.attrs["ref"], sync.line, sync.column, self.lenient))
+                    refs.append(parse_ref(attrs["ref"], sync.line, sync.column, lenient))
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
             anchor = None
             if "ref" in child.attrs:
                 try:
-                    anchor = parse_ref(child.attrs["ref"], child.line, child.column, self.lenient)
+                    anchor = parse_ref(child.attrs["ref"], child.line, child.column, lenient)
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{exc.reason}; constraint ignored", child)
                     continue
@@ -358,5 +382,4 @@ class _Reader:
             if kind == "synchronize" and anchor is not None:
                 refs.insert(0, anchor)
                 anchor = None
-            self.block.constraints.append(Constraint(kind, refs, anchor, node.attrs.get("id", ""), required,
-                                                     line=child.line, column=child.column))
+            constraints.append(Constraint(kind, refs, anchor, owner, required, line=child.line, column=child.column))

@@ -98,6 +98,8 @@ def add_outputs(parser: argparse.ArgumentParser) -> None:
 
 def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sources=(), beat_times=None) -> None:
     """Write the files ``args`` asks for from a finished run, on its time axis."""
+    if not any((args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report)):
+        return  # nothing asked for: nothing to load
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_npz, write_textgrid, write_wav
     from agentsim.media.tables import gesture_rows, write_csv

@@ -23,8 +23,7 @@ def add_parsers(commands) -> None:
 
 
 def add_conductor(scenarios) -> argparse.ArgumentParser:
-    from agentsim.scenarios.conductor.config import STRATEGIES
-    from agentsim.scenarios.conductor.run import DEFAULT_OUT
+    from agentsim.scenarios.conductor.names import DEFAULT_OUT, STRATEGIES
 
     parser = scenarios.add_parser(
         "conductor", help="the virtual orchestra conductor leads a simulated ensemble back to tempo",
@@ -77,8 +76,7 @@ def run_conductor(args: argparse.Namespace) -> int:
 
 
 def add_storytelling(scenarios) -> argparse.ArgumentParser:
-    from agentsim.scenarios.storytelling.markup import ANCHORS
-    from agentsim.scenarios.storytelling.run import DEFAULT_OUT
+    from agentsim.scenarios.storytelling.names import ANCHORS, DEFAULT_OUT
 
     parser = scenarios.add_parser(
         "storytelling", help="tell a story with gestures on the stressed syllables and measure the sync",

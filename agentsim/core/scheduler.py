@@ -20,6 +20,7 @@ from agentsim.core.block import Block
 from agentsim.core.composition import Composition
 from agentsim.core.engine import Engine, EngineContext
 from agentsim.core.errors import ScheduleError
+from agentsim.core.gcpause import paused_collection
 from agentsim.core.interruption import Interruption
 from agentsim.core.pegboard import PegBoard, TimePeg
 from agentsim.core.recording import BlockRecord, DropRecord, Recording, record_behaviours
@@ -128,6 +129,10 @@ class Scheduler(Composition, Interruption, Retiming):
 
     def submit(self, block: Block, source: str = "") -> BlockRun | None:
         """Submit one parsed block now. Returns its run, or None if it was refused."""
+        with paused_collection():
+            return self._submit(block, source)
+
+    def _submit(self, block: Block, source: str) -> BlockRun | None:
         where = f" in {source}" if source else ""
         character = block.character_id
         for w in block.warnings:
@@ -250,7 +255,7 @@ class Scheduler(Composition, Interruption, Retiming):
             self.end_if_done(run, time)
 
     def end_if_done(self, run: BlockRun, time: float) -> None:
-        if run.state == "running" and not run.live():
+        if run.state == "running" and not run.has_live():
             self.end(run, time)
 
     def end(self, run: BlockRun, time: float) -> None:

@@ -270,6 +270,8 @@ class BlockRun:
     # the predicted ends of its behaviours, as a max-heap with lazy deletion: (-end, version, timed)
     _ends: list[tuple[float, int, TimedBehaviour]] = field(default_factory=list, repr=False)
     _end_version: dict[TimedBehaviour, int] = field(default_factory=dict, repr=False)
+    _live_from: int = field(default=0, repr=False, compare=False)  # see has_live()
+    _live_of: tuple[int, int] | None = field(default=None, repr=False, compare=False)
 
     @property
     def id(self) -> str:
@@ -294,3 +296,18 @@ class BlockRun:
     def live(self) -> list[TimedBehaviour]:
         """Its behaviours that are planned or playing, in document order."""
         return [t for t in self.timed if t.live]
+
+    def has_live(self) -> bool:
+        """Whether any of its behaviours is planned or playing.
+
+        A behaviour that is no longer live never is again, so the search goes on from the first one
+        found live the last time (from the start again if the list was changed).
+        """
+        timed = self.timed
+        start = self._live_from if self._live_of == (id(timed), len(timed)) else 0
+        for i in range(start, len(timed)):
+            if timed[i].live:
+                self._live_from, self._live_of = i, (id(timed), len(timed))
+                return True
+        self._live_from, self._live_of = len(timed), (id(timed), len(timed))
+        return False

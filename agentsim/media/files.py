@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Iterable
+from typing import TYPE_CHECKING, Iterable
 
 
 from agentsim.core.errors import UsageError
 from agentsim.media import AXIS
-from agentsim.media.audio import Track
+if TYPE_CHECKING:  # checking where to write needs no audio
+    from agentsim.media.audio import Track
 
 
 def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[str | Path | None] = ()) -> None:

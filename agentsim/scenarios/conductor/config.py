@@ -45,6 +45,7 @@ from agentsim.core.errors import AgentsimError
 from agentsim.music.instruments import DRUM_CHANNEL, DRUM_KIT, PARTS, default_part, gm_program, program_name
 from agentsim.music.score import DYNAMICS_DB
 from agentsim.music.tempo import Meter, TempoChange, TempoMap
+from agentsim.scenarios.conductor.names import STRATEGIES
 
 HERE = Path(__file__).resolve().parent
 PIECES_DIR = HERE / "pieces"
@@ -53,7 +54,6 @@ DEFAULT_CONFIG = CONFIGS_DIR / "default.toml"
 
 #: Meters with conducting patterns (beats per bar).
 METER_BEATS = (2, 3, 4)
-STRATEGIES = ("follow", "target", "lead", "best")
 
 
 def _fail(where: str, message: str) -> AgentsimError:

@@ -25,9 +25,7 @@ from pathlib import Path
 from agentsim.core.errors import AgentsimError
 from agentsim.core.progress import progress
 from agentsim.media import AXIS, GLOSSARY
-from agentsim.scenarios.conductor.config import STRATEGIES
-
-DEFAULT_OUT = "out/conductor"
+from agentsim.scenarios.conductor.names import STRATEGIES
 
 
 def _summary_row(m: dict) -> str:

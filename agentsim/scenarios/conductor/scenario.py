@@ -359,8 +359,9 @@ def run_tempo_figure(run: Run, metrics: dict):
                         events, first_index=run.extra["first_index"], onsets=run.extra["onsets"])
 
 
-def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True) -> Path:
-    """Write the run's files into the folder ``out`` (created if needed)."""
+def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True) -> Path:
+    """Write the run's files into the folder ``out`` (created if needed); ``pictures``: the timeline
+    pictures too, ``plots``: any picture at all (``tempo.png`` and the timeline)."""
     from agentsim.animation import evaluate_poses, plot_timelines, write_bvh
     from agentsim.core.feedback import to_json
     from agentsim.media.audio import run_track
@@ -387,6 +388,8 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     write_csv(out / "gestures.csv", gestures)
     write_report(out / "report.html", recording=recording, stream=stream, track=track, gestures=gestures,
                  title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})")
+    if not plots:
+        return out
     run_tempo_figure(run, metrics).savefig(out / "tempo.png")
     if pictures:
         plot_timelines(recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW,

@@ -46,6 +46,7 @@ from agentsim.core.errors import AgentsimError
 from agentsim.core.progress import progress
 from agentsim.media import AXIS, GLOSSARY
 from agentsim.scenarios.storytelling.markup import Story, StoryError, read_story
+from agentsim.scenarios.storytelling.names import DEFAULT_OUT
 from agentsim.scenarios.storytelling.telling import Telling, make_voice, syllable_times, tell
 
 __all__ = ["STORIES_DIR", "DEFAULT_OUT", "main", "resolve_story", "load_story", "shipped_stories", "write_outputs",
@@ -53,8 +54,6 @@ __all__ = ["STORIES_DIR", "DEFAULT_OUT", "main", "resolve_story", "load_story", 
 
 #: Where the shipped stories live.
 STORIES_DIR = Path(__file__).resolve().parent / "stories"
-#: Where ``agentsim run storytelling`` writes unless told otherwise.
-DEFAULT_OUT = "out/storytelling"
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -212,9 +211,9 @@ def _clean(value):
 
 
 def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float = 30.0,
-                  seed: int = 0) -> "OrderedDict[str, float]":
+                  seed: int = 0, plots: bool = True) -> "OrderedDict[str, float]":
     """Write a telling's files (all but ``metrics.json``) to ``out``; returns the wall seconds of each
-    stage."""
+    stage. ``plots``: draw the timeline and sync-error pictures too."""
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.core.feedback import to_json
     from agentsim.media.audio import run_track
@@ -256,9 +255,10 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     write_report(out / "report.html", recording=telling.recording, stream=stream, track=track, gestures=gestures,
                  title=f"{telling.story.title} (strategy {telling.strategy})")
     t = stage("report", t)
-    plot_window(telling, out / "timeline.png", stream, window)
-    plot_errors(telling, out / "sync_errors.png")
-    stage("plots", t)
+    if plots:
+        plot_window(telling, out / "timeline.png", stream, window)
+        plot_errors(telling, out / "sync_errors.png")
+        stage("plots", t)
     return stages
 
 

@@ -31,7 +31,6 @@ Times are seconds from the start of the utterance's audio.
 
 from __future__ import annotations
 
-import bisect
 import hashlib
 import json
 import os
@@ -69,13 +68,11 @@ def default_cache_dir() -> Path:
 
 def word_after(utterance: Utterance, offset: int) -> int | None:
     """Index of the first word of ``utterance`` starting at or after character ``offset`` (None: none)."""
-    starts = [w.char_start for w in utterance.words]
-    k = bisect.bisect_left(starts, offset)
-    return k if k < len(starts) else None
+    return utterance.word_after(offset)
 
 
 def _phonemes_of(utterance: Utterance, k: int) -> list[Phoneme]:
-    return [p for p in utterance.phonemes if p.word_index == k]
+    return utterance.phonemes_of(k)
 
 
 def stressed_onset(utterance: Utterance, k: int) -> tuple[float, bool]:
