@@ -4,6 +4,7 @@ strategy and timing, seed, output, frame rate and anticipators, with what turns 
 from __future__ import annotations
 
 import argparse
+import math
 
 from agentsim.core.errors import AgentsimError, UsageError
 from agentsim.speech.delivery import CONDITIONS
@@ -99,8 +100,10 @@ def _metronome(text: str) -> tuple[float, float]:
         start = float(parts[1]) if len(parts) > 1 else 0.0
     except (ValueError, IndexError):
         raise argparse.ArgumentTypeError(f"expected BPM[,START], got {text!r}") from None
-    if not bpm > 0:
-        raise argparse.ArgumentTypeError("the metronome tempo must be positive")
+    if not (bpm > 0 and math.isfinite(bpm)):
+        raise argparse.ArgumentTypeError(f"the metronome tempo must be a positive, finite number of BPM, got {parts[0]!r}")
+    if not math.isfinite(start):
+        raise argparse.ArgumentTypeError(f"the metronome's first beat must be a finite time, got {parts[1]!r}")
     return bpm, start
 
 

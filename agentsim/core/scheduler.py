@@ -86,6 +86,7 @@ class Scheduler(Composition, Interruption, Retiming):
         self.engines: dict[str, Engine] = {}  # behaviour type -> engine
         self.engine_list: list[Engine] = []
         self.anticipators: dict[str, object] = {}
+        self.fault_counts: dict[str, int] = {}  # anticipator id -> faults refused
         self.runs: list[BlockRun] = []  # not yet ended, in submission order
         self.all_runs: list[BlockRun] = []
         self.drops: list[DropRecord] = []
@@ -108,6 +109,21 @@ class Scheduler(Composition, Interruption, Retiming):
     # ------------------------------------------------------------------ anticipators
     def add_anticipator(self, anticipator) -> None:
         self.anticipators[anticipator.id] = anticipator
+        anticipator.report = self.anticipator_fault
+
+    #: Most warnings about one anticipator's faults; after them its faults are only counted.
+    MAX_FAULT_WARNINGS = 100
+
+    def anticipator_fault(self, anticipator, sync_id: str, description: str) -> None:
+        """An anticipator did something that was refused (see :mod:`~agentsim.core.anticipator`): warn."""
+        counts = self.fault_counts
+        n = counts[anticipator.id] = counts.get(anticipator.id, 0) + 1
+        if n > self.MAX_FAULT_WARNINGS:
+            return
+        if n == self.MAX_FAULT_WARNINGS:
+            description += f" (further faults of anticipator {anticipator.id!r} are not reported)"
+        target = f"anticipators:{anticipator.id}" + (f":{sync_id}" if sync_id else "")
+        self.warn(target, "IMPOSSIBLE_TO_SCHEDULE", description, "agent")
 
     def anticipator_peg(self, anticipator_id: str, sync_id: str) -> TimePeg:
         """The anticipator peg BML calls ``anticipators:<id>:<sync>``; ScheduleError if there is none."""
@@ -139,7 +155,7 @@ class Scheduler(Composition, Interruption, Retiming):
             return None
         if block.composition == "REPLACE":
             for run in list(self.runs):
-                self.cut(run)
+                self.cut(run, block.id)
         now = self.env.now
         run = BlockRun(block, self.board.new_block_peg(block.id, now), self.env.event())
         self.link(run)
@@ -261,9 +277,17 @@ class Scheduler(Composition, Interruption, Retiming):
             self.runs.remove(run)
         run.ended.succeed()
 
-    def cut(self, run: BlockRun) -> None:
-        """End a block now (composition REPLACE): its behaviours stop where they are."""
+    def cut(self, run: BlockRun, by: str = "") -> None:
+        """End a block now (composition REPLACE): its behaviours stop where they are.
+
+        Every behaviour cut is said in an INTERRUPTED warning; one that had started also gets its end, now.
+        """
         now = self.env.now
+        character = run.block.character_id
+        cause = f"its block was replaced by {by}" if by else "its block was replaced"
+        if run.state == "pending":
+            self.log.send(fb.block_progress(run.id, "start", now, character))
+            run.state = "running"
         for timed in run.live():
             started = timed.state == "active" and timed.passed[0] is not None
             timed.state = "dropped"
@@ -271,10 +295,14 @@ class Scheduler(Composition, Interruption, Retiming):
             if started:  # what it makes (its sound) stops here too
                 timed.engine.stopped(timed, now)
             timed.engine.remove(timed)
-            self.drops.append(DropRecord(run.id, timed.id, now, "INTERRUPTED", "its block was replaced"))
-        if run.state == "pending":
-            self.log.send(fb.block_progress(run.id, "start", now, run.block.character_id))
-            run.state = "running"
+            self.drops.append(DropRecord(run.id, timed.id, now, "INTERRUPTED", cause))
+            self.warn(f"{run.id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {cause}; "
+                      + ("stopped at once" if started else "it will not start"), character, [timed.id])
+            if started:
+                last = len(timed.sync_ids) - 1
+                timed.passed[last] = now
+                self.log.send(fb.sync_point_progress(run.id, timed.id, timed.sync_ids[last], now - run.block_peg.time,
+                                                     now, character))
         self.end(run, now)
 
     def drop(self, timed: TimedBehaviour, reason: str) -> None:

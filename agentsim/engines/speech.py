@@ -319,7 +319,14 @@ class SpeechEngine(Engine):
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
         if index == 0:
             self.apply_rate(timed, time)
-            if self.config.strategy is None:
+            if self.config.strategy is not None and not self.followable(timed):
+                self.context.blocks.warn(f"{timed.block_id}:{timed.id}", "IMPOSSIBLE_TO_SCHEDULE",
+                                         f"{timed.id}: the speech has no words, so no progress events for the "
+                                         f"{self.config.strategy!r} strategy to follow; it plays as planned",
+                                         [timed.id])
+                self.take_timing(timed, time)
+                self._started.append((timed, self.planner.utterance(timed.behaviour), time, None))
+            elif self.config.strategy is None:
                 self.take_timing(timed, time)
                 self._started.append((timed, self.planner.utterance(timed.behaviour), time, None))
             else:
@@ -331,6 +338,12 @@ class SpeechEngine(Engine):
                 for listener in self.listeners:
                     listener.sound_started(heard)
         super().sync_passed(timed, index, time)
+
+    def followable(self, timed: TimedBehaviour) -> bool:
+        """Whether an animator-time strategy can follow the speech: it has words to make progress events."""
+        if self.config.timing == "linear":
+            return True  # planned from its text's words (a speech without any was not planned)
+        return bool(self.planner.utterance(timed.behaviour).words)
 
     def stopped(self, timed: TimedBehaviour, now: float) -> None:
         """An interruption stopped the speech at ``now``: its audio ends there, its events stop."""

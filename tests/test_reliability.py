@@ -1,0 +1,236 @@
+"""Reliability: nothing a document, an anticipator or a long run does may stop the realizer or lose feedback.
+
+The reproducers of the reliability issue, each ending with the run complete, a warning naming the cause,
+and (through the command line) exit status 0 with every feedback of the good files.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from agentsim.anticipators.metronome import Metronome
+from agentsim.bml.parser import MAX_BEHAVIOURS, MAX_DOCUMENT, guess_block_id, parse_document
+from agentsim.bml.tree import MAX_DEPTH
+from agentsim.core.block import Block
+from agentsim.engines.speech import SpeechConfig
+from agentsim.realizer import Realizer
+from agentsim.speech.animator_time import STRATEGIES
+
+from helpers import realize
+
+NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
+ROOT = Path(__file__).resolve().parent.parent
+GOOD = f'<bml {NS} id="good"><head id="h" lexeme="NOD"/><gesture id="g" lexeme="BEAT" stroke="1"/></bml>'
+
+
+def doc(body: str, block_id: str = "b", attrs: str = "") -> str:
+    return f'<bml {NS} id="{block_id}" {attrs}>{body}</bml>'
+
+
+def warnings_of(r) -> list[tuple[str, str, str]]:
+    return [(w["id"], w["warningType"], w["description"]) for w in r.warnings]
+
+
+def completes_good_after(r) -> None:
+    """The good block submitted after the bad one ran whole."""
+    assert "good:h:end" in r.glob and "good:g:stroke" in r.glob
+    assert [b["id"] for b in r.blocks if b["id"].startswith("good:")] == ["good:start", "good:end"]
+
+
+# ---------------------------------------------------------------------- documents that raised
+@pytest.mark.parametrize("bad, cause", [
+    (doc('<head id="h" lexeme="NOD"/>', block_id="h\ud800"), "not valid Unicode"),
+    ('<?xml version="1.0" encoding="bogus"?>' + doc('<head id="h" lexeme="NOD"/>'), "unknown encoding: bogus"),
+    (doc("<required>" * 1000 + '<head id="h" lexeme="NOD"/>' + "</required>" * 1000),
+     f"nested more than {MAX_DEPTH} deep"),
+    ("<bml" * 16000, "malformed XML"),
+], ids=["lone surrogate", "bogus encoding", "deep nesting", "many unclosed bml"])
+def test_a_document_that_cannot_be_read_is_refused_and_the_next_one_runs(bad, cause):
+    r = realize(bad, GOOD)
+    ((target, kind, description),) = warnings_of(r)
+    assert kind == "PARSING_FAILURE" and cause in description and description.startswith("block refused")
+    completes_good_after(r)
+
+
+@pytest.mark.parametrize("ref, cause", [
+    ("anticipators:metronome:beat" + "9" * 400, "is 427 characters long (at most 256)"),
+    ("anticipators:metronome:beat" + "9" * 5000, "is 5027 characters long (at most 256)"),
+    ("anticipators:metronome:beat" + "9" * 40, "a number in it has more than 32 digits"),
+    ("2+" + "9" * 40, "a number in it has more than 32 digits"),
+    ("anticipators:metronome:beat" + "9" * 20, "has no sync point 'beat99999999999999999999'"),
+])
+def test_huge_numbers_in_a_reference_lose_only_their_behaviour(ref, cause):
+    r = realize(doc(f'<gesture id="g" lexeme="BEAT" stroke="{ref}"/><head id="h" lexeme="NOD"/>'), GOOD,
+                anticipators=[Metronome()])
+    ((target, kind, description),) = warnings_of(r)
+    assert target == "b:g" and cause in description
+    assert "b:h:end" in r.glob and "b:g:start" not in r.glob
+    completes_good_after(r)
+
+
+def test_a_dtd_attribute_default_is_not_applied():
+    text = ('<?xml version="1.0"?><!DOCTYPE bml [<!ATTLIST bml id CDATA "fromdtd">'
+            f'<!ATTLIST head stroke CDATA "anticipators:metronome:beat{"9" * 400}">]>'
+            f'<bml {NS}><head id="h" lexeme="NOD"/></bml>')
+    (strict,) = parse_document(text, strict=True)
+    assert strict.error.reason == "the <bml> block has no id"
+    (lenient,) = parse_document(text)
+    assert lenient.id == "bml1" and lenient.behaviours[0].refs == {}
+
+
+@pytest.mark.parametrize("strategy", sorted(STRATEGIES))
+def test_a_speech_without_words_under_an_animator_time_strategy_plays_as_planned(strategy):
+    r = realize(doc('<speech id="s"><text>...</text></speech><head id="h" lexeme="NOD"/>'), GOOD,
+                speech=SpeechConfig(strategy=strategy))
+    ((target, kind, description),) = warnings_of(r)
+    assert target == "b:s" and kind == "IMPOSSIBLE_TO_SCHEDULE"
+    assert description == (f"s: the speech has no words, so no progress events for the {strategy!r} strategy to "
+                           "follow; it plays as planned")
+    assert r.glob["b:s:start"] == 0.0 and "b:s:end" in r.glob and "b:h:end" in r.glob
+    completes_good_after(r)
+
+
+@pytest.mark.parametrize("strategy", ["chang-naive", "skip-70ms", "best"])
+def test_an_appended_block_tied_inside_itself_after_a_speech_gets_finite_times(strategy):
+    r = realize(doc('<speech id="s"><text>Hello there my friend, how are you today?</text></speech>'),
+                doc('<faceLexeme id="f" lexeme="smile"/><gesture id="g" lexeme="BEAT" start="f:end+1"/>', "b2",
+                    'composition="APPEND"'), at=[0, 0.5], speech=SpeechConfig(strategy=strategy))
+    assert not r.warnings
+    assert r.glob["b2:g:start"] == pytest.approx(r.glob["b2:f:end"] + 1.0, abs=1e-9)
+    assert [b["id"] for b in r.blocks] == ["b:start", "b:end", "b2:start", "b2:end"]
+
+
+def test_a_timing_that_is_not_a_number_is_refused_by_the_planner():
+    from agentsim.core.engine import Planner
+    from agentsim.core.errors import ScheduleError
+
+    with pytest.raises(ScheduleError, match="not a number"):
+        Planner().check_times(None, [0.0, 1.0], [0.0, float("nan")])
+
+
+@pytest.mark.parametrize("bpm, start", [(100.0, float("nan")), (100.0, float("inf")), (float("inf"), 0.0),
+                                        (float("nan"), 0.0)])
+def test_a_metronome_with_times_that_are_not_finite_is_refused_when_made(bpm, start):
+    with pytest.raises(ValueError, match="finite|positive"):
+        Metronome(bpm=bpm, start=start)
+
+
+# ---------------------------------------------------------------------- silent losses
+def test_replace_cutting_a_speech_reports_its_end_and_an_interrupted_warning():
+    r = realize(doc('<speech id="s"><text>Hello there my friend, how are you today?</text></speech>'
+                    '<head id="later" lexeme="NOD" start="5"/>'),
+                doc('<head id="h" lexeme="NOD"/>', "b2", 'composition="REPLACE"'), at=[0, 0.5])
+    assert r.glob["b:s:start"] == 0.0 and r.glob["b:s:end"] == 0.5
+    assert warnings_of(r) == [("b:s", "INTERRUPTED", "s: its block was replaced by b2; stopped at once"),
+                              ("b:later", "INTERRUPTED", "later: its block was replaced by b2; it will not start")]
+    assert [b["id"] for b in r.blocks] == ["b:start", "b:end", "b2:start", "b2:end"]
+    ends = [f["id"] for f in r.items if f["type"] in ("syncPointProgress", "blockProgress")]
+    assert ends.index("b:s:end") < ends.index("b:end")
+
+
+def test_a_behaviour_tied_to_a_dropped_one_is_dropped_with_its_own_warning():
+    r = realize(doc('<gesture id="g" lexeme="BEAT" start="zz:end"/><head id="h" lexeme="NOD" start="g:end+2"/>'
+                    '<head id="free" lexeme="SHAKE"/>'))
+    assert warnings_of(r) == [
+        ("b:g", "IMPOSSIBLE_TO_SCHEDULE", "g: start='zz:end': no behaviour 'zz' in block b; behaviour dropped"),
+        ("b:h", "IMPOSSIBLE_TO_SCHEDULE", "h: start='g:end+2': it is tied to g, which was dropped; behaviour dropped")]
+    assert "b:h:start" not in r.glob and "b:free:end" in r.glob
+
+
+def test_chains_of_ties_to_a_dropped_behaviour_all_go():
+    r = realize(doc('<head id="c" lexeme="NOD" start="b:end"/><head id="b" lexeme="NOD" start="a:end"/>'
+                    '<gesture id="a" lexeme="BEAT" start="nobody:end"/>'))
+    assert [w[0] for w in warnings_of(r)] == ["b:a", "b:b", "b:c"]
+    assert not r.syncs
+
+
+def test_an_id_with_a_colon_is_refused_so_feedback_ids_stay_unambiguous():
+    r = realize(doc('<head id="h" lexeme="NOD"/>', block_id="a:b"), GOOD)
+    ((target, kind, description),) = warnings_of(r)
+    assert kind == "PARSING_FAILURE" and "contains ':'" in description
+    completes_good_after(r)
+    r = realize(doc('<head id="x:y" lexeme="NOD"/><head id="h" lexeme="NOD"/>'))
+    ((target, kind, description),) = warnings_of(r)
+    assert target == "b" and "behaviour id 'x:y' contains ':'" in description and "b:h:end" in r.glob
+
+
+@pytest.mark.parametrize("strict", [False, True])
+def test_an_xinclude_inside_speech_text_is_said(strict):
+    text = doc('<speech id="s"><text>Hello <xi:include xmlns:xi="http://www.w3.org/2001/XInclude" href="x.txt"/> '
+               'there</text></speech>')
+    r = realize(text, strict=strict)
+    assert any("xi:include" in w[2] for w in warnings_of(r)), warnings_of(r)
+    assert "b:s:end" in r.glob
+
+
+# ---------------------------------------------------------------------- limits
+def test_a_document_over_the_size_limit_is_refused_before_it_is_parsed():
+    big = doc("<x/>" * (MAX_DOCUMENT // 4 + 1))
+    r = realize(big, GOOD)
+    ((target, kind, description),) = warnings_of(r)
+    assert target == "b" and "MB long: at most 8 MB is read" in description
+    completes_good_after(r)
+
+
+def test_behaviours_beyond_the_limit_are_ignored_with_one_warning():
+    body = "".join(f'<wait id="w{i}" start="0" end="0.001"/>' for i in range(MAX_BEHAVIOURS + 3))
+    (block,) = parse_document(doc(body))
+    assert isinstance(block, Block) and len(block.behaviours) == MAX_BEHAVIOURS
+    (w,) = block.warnings
+    assert f"more than {MAX_BEHAVIOURS} behaviours: w{MAX_BEHAVIOURS} and every behaviour after it" in w.description
+
+
+def test_guessing_the_id_of_a_malformed_document_stays_linear():
+    # every failed try stops at the next tag: 100,000 unclosed tags are one pass
+    assert guess_block_id("<bml" * 100_000) == ""
+    assert guess_block_id('<bml <bml id="x" ') == "x"
+
+
+# ---------------------------------------------------------------------- the command line
+def cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.run([sys.executable, "-m", "agentsim.cli", *args], capture_output=True, text=True,
+                          timeout=120, cwd=cwd, env=env)
+
+
+def test_the_command_line_realizes_every_good_file_after_bad_ones(tmp_path):
+    bad = {
+        "encoding.xml": b'<?xml version="1.0" encoding="bogus"?>' + doc('<head id="h" lexeme="NOD"/>').encode(),
+        "deep.xml": doc("<required>" * 1000 + "</required>" * 1000).encode(),
+        "number.xml": doc('<gesture id="g" lexeme="BEAT" stroke="anticipators:metronome:beat' + "9" * 5000
+                          + '"/>').encode(),
+        "binary.xml": bytes(range(256)) * 4,
+    }
+    for name, data in bad.items():
+        (tmp_path / name).write_bytes(data)
+    (tmp_path / "good.xml").write_text(GOOD)
+    proc = cli("realize", "--tts", "builtin", "--metronome", "120", *bad, "good.xml", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    feedback = [json.loads(line) for line in proc.stdout.splitlines()]
+    alone = cli("realize", "--tts", "builtin", "--metronome", "120", "good.xml", cwd=tmp_path)
+    good = [f for f in feedback if f["id"].startswith("good")]
+    assert good == [f for f in map(json.loads, alone.stdout.splitlines())]
+    warned = [f["description"] for f in feedback if f["type"] == "warningFeedback"]
+    assert len(warned) == len(bad) and all(w for w in warned)
+
+
+@pytest.mark.parametrize("option", ["--metronome=100,nan", "--metronome=100,inf", "--metronome=inf",
+                                    "--anticipator=metronome:m2,start=nan"])
+def test_a_metronome_that_is_not_finite_is_a_usage_error_before_the_run(tmp_path, option):
+    (tmp_path / "good.xml").write_text(GOOD)
+    proc = cli("realize", "--tts", "builtin", option, "good.xml", cwd=tmp_path)
+    assert proc.returncode in (1, 2) and "finite" in proc.stderr and not proc.stdout
+    assert "internal error" not in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_recording_of_a_complete_run_is_kept():
+    realizer = Realizer()
+    realizer.submit(GOOD)
+    realizer.run()
+    assert [b.id for b in realizer.recording().blocks] == ["good"]
