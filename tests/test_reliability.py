@@ -234,3 +234,59 @@ def test_recording_of_a_complete_run_is_kept():
     realizer.submit(GOOD)
     realizer.run()
     assert [b.id for b in realizer.recording().blocks] == ["good"]
+
+
+@pytest.mark.parametrize("fps", ["1e5", "0", "nan"])
+def test_a_frame_rate_out_of_bounds_is_a_usage_error_before_the_run(tmp_path, fps):
+    (tmp_path / "good.xml").write_text(GOOD)
+    proc = cli("realize", "--tts", "builtin", "--fps", fps, "--poses", "out.npz", "good.xml", cwd=tmp_path)
+    assert proc.returncode == 2 and "--fps must be positive and at most 1000 frames per second" in proc.stderr
+    assert not proc.stdout and not (tmp_path / "out.npz").exists()
+
+
+def test_many_free_behaviours_end_one_by_one_without_rescanning_the_block():
+    body = "".join(f'<wait id="w{i}" start="{i * 0.001:.3f}" end="{i * 0.001 + 0.0005:.4f}"/>' for i in range(5000))
+    r = realize(doc(body))
+    assert not r.warnings and len(r.syncs) == 10_000
+    assert r.blocks[-1]["id"] == "b:end" and r.blocks[-1]["globalTime"] == pytest.approx(4.9995)
+
+
+def test_marks_are_placed_at_the_word_after_them():
+    from agentsim.speech.backend import SpeechText, Word, mark_times_from_words
+
+    words = [Word(i, f"w{i}", 0.5 * i, 0.5 * i + 0.4, 3 * i, 3 * i + 2) for i in range(4)]
+    speech = SpeechText("w0 w1 w2 w3", ((0, "a"), (4, "b"), (6, "c"), (11, "d")))
+    marks = mark_times_from_words(speech, words, duration=2.0)
+    assert [(m.name, m.time) for m in marks] == [("a", 0.0), ("b", 1.0), ("c", 1.0), ("d", 2.0)]
+    backwards = mark_times_from_words(speech, words[::-1], duration=2.0)
+    assert [m.time for m in backwards] == [1.5, 1.5, 1.5, 2.0]  # the first word listed at or after the mark
+
+
+def test_a_path_crossing_is_found_by_binary_search_with_the_same_times():
+    from agentsim.speech.animator_time import Path
+
+    path = Path(0.0, 0.0, 1.0)
+    for k in range(1, 2000):
+        path.then(float(k), 0.5 if k % 2 else 2.0)
+    assert path.crossing(0.5, 0.0) == 0.5
+    assert path.crossing(path.at(1234.25), 10.0) == pytest.approx(1234.25, abs=1e-9)
+    assert path.crossing(path.at(1999.5), 1999.0) == pytest.approx(1999.5, abs=1e-9)
+    assert path.crossing(-1.0, 5.0) == 5.0
+    stuck = Path(0.0, 0.0, 1.0).then(1.0, 0.0)
+    assert stuck.crossing(2.0, 0.0) == float("inf")
+
+
+@pytest.mark.parametrize("strategy", sorted(STRATEGIES))
+def test_animator_time_never_goes_back_whatever_order_events_come_in(strategy):
+    import importlib.util
+
+    import numpy as np
+
+    spec = importlib.util.spec_from_file_location("bench_storm", ROOT / "benchmarks" / "bench_storm.py")
+    bench_storm = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench_storm)
+    backend, utterance, events = bench_storm.storm_events(2000)
+    shuffled = np.random.default_rng(3).permutation(len(events))
+    for order, instants in ((range(len(events)), 200), (shuffled, 200), (shuffled, 1)):
+        result = bench_storm.run_storm(strategy, backend, utterance, events, order, utterance.duration / 2, instants)
+        assert result["monotone"]

@@ -88,9 +88,13 @@ def add_fps(parser: argparse.ArgumentParser, what: str) -> None:
     parser.add_argument("--fps", type=float, default=60.0, help=f"frame rate of {what} (60)")
 
 
+#: Highest frame rate of motion output (frames per second): far above any display or motion capture.
+MAX_FPS = 1000.0
+
+
 def check_fps(args: argparse.Namespace) -> None:
-    if not args.fps > 0:
-        raise UsageError("--fps must be positive")
+    if not 0 < args.fps <= MAX_FPS:
+        raise UsageError(f"--fps must be positive and at most {MAX_FPS:g} frames per second, got {args.fps:g}")
 
 
 def _metronome(text: str) -> tuple[float, float]:

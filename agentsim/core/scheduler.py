@@ -266,7 +266,7 @@ class Scheduler(Composition, Interruption, Retiming):
             self.end_if_done(run, time)
 
     def end_if_done(self, run: BlockRun, time: float) -> None:
-        if run.state == "running" and not run.live():
+        if run.state == "running" and not run.live_count:  # (a count: ends come one by one, N of them)
             self.end(run, time)
 
     def end(self, run: BlockRun, time: float) -> None:

@@ -36,6 +36,7 @@ class KeyRef:
         return None if t is None else t + self.offset
 
 
+_LIVE = ("planned", "active")
 _planned = itertools.count()
 _versions = itertools.count()
 
@@ -63,6 +64,7 @@ class TimedBehaviour:
         self.owns = [False] * len(self.sync_ids)
         self.heap_version = 0  # which of the player's heap entries for this behaviour is current
         self.next_index = 0
+        self._state = ""
         self.state = "planned"  # planned -> active -> finished | dropped
         self.stopped: float | None = None  # when it was dropped, cut or interrupted, if it was
         self.planned_start: float | None = None  # its start as first planned
@@ -80,9 +82,21 @@ class TimedBehaviour:
         return self.run.block.id
 
     @property
+    def state(self) -> str:
+        """``planned`` -> ``active`` -> ``finished`` | ``dropped``."""
+        return self._state
+
+    @state.setter
+    def state(self, value: str) -> None:
+        was, now = self._state in _LIVE, value in _LIVE
+        self._state = value
+        if was != now and isinstance(self.run, BlockRun):
+            self.run.live_count += 1 if now else -1
+
+    @property
     def live(self) -> bool:
         """Planned or playing (not finished, not dropped)."""
-        return self.state in ("planned", "active")
+        return self._state in _LIVE
 
     def _anchor(self, i: int) -> float | None:
         passed = self.passed[i]
@@ -269,6 +283,8 @@ class BlockRun:
     wake: simpy.Event | None = None  # succeeds when what this pending run waits for changes
     # the predicted ends of its behaviours, as a max-heap with lazy deletion: (-end, version, timed)
     _ends: list[tuple[float, int, TimedBehaviour]] = field(default_factory=list, repr=False)
+    #: how many behaviours made for it are planned or playing (kept by :attr:`TimedBehaviour.state`)
+    live_count: int = 0
     _end_version: dict[TimedBehaviour, int] = field(default_factory=dict, repr=False)
 
     @property
@@ -293,4 +309,4 @@ class BlockRun:
 
     def live(self) -> list[TimedBehaviour]:
         """Its behaviours that are planned or playing, in document order."""
-        return [t for t in self.timed if t.live]
+        return [t for t in self.timed if t.live] if self.live_count else []

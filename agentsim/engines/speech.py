@@ -210,7 +210,8 @@ class Playback:
         """Keep how t_A went since the last event, before the next event changes its future."""
         last = self.history[-1][0] if self.history else None
         path = self.strategy.path
-        points = [t for t in path.times if last is not None and last < t < now]
+        times = path.times
+        points = [] if last is None else times[bisect.bisect_right(times, last):bisect.bisect_left(times, now)]
         for t in points + [now]:
             p = path.at(t)
             self.history.append((t, p))
@@ -448,15 +449,24 @@ class SpeechEngine(Engine):
 
     def _deliver(self, playback: Playback):
         env = self.env
-        for event in playback.delivered:
-            if event.arrival_time > env.now:
-                yield env.timeout(event.arrival_time - env.now)
+        events = playback.delivered
+        i = 0
+        while i < len(events):
+            if events[i].arrival_time > env.now:
+                yield env.timeout(events[i].arrival_time - env.now)
             if playback.finished:  # interrupted: nothing it says matters any more
                 return
             playback.record(env.now)
             before = playback.strategy.path
-            playback.strategy.on_event(event, env.now)
-            if playback.strategy.path is not before:  # the event changed the future of t_A
+            # every event that arrives at this instant, then one look at what they changed (a burst of
+            # events at one instant costs the re-timing once)
+            first = i
+            while i < len(events) and events[i].arrival_time <= env.now:
+                playback.strategy.on_event(events[i], env.now)
+                i += 1
+            if i - first > 1:  # where the events of this instant took t_A (it may have snapped)
+                playback.record(env.now)
+            if playback.strategy.path is not before:  # the events changed the future of t_A
                 self.context.pegs_moved(playback.dependants, horizon=self.HORIZON)
         # After the last event and the longest it could have been held, t_A learns nothing more.
         last = max([playback.t_end] + [e.arrival_time for e in playback.delivered])

@@ -108,8 +108,8 @@ def main(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     strategy = check_strategy(getattr(args, "strategy", "best") or "best")
-    if not args.fps > 0:
-        raise AgentsimError("--fps must be positive")
+    if not 0 < args.fps <= 1000:
+        raise AgentsimError(f"--fps must be positive and at most 1000 frames per second, got {args.fps:g}")
     if not args.window > 0:
         raise AgentsimError("--window must be positive")
     delivery = args.delivery
