@@ -290,3 +290,56 @@ def test_animator_time_never_goes_back_whatever_order_events_come_in(strategy):
     for order, instants in ((range(len(events)), 200), (shuffled, 200), (shuffled, 1)):
         result = bench_storm.run_storm(strategy, backend, utterance, events, order, utterance.duration / 2, instants)
         assert result["monotone"]
+
+
+# ---------------------------------------------------------------------- a flat memory
+def test_a_realizer_that_keeps_a_few_blocks_releases_older_ones_with_their_pegs():
+    realizer = Realizer(keep=4, anticipators=[Metronome(bpm=120)])
+    for i in range(100):
+        realizer.submit_at(i * 2.0, doc('<gesture id="g" lexeme="BEAT" stroke="anticipators:metronome:beat'
+                                        f'{4 * i + 3}"/><speech id="s"><text>one two</text></speech>', f"b{i}"))
+    realizer.run()
+    scheduler = realizer.scheduler
+    assert len(scheduler.all_runs) <= 2 * 4 + 16 and scheduler.all_runs[-1].id == "b99"
+    assert len(realizer.board.block_pegs) == len(scheduler.all_runs)
+    assert len(realizer.speech.heard()) <= len(scheduler.all_runs)
+    assert len(realizer.scheduler.anticipators["metronome"].pegs) < 60  # of 100: the last minute, and a batch
+    # every block ran whole: the feedback listeners got everything, the log keeps the latest
+    ends = [f for f in realizer.feedback.items if f["type"] == "blockProgress" and f["id"].endswith(":end")]
+    assert ends[-1]["id"] == "b99:end" and not realizer.feedback.warnings()
+
+
+def test_a_released_block_can_no_longer_be_referred_to_but_a_kept_one_can():
+    realizer = Realizer(keep=1)
+    for i in range(30):
+        realizer.submit_at(float(i), doc('<head id="h" lexeme="NOD"/>', f"b{i}"))
+    realizer.submit_at(40.0, doc('<head id="late" lexeme="NOD" start="b29:h:end+20"/>'
+                                 '<head id="lost" lexeme="NOD" start="b0:h:end"/>', "tail"))
+    realizer.run()
+    syncs = realizer.feedback.sync_times()
+    assert syncs["tail:late:start"] == pytest.approx(syncs["b29:h:end"] + 20.0, abs=1e-9)
+    ((w),) = [w for w in realizer.feedback.warnings()]
+    assert w["id"] == "tail:lost" and "no sync point b0:h:end in a planned block" in w["description"]
+
+
+def test_by_default_a_realizer_keeps_the_whole_run_for_its_recording():
+    realizer = Realizer()
+    for i in range(300):
+        realizer.submit_at(float(i), doc('<head id="h" lexeme="NOD"/>', f"b{i}"))
+    realizer.run()
+    recording = realizer.recording()
+    assert len(recording.blocks) == 300 and len(recording.behaviours) == 300
+
+
+# ---------------------------------------------------------------------- fuzz
+def test_two_thousand_mutated_documents_neither_stop_the_realizer_nor_lose_feedback():
+    """The profile of ``benchmarks/fuzz_bml.py`` the suite runs: 2,000 cases (a few seconds), seeded."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("fuzz_bml", ROOT / "benchmarks" / "fuzz_bml.py")
+    fuzz_bml = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(fuzz_bml)
+    report = fuzz_bml.fuzz(2000, seed=17)
+    assert report["failures"] == []
+    assert report["uncaught_exceptions"] == report["feedback_losses"] == 0
+    assert report["cases_that_played_something"] > 1000  # most mutations still reach the scheduler

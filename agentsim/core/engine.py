@@ -323,3 +323,6 @@ class Engine:
     def remove(self, timed: TimedBehaviour) -> None:
         self.planner.remove(timed)
         self.plan.kick()
+
+    def forget(self, block_ids: set[str]) -> None:
+        """The scheduler released these ended blocks: forget what is kept of them (what was heard, say)."""

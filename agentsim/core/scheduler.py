@@ -78,7 +78,7 @@ class Scheduler(Composition, Interruption, Retiming):
     """
 
     def __init__(self, env: simpy.Environment, board: PegBoard, log: fb.FeedbackLog,
-                 prediction_tolerance: float = FRAME):
+                 prediction_tolerance: float = FRAME, keep: int | None = None):
         self.env = env
         self.board = board
         self.log = log
@@ -90,6 +90,10 @@ class Scheduler(Composition, Interruption, Retiming):
         self.runs: list[BlockRun] = []  # not yet ended, in submission order
         self.all_runs: list[BlockRun] = []
         self.drops: list[DropRecord] = []
+        #: how many ended blocks are kept (None: all): older ones, once nothing refers to them by name any more,
+        #: are released with their pegs, registrations and records (see :meth:`release`)
+        self.keep = keep
+        self._ended: list[BlockRun] = []  # ended or refused runs, oldest first (with ``keep``)
         #: bumped whenever behaviours are added, so that :class:`Dependants` know to look again
         self.structure_version = 0
         self._pending: dict[TimedBehaviour, None] | None = {}  # to re-time this instant; None: all
@@ -174,6 +178,7 @@ class Scheduler(Composition, Interruption, Retiming):
         if solver.failed:
             run.state = "refused"
             run.ended.succeed()
+            self.retire(run)
             return run
         for timed in list(run.timed):
             reason = timed.engine.planner.admit(timed)
@@ -276,6 +281,44 @@ class Scheduler(Composition, Interruption, Retiming):
         if run in self.runs:
             self.runs.remove(run)
         run.ended.succeed()
+        self.retire(run)
+
+    def retire(self, run: BlockRun) -> None:
+        """A run is over (ended or refused): with :attr:`keep`, release the oldest ones beyond it (in batches,
+        so that each costs O(1) amortised)."""
+        if self.keep is None:
+            return
+        self._ended.append(run)
+        if len(self._ended) > 2 * self.keep + 16:
+            cut = len(self._ended) - self.keep
+            self.release(self._ended[:cut])
+            del self._ended[:cut]
+
+    #: A passed anticipator peg is forgotten this long (s) after its time, when blocks are released.
+    PEG_MEMORY = 60.0
+
+    def release(self, runs: list[BlockRun]) -> None:
+        """Forget ended runs: they leave :attr:`all_runs` and the records, their sync points can no longer be
+        referred to by name (a reference to them is a warning, as to a block that never was), their block pegs
+        and registrations go, and so do the engines' records of them and the anticipators' passed pegs.
+        Whatever still holds one of their pegs (a later block tied to them) keeps it."""
+        gone = {id(r) for r in runs}
+        self.all_runs = [r for r in self.all_runs if id(r) not in gone]
+        kept = {r.id for r in self.all_runs}
+        for run in runs:
+            if run.id not in kept:  # no later block of that id has taken its place on the board
+                self.board.forget_block(run.id)
+                if self.board.block_pegs.get(run.id) is run.block_peg:
+                    del self.board.block_pegs[run.id]
+        released = {r.id for r in runs} - kept
+        self.drops = [d for d in self.drops if d.block not in released]
+        for engine in self.engine_list:
+            engine.forget(released)
+        before = self.env.now - self.PEG_MEMORY
+        for anticipator in self.anticipators.values():
+            forget = getattr(anticipator, "forget_passed", None)
+            if forget is not None:
+                forget(before)
 
     def cut(self, run: BlockRun, by: str = "") -> None:
         """End a block now (composition REPLACE): its behaviours stop where they are.

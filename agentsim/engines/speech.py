@@ -340,6 +340,12 @@ class SpeechEngine(Engine):
                     listener.sound_started(heard)
         super().sync_passed(timed, index, time)
 
+    def forget(self, block_ids: set[str]) -> None:
+        self._started = [s for s in self._started if s[0].block_id not in block_ids]
+        self.playbacks = [p for p in self.playbacks if p.timed.block_id not in block_ids]
+        kept = {id(s[0]) for s in self._started}
+        self._stopped = {k: v for k, v in self._stopped.items() if k in kept}
+
     def followable(self, timed: TimedBehaviour) -> bool:
         """Whether an animator-time strategy can follow the speech: it has words to make progress events."""
         if self.config.timing == "linear":
