@@ -343,3 +343,77 @@ def test_two_thousand_mutated_documents_neither_stop_the_realizer_nor_lose_feedb
     assert report["failures"] == []
     assert report["uncaught_exceptions"] == report["feedback_losses"] == 0
     assert report["cases_that_played_something"] > 1000  # most mutations still reach the scheduler
+
+
+# ---------------------------------------------------------------------- outputs that cannot half-exist
+def test_a_file_is_written_whole_or_not_at_all(tmp_path):
+    from agentsim.media.files import write_text, written
+
+    target = tmp_path / "feedback.jsonl"
+    write_text(target, "old\n")
+    with pytest.raises(OSError, match="No space left"):
+        with written(target) as tmp:
+            tmp.write_text("half of it")
+            raise OSError(28, "No space left on device")
+    assert target.read_text() == "old\n" and sorted(p.name for p in tmp_path.iterdir()) == ["feedback.jsonl"]
+    write_text(target, "new\n")
+    assert target.read_text() == "new\n" and len(list(tmp_path.iterdir())) == 1
+
+
+def test_a_full_disk_for_the_feedback_is_one_clear_line(tmp_path):
+    (tmp_path / "good.xml").write_text(GOOD)
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run([sys.executable, "-m", "agentsim.cli", "realize", "--tts", "builtin", "good.xml"],
+                              stdout=full, stderr=subprocess.PIPE, text=True, timeout=120, cwd=tmp_path, env=env)
+    lines = [line for line in proc.stderr.splitlines() if not line.startswith("speech:")]
+    assert proc.returncode == 1 and lines == ["agentsim: cannot go on: No space left on device"]
+
+
+def test_a_closed_standard_output_is_one_clear_line(tmp_path):
+    (tmp_path / "good.xml").write_text(GOOD)
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run(f"'{sys.executable}' -m agentsim.cli realize --tts builtin good.xml >&-", shell=True,
+                          stderr=subprocess.PIPE, text=True, timeout=120, cwd=tmp_path, env=env)
+    lines = [line for line in proc.stderr.splitlines() if not line.startswith("speech:")]
+    assert proc.returncode == 2
+    assert lines == ["agentsim: standard output is closed: there is nowhere to write the feedback"]
+
+
+@pytest.mark.parametrize("where", ["file/poses.npz", "missing/poses.npz"])
+def test_an_output_that_cannot_be_written_is_said_before_the_run(tmp_path, where):
+    (tmp_path / "good.xml").write_text(GOOD)
+    (tmp_path / "file").write_text("a file, not a folder")
+    proc = cli("realize", "--tts", "builtin", "--poses", where, "good.xml", cwd=tmp_path)
+    assert proc.returncode == 2 and not proc.stdout  # nothing ran
+    assert proc.stderr.splitlines()[-1].startswith(f"agentsim: cannot write {where}: there is no folder")
+
+
+def test_a_conductor_output_folder_under_a_file_is_said_before_the_run(tmp_path):
+    (tmp_path / "file").write_text("a file, not a folder")
+    proc = cli("run", "conductor", "--out", "file/out", cwd=tmp_path)
+    assert proc.returncode == 2 and "internal error" not in proc.stderr
+    assert proc.stderr.splitlines()[-1] == ("agentsim: cannot make the output folder file/out: a file is in the way on "
+                                            "its path")
+
+
+@pytest.mark.parametrize("kind", ["folder", "latin-1"])
+def test_a_conductor_configuration_that_is_a_folder_or_not_utf8_is_one_clear_line(tmp_path, kind):
+    config = tmp_path / "config.toml"
+    if kind == "folder":
+        config.mkdir()
+    else:
+        config.write_bytes('title = "caf\xe9"\n'.encode("latin-1"))
+    proc = cli("run", "conductor", "--config", str(config), "--out", "out", cwd=tmp_path)
+    assert proc.returncode == 1 and "internal error" not in proc.stderr and "no such file" not in proc.stderr
+    message = "is a folder, not a configuration file" if kind == "folder" else "not UTF-8 text (byte 12"
+    assert message in proc.stderr.splitlines()[-1] and not (tmp_path / "out").exists()
+
+
+def test_a_speech_over_the_word_limit_is_ignored_with_a_warning():
+    from agentsim.bml.parser import MAX_WORDS
+
+    r = realize(doc(f'<speech id="s"><text>{"word " * (MAX_WORDS + 1)}</text></speech><head id="h" lexeme="NOD"/>'))
+    ((target, kind, description),) = warnings_of(r)
+    assert target == "b:s" and f"has {MAX_WORDS + 1} words (at most {MAX_WORDS}" in description
+    assert "b:h:end" in r.glob

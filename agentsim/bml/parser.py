@@ -36,6 +36,8 @@ MAX_NUMBER = 32
 #: the block is ignored, with a warning.
 MAX_BEHAVIOURS = 10_000
 MAX_SYNCS = 10_000
+#: Most words one speech may have (10,000 words take more than an hour to say); a longer one is ignored.
+MAX_WORDS = 10_000
 
 ALL_SYNC_NAMES = {s for t in BEHAVIOUR_TYPES.values() for s in t.syncs}
 #: The BML 1.0 core behaviour elements (the extension ones live in their own namespaces).
@@ -357,6 +359,11 @@ class _Reader:
         beh.text, beh.marks, beh.prosody = reading.text, reading.marks, reading.prosody
         if not beh.text:
             self.warn("PARSING_FAILURE", f"speech {beh.id} has empty text; behaviour ignored", node, [beh.id])
+            return False
+        words = len(beh.text.split())
+        if words > MAX_WORDS:
+            self.warn("PARSING_FAILURE", f"speech {beh.id} has {words} words (at most {MAX_WORDS}, over an hour of "
+                      "speech); behaviour ignored", node, [beh.id])
             return False
         return True
 

@@ -79,7 +79,7 @@ def add_outputs(parser: argparse.ArgumentParser) -> None:
 def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sources=(), beat_times=None) -> None:
     """Write the files ``args`` asks for from a finished run, on its time axis."""
     from agentsim.media.audio import run_track
-    from agentsim.media.files import write_npz, write_textgrid, write_wav
+    from agentsim.media.files import write_npz, write_textgrid, write_wav, written
     from agentsim.media.tables import gesture_rows, write_csv
 
     recording = realizer.recording()
@@ -95,13 +95,15 @@ def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sour
     if args.bvh:
         from agentsim.animation import write_bvh
 
-        write_bvh(args.bvh, stream)
+        with written(args.bvh) as tmp:
+            write_bvh(tmp, stream)
     if args.poses:
         write_npz(args.poses, stream)
     if args.textgrid:
         write_textgrid(args.textgrid, recording, gestures)
     if args.csv:
-        write_csv(Path(args.csv) / "gestures.csv", gestures)
+        with written(Path(args.csv) / "gestures.csv") as tmp:
+            write_csv(tmp, gestures)
     if args.report:
         from agentsim.media.report import write_report
 
@@ -142,8 +144,10 @@ def realize_files(args: argparse.Namespace) -> int:
     if args.wav and args.tts == "builtin":
         raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak")
     print(f"speech: {options.describe_backend(tts)}", file=sys.stderr)
-    realizer = Realizer(realtime=args.realtime, anticipators=options.anticipators(args), strict=args.strict, tts=tts)
     out = sys.stdout
+    if out is None:  # started with its standard output closed
+        raise UsageError("standard output is closed: there is nowhere to write the feedback")
+    realizer = Realizer(realtime=args.realtime, anticipators=options.anticipators(args), strict=args.strict, tts=tts)
 
     def emit(feedback):
         out.write(to_json(feedback) + "\n")

@@ -51,6 +51,9 @@ def main(args: argparse.Namespace) -> int:
 
     config = load_config(args.config)  # a bad configuration fails here, before anything runs
     out = Path(args.out)
+    from agentsim.media.files import check_writable
+
+    check_writable(folders=[out])  # so does an output folder that cannot be written
     live = args.live or args.device is not None
     if args.seconds is not None and not live:
         raise AgentsimError("--seconds only applies to --input")
