@@ -41,6 +41,11 @@ class Realizer:
         delivery, what the planner knows); by default the audio plays exactly as planned.
     prediction_tolerance : float
         A behaviour is predicted again when one of its sync points moved by more than this (seconds).
+    keep : int, optional
+        How many ended blocks to keep, with what was recorded of them (None, the default: all, so that
+        :meth:`recording` holds the whole run). A realizer that runs for days (the live service) keeps a few
+        hundred: older blocks are released with their pegs, and the feedback log keeps the last ``100 * keep``
+        items (its listeners still get everything).
     strict : bool
         Read only BML 1.0 (one block a document). By default BML as other realizers write it is read too,
         each block's adaptations said in one ``NONSTANDARD_BML`` warning; blocks without an id are named
@@ -49,16 +54,16 @@ class Realizer:
 
     def __init__(self, env: simpy.Environment | None = None, realtime: bool = False,
                  tts: TTSBackend | None = None, anticipators: Iterable = (), speech: SpeechConfig | None = None,
-                 prediction_tolerance: float = FRAME, strict: bool = False):
+                 prediction_tolerance: float = FRAME, strict: bool = False, keep: int | None = None):
         self.strict = strict
         self._unnamed = 0
         self.env = env if env is not None else make_environment(realtime)
         self.board = PegBoard()
-        self.feedback = FeedbackLog()
+        self.feedback = FeedbackLog(keep=None if keep is None else 100 * keep)
         if tts is None:
             from agentsim.speech.builtin import BuiltinBackend
             tts = BuiltinBackend()
-        self.scheduler = Scheduler(self.env, self.board, self.feedback, prediction_tolerance)
+        self.scheduler = Scheduler(self.env, self.board, self.feedback, prediction_tolerance, keep=keep)
         context = self.scheduler.context
         self.speech = SpeechEngine(context, tts, speech)
         self.animation = AnimationEngine(context)
@@ -136,6 +141,8 @@ class Realizer:
             return self.submit(bml, source)
 
         process = self.env.process(later())
+        if len(self._submissions) > 64:  # those done already are not waited for
+            self._submissions = [p for p in self._submissions if not p.triggered]
         self._submissions.append(process)
         return process
 

@@ -33,9 +33,14 @@ def test_extension_element_in_another_namespace_is_ignored_with_a_warning():
     assert "nod1:end" in r.local
 
 
-def test_cyclic_constraints_drop_one_behaviour():
-    r = realize(block('<head id="a" lexeme="NOD" start="b:end"/><head id="b" lexeme="NOD" start="a:end"/>'))
-    assert r.dropped() == {"b"} and "a:end" in r.local
+def test_cyclic_constraints_drop_the_behaviour_that_closes_the_circle_and_what_is_tied_to_it():
+    r = realize(block('<head id="a" lexeme="NOD" start="b:end"/><head id="b" lexeme="NOD" start="a:end"/>'
+                      '<head id="c" lexeme="SHAKE"/>'))
+    # b closes the circle; a is tied to b's end, which will never come: it goes too, with its own warning
+    assert [(w["id"], w["warningType"]) for w in r.warnings] == [("bml1:b", "IMPOSSIBLE_TO_SCHEDULE"),
+                                                               ("bml1:a", "IMPOSSIBLE_TO_SCHEDULE")]
+    assert "it is tied to b, which was dropped" in r.warnings[1]["description"]
+    assert "c:end" in r.local and "a:start" not in r.local
     assert [b["id"] for b in r.blocks] == ["bml1:start", "bml1:end"]
 
 

@@ -71,7 +71,10 @@ def test_replace_ends_the_earlier_block_now():
     assert blocks[:3] == [("bml1:start", 0.0), ("bml1:end", 0.7), ("bml3:start", 0.7)]
     assert blocks[3][0] == "bml3:end"
     assert all(f["globalTime"] <= 0.7 for f in r.syncs if f["id"].startswith("bml1:"))
-    assert "bml1:speech1:end" not in r.glob
+    # the speech cut short gets its end at the cut, and an INTERRUPTED warning
+    assert r.glob["bml1:speech1:end"] == 0.7
+    cut = [(w["id"], w["warningType"], w["globalTime"]) for w in r.warnings]
+    assert ("bml1:speech1", "INTERRUPTED", 0.7) in cut and all(kind == "INTERRUPTED" for _, kind, _ in cut)
     assert syncs_of(r.items, "bml3", "nod1") == GESTURE
 
 
@@ -82,7 +85,9 @@ def test_append_and_replace_and_resubmission():
     ends = [b["id"] for b in r.blocks if b["id"].endswith(":end")]
     assert starts == ["bml1:start", "bml2:start", "bml3:start", "bml1:start", "bml2:start"]
     assert ends == ["bml1:end", "bml2:end", "bml3:end", "bml1:end", "bml2:end"]
-    assert not r.warnings
+    # what the REPLACE cut is said, nothing else
+    assert {(w["id"], w["warningType"]) for w in r.warnings} == {("bml2:speech1", "INTERRUPTED"),
+                                                                  ("bml2:nod1", "INTERRUPTED")}
 
 
 def test_replace_of_a_block_not_yet_started_still_reports_start_and_end():

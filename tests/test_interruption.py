@@ -38,6 +38,13 @@ def a_moment_inside_a_gesture(realizer: Realizer, targets: list[int]) -> tuple[f
     return (syncs["start"] + syncs["ready"]) / 2, k
 
 
+def interrupted_ids(realizer) -> set[str]:
+    """The behaviours an interruption cut or removed, from the warnings, which must all say INTERRUPTED."""
+    warnings = realizer.feedback.warnings()
+    assert all(w["warningType"] == "INTERRUPTED" for w in warnings), warnings
+    return {w["id"] for w in warnings}
+
+
 @pytest.mark.parametrize("config", [None, SpeechConfig("best", CONDITIONS["A"], seed=1)],
                          ids=["as planned", "animator time"])
 @pytest.mark.parametrize("how", ["api", "bmla"])
@@ -72,13 +79,16 @@ def test_a_long_speech_interrupted_mid_sentence(config, how):
     assert marks and not [m for m in syncs if m.startswith("sync:speech1:w") and syncs[m] > t]
     blocks = {f["id"]: f["globalTime"] for f in items if f["type"] == "blockProgress"}
     assert blocks["sync:end"] == max(syncs[e] for e in after)
-    # the later gestures never start; the prediction says they are gone, without a warning
+    # the later gestures never start; the prediction says they are gone, and an INTERRUPTED warning too
     later = [j for j in targets if f"sync:g{j}:start" not in syncs]
     assert later and not [s for s in syncs if any(s.startswith(f"sync:g{j}:") for j in later)]
     gone = {b["id"] for f in items if f["type"] == "predictionFeedback" for b in f["behaviours"]
             if b.get("status") == "removed"}
     assert gone == {f"g{j}" for j in later} and min(later) > max(started)
-    assert not realizer.feedback.warnings()
+    # every behaviour cut or removed is said in an INTERRUPTED warning, and nothing else is
+    cut = interrupted_ids(realizer)
+    assert {"sync:speech1", f"sync:g{k}"} | {f"sync:g{j}" for j in later} <= cut
+    assert cut <= {"sync:speech1"} | {f"sync:g{j}" for j in started + later}
     # no peg of the board points into what was removed
     assert all(realizer.board.find_sync("sync", f"g{j}", "stroke") is None for j in later)
     recording = realizer.recording()
@@ -110,7 +120,8 @@ def test_interrupting_only_some_behaviours_leaves_the_rest_playing():
     assert speech_end > t + 1.0  # the speech goes on
     assert syncs[f"sync:g{k}:relax"] == t
     assert not [s for s in syncs if s.startswith("sync:g") and syncs[s] > t + BEAT_RETRACTION + 1e-9]
-    assert not realizer.feedback.warnings()
+    cut = interrupted_ids(realizer)
+    assert f"sync:g{k}" in cut and "sync:speech1" not in cut
 
 
 def test_bad_targets_are_reported_and_the_rest_runs():
@@ -223,9 +234,10 @@ def test_blocks_to_interrupt_and_activate_are_looked_up_when_the_block_starts():
                             '<head id="n" lexeme="NOD"/></bml>')
     realizer.run()
     warnings = [(w["id"], w["description"]) for w in realizer.feedback.warnings()]
-    assert warnings[0] == ("late", "interrupt: there is no block 'ghost'; ignored")
-    assert warnings[1][0] == "x" and warnings[1][1].startswith("onStart: cannot activate block 'ready': it is ")
-    assert len(warnings) == 2
+    assert warnings[0] == ("talk:s", "s: interrupted by late; what is left of it ends now")
+    assert warnings[1] == ("late", "interrupt: there is no block 'ghost'; ignored")
+    assert warnings[2][0] == "x" and warnings[2][1].startswith("onStart: cannot activate block 'ready': it is ")
+    assert len(warnings) == 3
     blocks = {f["id"]: f["globalTime"] for f in realizer.feedback.items if f["type"] == "blockProgress"}
     syncs = realizer.feedback.sync_times()
     assert blocks["talk:start"] == 0.5 and syncs["talk:s:end"] == 1.0  # cut short when "late" would start

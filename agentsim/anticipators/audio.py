@@ -18,7 +18,7 @@ import numpy as np
 from agentsim.core.errors import AgentsimError, Unavailable
 from agentsim.core.anticipator import Anticipator
 
-_BEAT = re.compile(r"^beat(\d+)$")
+_BEAT = re.compile(r"^beat(\d{1,9})$")
 _NEXT = re.compile(r"^next(\d+)$")
 
 

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
 import re
 
 from agentsim.core.anticipator import Anticipator
 
-_BEAT = re.compile(r"^beat(\d+)$")
+#: beats are numbered up to 999,999,999 (a day at 10,000 BPM is 14.4 million)
+_BEAT = re.compile(r"^beat(\d{1,9})$")
 
 
 class Metronome(Anticipator):
@@ -21,6 +23,10 @@ class Metronome(Anticipator):
         super().__init__(anticipator_id)
         if not bpm > 0:
             raise ValueError(f"tempo must be positive, got {bpm!r} BPM")
+        if not math.isfinite(bpm):
+            raise ValueError(f"tempo must be finite, got {bpm!r} BPM")
+        if not math.isfinite(start):
+            raise ValueError(f"the first beat must be at a finite time, got {start!r}")
         self.period = 60.0 / bpm
         # beat ``origin_beat`` is at time ``origin``; later beats follow every ``period`` seconds
         self.origin = start
@@ -53,8 +59,8 @@ class Metronome(Anticipator):
 
     def set_tempo(self, bpm: float, at: float | None = None) -> None:
         """Change the tempo at time ``at`` (default: now): beats after it are re-spaced, earlier ones stay."""
-        if not bpm > 0:
-            raise ValueError(f"tempo must be positive, got {bpm!r} BPM")
+        if not (bpm > 0 and math.isfinite(bpm)):
+            raise ValueError(f"tempo must be positive and finite, got {bpm!r} BPM")
         t = self._now(at)
         last = self.last_beat_before(t)
         nxt = last + 1
@@ -70,6 +76,8 @@ class Metronome(Anticipator):
 
     def set_phase(self, next_beat_time: float, at: float | None = None) -> None:
         """Move the next beat after ``at`` (default: now) to ``next_beat_time``; later beats follow it."""
+        if not math.isfinite(next_beat_time):
+            raise ValueError(f"the next beat must be at a finite time, got {next_beat_time!r}")
         t = self._now(at)
         nxt = self.last_beat_before(t) + 1
         self.origin, self.origin_beat = next_beat_time, nxt

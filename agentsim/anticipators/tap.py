@@ -12,7 +12,7 @@ from typing import Iterable
 
 from agentsim.core.anticipator import Anticipator
 
-_BEAT = re.compile(r"^beat(\d+)$")
+_BEAT = re.compile(r"^beat(\d{1,9})$")
 
 
 def read_taps(path: str | Path) -> list[float]:

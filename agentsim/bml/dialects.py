@@ -25,6 +25,7 @@ from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_
 from agentsim.animation.units import motion_unit
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour
 from agentsim.core.engine import stretch_times
+from agentsim.core.errors import ScheduleError
 
 #: The namespace of the BML drafts before 1.0 (Greta, SEMAINE, the Vienna draft), read as BML 1.0.
 DRAFT_NAMESPACES = ("http://www.mindmakers.org/projects/BML", "http://www.mindmakers.org/projects/bml",
@@ -180,7 +181,10 @@ def implied_start(node: Node) -> float:
     except KeyError:
         return min(numbers.values())
     # as the planners do: the preferred timing stretched linearly between the known keys
-    return stretch_times(preferred, {kind.syncs.index(k): t for k, t in numbers.items()}, 0.0)[0]
+    try:
+        return stretch_times(preferred, {kind.syncs.index(k): t for k, t in numbers.items()}, 0.0)[0]
+    except ScheduleError:  # its times are out of order: the scheduler will say so; here, the earliest will do
+        return min(numbers.values())
 
 
 def is_smartbody(prefix: str, uri: str | None) -> bool:

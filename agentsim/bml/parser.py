@@ -20,7 +20,7 @@ from typing import Callable
 from agentsim.bml import lexemes
 from agentsim.bml.dialects import Adapter, Notes, find_blocks, fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
-from agentsim.bml.tree import Node, read_forest, read_tree
+from agentsim.bml.tree import Node, encode, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
                                      EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
@@ -29,6 +29,17 @@ from agentsim.core.gcpause import paused_collection
 
 #: Largest time or offset (seconds) accepted in a reference; beyond it a behaviour is refused.
 MAX_TIME = 1.0e6
+#: Largest document read (bytes); a larger one is refused before it is parsed.
+MAX_DOCUMENT = 8 * 1024 * 1024
+#: Longest sync reference (characters), and longest number in one; longer ones are refused.
+MAX_REFERENCE = 256
+MAX_NUMBER = 32
+#: Most behaviours one block may hold, and most sync points one behaviour may have; beyond them the rest of
+#: the block is ignored, with a warning.
+MAX_BEHAVIOURS = 10_000
+MAX_SYNCS = 10_000
+#: Most words one speech may have (10,000 words take more than an hour to say); a longer one is ignored.
+MAX_WORDS = 10_000
 
 ALL_SYNC_NAMES = {s for t in BEHAVIOUR_TYPES.values() for s in t.syncs}
 #: The BML 1.0 core behaviour elements (the extension ones live in their own namespaces).
@@ -54,23 +65,29 @@ _LENIENT_REF = re.compile(
     rf"^(?P<path>{_LAZY_NAME}:\d[\w.\-]*?)\s*(?:(?P<sign>[+-])\s*(?P<offset>{_NUMBER}))?$"
 )
 _ABSOLUTE = re.compile(rf"^[+-]?{_NUMBER}$")
-_BLOCK_ID = re.compile(r"<(?:\w+:)?bml\b[^>]*?\bid\s*=\s*[\"']([^\"']*)[\"']", re.S)
+# (``[^<>]``: a try that fails stops at the next tag, so the search stays linear in the text)
+_BLOCK_ID = re.compile(r"<(?:\w+:)?bml\b[^<>]*?\bid\s*=\s*[\"']([^\"'<>]*)[\"']", re.S)
 
 
 def guess_block_id(text: str | bytes) -> str:
     """The ``id`` of the ``<bml>`` element, read leniently (for naming a block that fails to parse)."""
     if isinstance(text, bytes):
-        text = text.decode("utf-8", "replace")
+        text = text[:MAX_DOCUMENT].decode("utf-8", "replace")
+    else:
+        text = text[:MAX_DOCUMENT].encode("utf-8", "replace").decode("utf-8")
     match = _BLOCK_ID.search(text)
-    return match.group(1) if match else ""
+    return match.group(1)[:MAX_REFERENCE] if match else ""
 
 
 def parse_ref(text: str, line: int | None = None, column: int | None = None, lenient: bool = False) -> SyncRef:
     """Parse a sync reference: ``2.5``, ``g1:stroke``, ``g1:end+0.5``, ``bml2:g1:start-2``,
     ``anticipators:metronome:beat3+0.1``. ``line`` and ``column`` locate it for error messages; ``lenient``
     also takes names that start with a digit (``s1:1``)."""
+    raw = text.strip()
     try:
-        return _parse_ref(text.strip(), lenient)
+        if len(raw) > MAX_REFERENCE:
+            raise BMLError(f"sync reference {raw[:40]!r}... is {len(raw)} characters long (at most {MAX_REFERENCE})")
+        return _parse_ref(raw, lenient)
     except BMLError as exc:
         raise BMLError(exc.reason, line, column) from None
 
@@ -80,8 +97,13 @@ def parse_ref(text: str, line: int | None = None, column: int | None = None, len
 _PLAIN_REF = re.compile(r"([A-Za-z_]\w*):([A-Za-z_]\w*)(?::([A-Za-z_]\w*))?(?:([+-])(\d+(?:\.\d*)?))?\Z")
 
 
-@functools.lru_cache(maxsize=65536)
+_LONG_NUMBER = re.compile(rf"\d{{{MAX_NUMBER + 1},}}")
+
+
+@functools.lru_cache(maxsize=4096)
 def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
+    if _LONG_NUMBER.search(raw):
+        raise BMLError(f"invalid sync reference {raw!r}: a number in it has more than {MAX_NUMBER} digits")
     plain = _PLAIN_REF.match(raw)
     if plain is not None:
         first, second, third, sign, number = plain.groups()
@@ -120,10 +142,22 @@ class Refused:
     error: BMLError
 
 
+def _checked(text: str | bytes) -> bytes:
+    """The document as bytes, if it is valid Unicode and not larger than :data:`MAX_DOCUMENT`."""
+    if len(text) > MAX_DOCUMENT:
+        raise BMLError(f"the document is {len(text) / 1048576:.1f} MB long: at most {MAX_DOCUMENT // 1048576} MB "
+                       "is read", 1, 1)
+    data = encode(text)
+    if len(data) > MAX_DOCUMENT:
+        raise BMLError(f"the document is {len(data) / 1048576:.1f} MB long: at most {MAX_DOCUMENT // 1048576} MB "
+                       "is read", 1, 1)
+    return data
+
+
 def parse_bml(text: str | bytes) -> Block:
     """Parse one BML 1.0 block, strictly. Raises :class:`BMLError` if the block as a whole cannot be used."""
     with paused_collection():
-        return warn_lexemes(read_block(read_tree(text), None))
+        return warn_lexemes(read_block(read_tree(_checked(text)), None))
 
 
 def warn_lexemes(block: Block) -> Block:
@@ -155,7 +189,10 @@ def _parse_document(text: str | bytes, strict: bool, name_block: Callable[[], st
             return [parse_bml(text)]
         except BMLError as exc:
             return [Refused(guess_block_id(text), exc)]
-    data = text.encode("utf-8") if isinstance(text, str) else text
+    try:
+        data = _checked(text)
+    except BMLError as exc:
+        return [Refused(guess_block_id(text), exc)]
     data, doctype = without_doctype(data)
     try:
         root, forest = read_forest(data)
@@ -254,6 +291,7 @@ class _Reader:
         self.notes = notes
         self.lenient = notes is not None
         self.seen: set[str] = set()
+        self.full = False  # the block reached MAX_BEHAVIOURS
 
     def warn(self, kind: str, text: str, node: Node, behaviours: list[str] | None = None) -> None:
         self.block.warnings.append(ParseWarning(kind, f"{text} (line {node.line}, column {node.column})",
@@ -291,6 +329,12 @@ class _Reader:
         if ":" in bid:
             self.warn("PARSING_FAILURE", f"behaviour id {bid!r} contains ':', which feedback ids use to join block, "
                       "behaviour and sync ids; behaviour ignored", node)
+            return
+        if len(self.block.behaviours) >= MAX_BEHAVIOURS:
+            if len(self.block.behaviours) == MAX_BEHAVIOURS and not self.full:
+                self.full = True
+                self.warn("PARSING_FAILURE", f"the block has more than {MAX_BEHAVIOURS} behaviours: {bid} and "
+                          "every behaviour after it ignored", node, [bid])
             return
         self.seen.add(bid)
         beh = Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), required=required,
@@ -340,11 +384,20 @@ class _Reader:
             self.warn("PARSING_FAILURE", message, where, [beh.id])
         if self.notes is not None:
             self.notes.extend(reading.adapted)
+        if len(reading.marks) > MAX_SYNCS:
+            self.warn("PARSING_FAILURE", f"speech {beh.id} has {len(reading.marks)} sync marks (at most "
+                      f"{MAX_SYNCS}); behaviour ignored", node, [beh.id])
+            return False
         for _, name in reading.marks:
             beh.sync_ids.insert(len(beh.sync_ids) - 1, name)
         beh.text, beh.marks, beh.prosody = reading.text, reading.marks, reading.prosody
         if not beh.text:
             self.warn("PARSING_FAILURE", f"speech {beh.id} has empty text; behaviour ignored", node, [beh.id])
+            return False
+        words = len(beh.text.split())
+        if words > MAX_WORDS:
+            self.warn("PARSING_FAILURE", f"speech {beh.id} has {words} words (at most {MAX_WORDS}, over an hour of "
+                      "speech); behaviour ignored", node, [beh.id])
             return False
         return True
 

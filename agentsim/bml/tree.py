@@ -17,6 +17,9 @@ from defusedxml.expatreader import create_parser
 
 from agentsim.core.errors import BMLError
 
+#: Deepest nesting of elements read (BML nests a few levels; deeper documents are refused, not recursed into).
+MAX_DEPTH = 256
+
 
 class Node:
     """An element: tag as written, attributes, children (elements and text) and where it starts."""
@@ -81,6 +84,9 @@ class _TreeBuilder:
         self.stack: list[Node] = []
 
     def start(self, name: str, attrs: dict[str, str]) -> None:
+        if len(self.stack) >= MAX_DEPTH:
+            raise BMLError(f"elements nested more than {MAX_DEPTH} deep", self.expat.CurrentLineNumber,
+                           self.expat.CurrentColumnNumber + 1)
         stack = self.stack
         namespaces = stack[-1].namespaces if stack else {}
         if attrs and "xmlns" in "".join(attrs) and any(key.startswith("xmlns") for key in attrs):
@@ -129,6 +135,9 @@ def _parse(data: bytes, shift: int = 0) -> Node:
     expat.EndElementHandler = builder.end
     expat.CharacterDataHandler = builder.text
     expat.buffer_text = True
+    # Only the attributes the document writes: defaults an internal DTD's ATTLIST declares are not applied
+    # (they could give a block its id or put a time into every element of a kind).
+    expat.specified_attributes = True
     try:
         expat.Parse(data, True)
     except xml.parsers.expat.ExpatError as exc:
@@ -145,9 +154,23 @@ def _parse(data: bytes, shift: int = 0) -> Node:
     return builder.root
 
 
+def encode(text: str | bytes) -> bytes:
+    """A document as UTF-8 bytes; :class:`BMLError` (with line and column) for text that is not valid Unicode
+    (a lone surrogate)."""
+    if not isinstance(text, str):
+        return text
+    try:
+        return text.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        line = text.count("\n", 0, exc.start) + 1
+        column = exc.start - (text.rfind("\n", 0, exc.start) + 1) + 1
+        raise BMLError(f"the document is not valid Unicode: {exc.reason} "
+                       f"({text[exc.start:exc.end].encode('unicode_escape').decode('ascii')})", line, column) from None
+
+
 def read_tree(text: str | bytes) -> Node:
     """The element tree of one XML document. Raises :class:`BMLError` (with line and column)."""
-    return _parse(text.encode("utf-8") if isinstance(text, str) else text)
+    return _parse(encode(text))
 
 
 #: The element that :func:`read_forest` puts around several top-level elements.
@@ -163,7 +186,7 @@ def read_forest(text: str | bytes) -> tuple[Node, bool]:
     Returns the root, and whether it is a :data:`FOREST` element made here around several elements one
     after another (XML declarations among them are dropped; positions stay those of the text given).
     """
-    data = text.encode("utf-8") if isinstance(text, str) else text
+    data = encode(text)
     try:
         return _parse(data), False
     except BMLError as exc:

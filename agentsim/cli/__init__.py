@@ -42,6 +42,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _quiet_stdout() -> None:
+    """Make what is left in standard output's buffer go nowhere (it cannot be written: say nothing more)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, AttributeError, ValueError):
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status (0 done, 1 an error the user can fix, 2 a usage
     error, 70 a bug, 130 interrupted)."""
@@ -57,6 +66,11 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    except OSError as exc:  # the machine, not the program: a full disk, a read-only folder, a closed output
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"agentsim: cannot go on: {exc.strerror or exc}{where}", file=sys.stderr)
+        _quiet_stdout()
+        return 1
     except Exception as exc:  # a bug: one line for the user, the traceback on request
         if os.environ.get("AGENTSIM_DEBUG"):
             raise

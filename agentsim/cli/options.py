@@ -90,9 +90,13 @@ def add_fps(parser: argparse.ArgumentParser, what: str, default: float | None = 
                         help=f"frame rate of {what}" + (f" ({default:g})" if default is not None else ""))
 
 
+#: Highest frame rate of motion output (frames per second): far above any display or motion capture.
+MAX_FPS = 1000.0
+
+
 def check_fps(args: argparse.Namespace) -> None:
-    if args.fps is not None and not (args.fps > 0 and math.isfinite(args.fps)):
-        raise UsageError("--fps must be positive")
+    if args.fps is not None and not 0 < args.fps <= MAX_FPS:
+        raise UsageError(f"--fps must be positive and at most {MAX_FPS:g} frames per second, got {args.fps:g}")
 
 
 def _metronome(text: str) -> tuple[float, float]:
@@ -103,9 +107,9 @@ def _metronome(text: str) -> tuple[float, float]:
     except (ValueError, IndexError):
         raise argparse.ArgumentTypeError(f"expected BPM[,START], got {text!r}") from None
     if not (bpm > 0 and math.isfinite(bpm)):
-        raise argparse.ArgumentTypeError(f"the metronome tempo must be a positive number of BPM, got {parts[0]}")
+        raise argparse.ArgumentTypeError(f"the metronome tempo must be a positive, finite number of BPM, got {parts[0]!r}")
     if not math.isfinite(start):
-        raise argparse.ArgumentTypeError(f"the metronome start must be a number of seconds, got {parts[1]}")
+        raise argparse.ArgumentTypeError(f"the metronome's first beat must be a finite time, got {parts[1]!r}")
     return bpm, start
 
 

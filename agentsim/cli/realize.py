@@ -101,7 +101,7 @@ def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sour
     if not any((args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report)):
         return  # nothing asked for: nothing to load
     from agentsim.media.audio import run_track
-    from agentsim.media.files import write_npz, write_textgrid, write_wav
+    from agentsim.media.files import write_npz, write_textgrid, write_wav, written
     from agentsim.media.tables import gesture_rows, write_csv
 
     recording = realizer.recording()
@@ -117,13 +117,15 @@ def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sour
     if args.bvh:
         from agentsim.animation import write_bvh
 
-        write_bvh(args.bvh, stream)
+        with written(args.bvh) as tmp:
+            write_bvh(tmp, stream)
     if args.poses:
         write_npz(args.poses, stream)
     if args.textgrid:
         write_textgrid(args.textgrid, recording, gestures)
     if args.csv:
-        write_csv(Path(args.csv) / "gestures.csv", gestures)
+        with written(Path(args.csv) / "gestures.csv") as tmp:
+            write_csv(tmp, gestures)
     if args.report:
         from agentsim.media.report import write_report
 
@@ -171,8 +173,10 @@ def realize_files(args: argparse.Namespace) -> int:
     if args.wav and args.tts == "builtin":
         raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak")
     print(f"speech: {options.describe_backend(tts)}", file=sys.stderr)
-    realizer = Realizer(realtime=args.realtime, anticipators=options.anticipators(args), strict=args.strict, tts=tts)
     out = sys.stdout
+    if out is None:  # started with its standard output closed
+        raise UsageError("standard output is closed: there is nowhere to write the feedback")
+    realizer = Realizer(realtime=args.realtime, anticipators=options.anticipators(args), strict=args.strict, tts=tts)
 
     def emit(feedback):
         out.write(to_json(feedback) + "\n")

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from agentsim.cli import options
+from agentsim.core.errors import UsageError
 
 
 def add_parsers(commands) -> None:
@@ -32,6 +33,8 @@ def add_parsers(commands) -> None:
 def run_server(args: argparse.Namespace) -> int:
     from agentsim.live.service import Service
 
+    if not 0 <= args.fps <= options.MAX_FPS:  # (0: no poses)
+        raise UsageError(f"--fps must be between 0 and {options.MAX_FPS:g} poses per second, got {args.fps:g}")
     service = Service(host=args.host, port=args.port, audio=args.audio, tts=options.backend(args.tts),
                       strict=args.strict, fps=args.fps, calibrate=args.calibrate)
     print(f"speech: {options.describe_backend(service.live.realizer.speech.planner.backend)}", file=sys.stderr)

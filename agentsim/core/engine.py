@@ -87,6 +87,8 @@ class Planner:
 
     def check_times(self, behaviour: Behaviour, preferred: Sequence[float], times: Sequence[float]) -> None:
         """Raise :class:`ScheduleError` unless ``times`` is a valid timing for ``behaviour``."""
+        if any(t != t for t in times):
+            raise ScheduleError("a sync point's time is not a number (NaN)")
         for a, b in zip(times, times[1:]):
             if b < a - EPSILON:
                 raise ScheduleError("sync points would happen out of order")
@@ -321,3 +323,6 @@ class Engine:
     def remove(self, timed: TimedBehaviour) -> None:
         self.planner.remove(timed)
         self.plan.kick()
+
+    def forget(self, block_ids: set[str]) -> None:
+        """The scheduler released these ended blocks: forget what is kept of them (what was heard, say)."""

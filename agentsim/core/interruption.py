@@ -79,7 +79,7 @@ class Interruption:
     def interrupt(self, run: BlockRun, include: Iterable[str] = (), exclude: Iterable[str] = (),
                   by: str = "") -> None:
         """Interrupt a block now, gracefully: speech stops, gestures retract, what hung from what will never
-        come is removed (quietly, unless it was required). ``include``: only these behaviours; ``exclude``:
+        come is removed; each behaviour cut or removed gets an INTERRUPTED warning. ``include``: only these behaviours; ``exclude``:
         all but these. A block that has not started is not started at all (it still gets its start and end,
         now); every behaviour of it goes."""
         include, exclude = set(include), set(exclude)
@@ -120,6 +120,8 @@ class Interruption:
             timed.next_index += 1
         timed.engine.stopped(timed, now)
         self.drops.append(DropRecord(timed.block_id, timed.id, now, "INTERRUPTED", cause))
+        self.warn(f"{timed.block_id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {cause}; what is left of it ends now",
+                  timed.run.block.character_id, [timed.id])
         self.remove_dependants(left, timed, cause)
         timed.engine.plan.kick([timed])
 
@@ -135,9 +137,9 @@ class Interruption:
         self.board.forget_behaviour(run.id, timed.id)
         run.gone.append(timed)
         self.drops.append(DropRecord(run.id, timed.id, self.env.now, "INTERRUPTED", cause))
-        if timed.behaviour.required:
-            self.warn(f"{run.id}:{timed.id}", "INTERRUPTED", f"{timed.id}: required, but {cause}; behaviour "
-                      "removed", run.block.character_id, [timed.id])
+        required = "required, but " if timed.behaviour.required else ""
+        self.warn(f"{run.id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {required}{cause}; behaviour removed before "
+                  "it started", run.block.character_id, [timed.id])
         self.remove_dependants(left, timed, cause)
 
     def remove_dependants(self, peg_ids: set[int], origin: TimedBehaviour, cause: str) -> None:

@@ -79,7 +79,7 @@ class Scheduler(Composition, Interruption, Retiming):
     """
 
     def __init__(self, env: simpy.Environment, board: PegBoard, log: fb.FeedbackLog,
-                 prediction_tolerance: float = FRAME):
+                 prediction_tolerance: float = FRAME, keep: int | None = None):
         self.env = env
         self.board = board
         self.log = log
@@ -87,9 +87,14 @@ class Scheduler(Composition, Interruption, Retiming):
         self.engines: dict[str, Engine] = {}  # behaviour type -> engine
         self.engine_list: list[Engine] = []
         self.anticipators: dict[str, object] = {}
+        self.fault_counts: dict[str, int] = {}  # anticipator id -> faults refused
         self.runs: list[BlockRun] = []  # not yet ended, in submission order
         self.all_runs: list[BlockRun] = []
         self.drops: list[DropRecord] = []
+        #: how many ended blocks are kept (None: all): older ones, once nothing refers to them by name any more,
+        #: are released with their pegs, registrations and records (see :meth:`release`)
+        self.keep = keep
+        self._ended: list[BlockRun] = []  # ended or refused runs, oldest first (with ``keep``)
         #: bumped whenever behaviours are added, so that :class:`Dependants` know to look again
         self.structure_version = 0
         self._pending: dict[TimedBehaviour, None] | None = {}  # to re-time this instant; None: all
@@ -109,6 +114,21 @@ class Scheduler(Composition, Interruption, Retiming):
     # ------------------------------------------------------------------ anticipators
     def add_anticipator(self, anticipator) -> None:
         self.anticipators[anticipator.id] = anticipator
+        anticipator.report = self.anticipator_fault
+
+    #: Most warnings about one anticipator's faults; after them its faults are only counted.
+    MAX_FAULT_WARNINGS = 100
+
+    def anticipator_fault(self, anticipator, sync_id: str, description: str) -> None:
+        """An anticipator did something that was refused (see :mod:`~agentsim.core.anticipator`): warn."""
+        counts = self.fault_counts
+        n = counts[anticipator.id] = counts.get(anticipator.id, 0) + 1
+        if n > self.MAX_FAULT_WARNINGS:
+            return
+        if n == self.MAX_FAULT_WARNINGS:
+            description += f" (further faults of anticipator {anticipator.id!r} are not reported)"
+        target = f"anticipators:{anticipator.id}" + (f":{sync_id}" if sync_id else "")
+        self.warn(target, "IMPOSSIBLE_TO_SCHEDULE", description, "agent")
 
     def anticipator_peg(self, anticipator_id: str, sync_id: str) -> TimePeg:
         """The anticipator peg BML calls ``anticipators:<id>:<sync>``; ScheduleError if there is none."""
@@ -144,7 +164,7 @@ class Scheduler(Composition, Interruption, Retiming):
             return None
         if block.composition == "REPLACE":
             for run in list(self.runs):
-                self.cut(run)
+                self.cut(run, block.id)
         now = self.env.now
         run = BlockRun(block, self.board.new_block_peg(block.id, now), self.env.event())
         self.link(run)
@@ -163,6 +183,7 @@ class Scheduler(Composition, Interruption, Retiming):
         if solver.failed:
             run.state = "refused"
             run.ended.succeed()
+            self.retire(run)
             return run
         for timed in list(run.timed):
             reason = timed.engine.planner.admit(timed)
@@ -255,7 +276,7 @@ class Scheduler(Composition, Interruption, Retiming):
             self.end_if_done(run, time)
 
     def end_if_done(self, run: BlockRun, time: float) -> None:
-        if run.state == "running" and not run.has_live():
+        if run.state == "running" and not run.live_count:  # (a count: ends come one by one, N of them)
             self.end(run, time)
 
     def end(self, run: BlockRun, time: float) -> None:
@@ -265,10 +286,56 @@ class Scheduler(Composition, Interruption, Retiming):
         if run in self.runs:
             self.runs.remove(run)
         run.ended.succeed()
+        self.retire(run)
 
-    def cut(self, run: BlockRun) -> None:
-        """End a block now (composition REPLACE): its behaviours stop where they are."""
+    def retire(self, run: BlockRun) -> None:
+        """A run is over (ended or refused): with :attr:`keep`, release the oldest ones beyond it (in batches,
+        so that each costs O(1) amortised)."""
+        if self.keep is None:
+            return
+        self._ended.append(run)
+        if len(self._ended) > 2 * self.keep + 16:
+            cut = len(self._ended) - self.keep
+            self.release(self._ended[:cut])
+            del self._ended[:cut]
+
+    #: A passed anticipator peg is forgotten this long (s) after its time, when blocks are released.
+    PEG_MEMORY = 60.0
+
+    def release(self, runs: list[BlockRun]) -> None:
+        """Forget ended runs: they leave :attr:`all_runs` and the records, their sync points can no longer be
+        referred to by name (a reference to them is a warning, as to a block that never was), their block pegs
+        and registrations go, and so do the engines' records of them and the anticipators' passed pegs.
+        Whatever still holds one of their pegs (a later block tied to them) keeps it."""
+        gone = {id(r) for r in runs}
+        self.all_runs = [r for r in self.all_runs if id(r) not in gone]
+        kept = {r.id for r in self.all_runs}
+        for run in runs:
+            if run.id not in kept:  # no later block of that id has taken its place on the board
+                self.board.forget_block(run.id)
+                if self.board.block_pegs.get(run.id) is run.block_peg:
+                    del self.board.block_pegs[run.id]
+        released = {r.id for r in runs} - kept
+        self.drops = [d for d in self.drops if d.block not in released]
+        for engine in self.engine_list:
+            engine.forget(released)
+        before = self.env.now - self.PEG_MEMORY
+        for anticipator in self.anticipators.values():
+            forget = getattr(anticipator, "forget_passed", None)
+            if forget is not None:
+                forget(before)
+
+    def cut(self, run: BlockRun, by: str = "") -> None:
+        """End a block now (composition REPLACE): its behaviours stop where they are.
+
+        Every behaviour cut is said in an INTERRUPTED warning; one that had started also gets its end, now.
+        """
         now = self.env.now
+        character = run.block.character_id
+        cause = f"its block was replaced by {by}" if by else "its block was replaced"
+        if run.state == "pending":
+            self.log.send(fb.block_progress(run.id, "start", now, character))
+            run.state = "running"
         for timed in run.live():
             started = timed.state == "active" and timed.passed[0] is not None
             timed.state = "dropped"
@@ -276,10 +343,14 @@ class Scheduler(Composition, Interruption, Retiming):
             if started:  # what it makes (its sound) stops here too
                 timed.engine.stopped(timed, now)
             timed.engine.remove(timed)
-            self.drops.append(DropRecord(run.id, timed.id, now, "INTERRUPTED", "its block was replaced"))
-        if run.state == "pending":
-            self.log.send(fb.block_progress(run.id, "start", now, run.block.character_id))
-            run.state = "running"
+            self.drops.append(DropRecord(run.id, timed.id, now, "INTERRUPTED", cause))
+            self.warn(f"{run.id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {cause}; "
+                      + ("stopped at once" if started else "it will not start"), character, [timed.id])
+            if started:
+                last = len(timed.sync_ids) - 1
+                timed.passed[last] = now
+                self.log.send(fb.sync_point_progress(run.id, timed.id, timed.sync_ids[last], now - run.block_peg.time,
+                                                     now, character))
         self.end(run, now)
 
     def drop(self, timed: TimedBehaviour, reason: str) -> None:

@@ -264,6 +264,7 @@ class BlockSolver:
                 for other in members.get(root, ()):
                     if not placed[other]:
                         heapq.heappush(ready, priority[other])
+        self.drop_dependants()
         self.honour_inequalities(inequalities)
         if self.shift_clusters(inequalities):
             self.check_inequalities(inequalities)
@@ -339,6 +340,21 @@ class BlockSolver:
         timed.owns = [i in owned for i in range(n)]
         self.timed[beh.id] = timed
         return newly_known
+
+    def drop_dependants(self) -> None:
+        """A behaviour whose sync points are tied to one that was dropped is dropped too, with its own
+        warning (else it would run at a time nothing gave it)."""
+        changed = True
+        while changed:
+            changed = False
+            for beh in self.block.behaviours:
+                if beh.id in self.dropped:
+                    continue
+                for sync_id, ref in beh.refs.items():
+                    if ref.kind == "sync" and ref.block in (None, self.block.id) and ref.behaviour in self.dropped:
+                        self.drop(beh.id, f"{sync_id}={ref.text!r}: it is tied to {ref.behaviour}, which was dropped")
+                        changed = True
+                        break
 
     def self_ties(self, beh: Behaviour, groups, known, times) -> dict[str, float]:
         """Times implied by constraints between sync points of the same behaviour (``end="b:start+1"``)."""

@@ -36,6 +36,7 @@ class KeyRef:
         return None if t is None else t + self.offset
 
 
+_LIVE = ("planned", "active")
 _planned = itertools.count()
 _versions = itertools.count()
 
@@ -63,6 +64,7 @@ class TimedBehaviour:
         self.owns = [False] * len(self.sync_ids)
         self.heap_version = 0  # which of the player's heap entries for this behaviour is current
         self.next_index = 0
+        self._state = ""
         self.state = "planned"  # planned -> active -> finished | dropped
         self.stopped: float | None = None  # when it was dropped, cut or interrupted, if it was
         self.planned_start: float | None = None  # its start as first planned
@@ -80,9 +82,21 @@ class TimedBehaviour:
         return self.run.block.id
 
     @property
+    def state(self) -> str:
+        """``planned`` -> ``active`` -> ``finished`` | ``dropped``."""
+        return self._state
+
+    @state.setter
+    def state(self, value: str) -> None:
+        was, now = self._state in _LIVE, value in _LIVE
+        self._state = value
+        if was != now and isinstance(self.run, BlockRun):
+            self.run.live_count += 1 if now else -1
+
+    @property
     def live(self) -> bool:
         """Planned or playing (not finished, not dropped)."""
-        return self.state in ("planned", "active")
+        return self._state in _LIVE
 
     def _anchor(self, i: int) -> float | None:
         passed = self.passed[i]
@@ -269,9 +283,9 @@ class BlockRun:
     wake: simpy.Event | None = None  # succeeds when what this pending run waits for changes
     # the predicted ends of its behaviours, as a max-heap with lazy deletion: (-end, version, timed)
     _ends: list[tuple[float, int, TimedBehaviour]] = field(default_factory=list, repr=False)
+    #: how many behaviours made for it are planned or playing (kept by :attr:`TimedBehaviour.state`)
+    live_count: int = 0
     _end_version: dict[TimedBehaviour, int] = field(default_factory=dict, repr=False)
-    _live_from: int = field(default=0, repr=False, compare=False)  # see has_live()
-    _live_of: tuple[int, int] | None = field(default=None, repr=False, compare=False)
 
     @property
     def id(self) -> str:
@@ -295,19 +309,8 @@ class BlockRun:
 
     def live(self) -> list[TimedBehaviour]:
         """Its behaviours that are planned or playing, in document order."""
-        return [t for t in self.timed if t.live]
+        return [t for t in self.timed if t.live] if self.live_count else []
 
     def has_live(self) -> bool:
-        """Whether any of its behaviours is planned or playing.
-
-        A behaviour that is no longer live never is again, so the search goes on from the first one
-        found live the last time (from the start again if the list was changed).
-        """
-        timed = self.timed
-        start = self._live_from if self._live_of == (id(timed), len(timed)) else 0
-        for i in range(start, len(timed)):
-            if timed[i].live:
-                self._live_from, self._live_of = i, (id(timed), len(timed))
-                return True
-        self._live_from, self._live_of = len(timed), (id(timed), len(timed))
-        return False
+        """Whether any of its behaviours is planned or playing (:attr:`live_count`, kept as they change)."""
+        return self.live_count > 0

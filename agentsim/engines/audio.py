@@ -102,6 +102,9 @@ class AudioEngine(Engine):
                 listener.file_started(self.played[-1])
         super().sync_passed(timed, index, time)
 
+    def forget(self, block_ids: set[str]) -> None:
+        self.played = [heard for heard in self.played if heard.block not in block_ids]
+
     def stopped(self, timed: TimedBehaviour, now: float) -> None:
         for listener in self.listeners:
             listener.sound_stopped(timed.block_id, timed.id, now)

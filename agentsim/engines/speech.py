@@ -208,7 +208,8 @@ class Playback:
         """Keep how t_A went since the last event, before the next event changes its future."""
         last = self.history[-1][0] if self.history else None
         path = self.strategy.path
-        points = [t for t in path.times if last is not None and last < t < now]
+        times = path.times
+        points = [] if last is None else times[bisect.bisect_right(times, last):bisect.bisect_left(times, now)]
         for t in points + [now]:
             p = path.at(t)
             self.history.append((t, p))
@@ -317,7 +318,14 @@ class SpeechEngine(Engine):
     def sync_passed(self, timed: TimedBehaviour, index: int, time: float) -> None:
         if index == 0:
             self.apply_rate(timed, time)
-            if self.config.strategy is None:
+            if self.config.strategy is not None and not self.followable(timed):
+                self.context.blocks.warn(f"{timed.block_id}:{timed.id}", "IMPOSSIBLE_TO_SCHEDULE",
+                                         f"{timed.id}: the speech has no words, so no progress events for the "
+                                         f"{self.config.strategy!r} strategy to follow; it plays as planned",
+                                         [timed.id])
+                self.take_timing(timed, time)
+                self._started.append((timed, self.planner.utterance(timed.behaviour), time, None))
+            elif self.config.strategy is None:
                 self.take_timing(timed, time)
                 self._started.append((timed, self.planner.utterance(timed.behaviour), time, None))
             else:
@@ -329,6 +337,18 @@ class SpeechEngine(Engine):
                 for listener in self.listeners:
                     listener.sound_started(heard)
         super().sync_passed(timed, index, time)
+
+    def forget(self, block_ids: set[str]) -> None:
+        self._started = [s for s in self._started if s[0].block_id not in block_ids]
+        self.playbacks = [p for p in self.playbacks if p.timed.block_id not in block_ids]
+        kept = {id(s[0]) for s in self._started}
+        self._stopped = {k: v for k, v in self._stopped.items() if k in kept}
+
+    def followable(self, timed: TimedBehaviour) -> bool:
+        """Whether an animator-time strategy can follow the speech: it has words to make progress events."""
+        if self.config.timing == "linear":
+            return True  # planned from its text's words (a speech without any was not planned)
+        return bool(self.planner.utterance(timed.behaviour).words)
 
     def stopped(self, timed: TimedBehaviour, now: float) -> None:
         """An interruption stopped the speech at ``now``: its audio ends there, its events stop."""
@@ -435,15 +455,24 @@ class SpeechEngine(Engine):
 
     def _deliver(self, playback: Playback):
         env = self.env
-        for event in playback.delivered:
-            if event.arrival_time > env.now:
-                yield env.timeout(event.arrival_time - env.now)
+        events = playback.delivered
+        i = 0
+        while i < len(events):
+            if events[i].arrival_time > env.now:
+                yield env.timeout(events[i].arrival_time - env.now)
             if playback.finished:  # interrupted: nothing it says matters any more
                 return
             playback.record(env.now)
             before = playback.strategy.path
-            playback.strategy.on_event(event, env.now)
-            if playback.strategy.path is not before:  # the event changed the future of t_A
+            # every event that arrives at this instant, then one look at what they changed (a burst of
+            # events at one instant costs the re-timing once)
+            first = i
+            while i < len(events) and events[i].arrival_time <= env.now:
+                playback.strategy.on_event(events[i], env.now)
+                i += 1
+            if i - first > 1:  # where the events of this instant took t_A (it may have snapped)
+                playback.record(env.now)
+            if playback.strategy.path is not before:  # the events changed the future of t_A
                 self.context.pegs_moved(playback.dependants, horizon=self.HORIZON)
         # After the last event and the longest it could have been held, t_A learns nothing more.
         last = max([playback.t_end] + [e.arrival_time for e in playback.delivered])

@@ -45,6 +45,8 @@ WARM_UP = ('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="warmup"><
 
 #: How many feedback items the realizer keeps (older ones are forgotten: a server runs for hours).
 KEEP_FEEDBACK = 10_000
+#: How many ended blocks the realizer keeps (older ones are released with their pegs: memory stays flat).
+KEEP_BLOCKS = 256
 
 
 class LiveRealizer:
@@ -61,6 +63,7 @@ class LiveRealizer:
         from agentsim.realizer import Realizer
 
         self.env = make_environment(realtime=True)
+        realizer_options.setdefault("keep", KEEP_BLOCKS)
         self.realizer = Realizer(env=self.env, **realizer_options)
         self.realizer.feedback.keep = KEEP_FEEDBACK
         #: documents as clients sent them, for the reader; blocks read and ready, for the realizer

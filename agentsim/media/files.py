@@ -5,6 +5,7 @@ syntax for comments (a reader we test refuses one), so the BVH says nothing; its
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable
@@ -14,6 +15,17 @@ from agentsim.core.errors import UsageError
 from agentsim.media import AXIS
 if TYPE_CHECKING:  # checking where to write needs no audio
     from agentsim.media.audio import Track
+
+
+def _cannot_write_in(folder: Path) -> str | None:
+    """Why nothing can be written in ``folder`` (a read-only mount, which permissions do not tell), or None."""
+    probe = folder / f".agentsim-probe-{os.getpid()}"
+    try:
+        probe.touch()
+        probe.unlink()
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
 
 
 def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[str | Path | None] = ()) -> None:
@@ -35,16 +47,51 @@ def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[st
                                  f"({exc.strerror or exc})") from None
         if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
             raise UsageError(f"cannot write {path}: no permission to write in {folder}")
+        problem = _cannot_write_in(folder)
+        if problem:
+            raise UsageError(f"cannot write {path}: {problem}")
     for name in folders:
         if name is None:
             continue
         path = Path(name)
         try:
             path.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:
+            raise UsageError(f"cannot make the output folder {path}: a file of that name is in the way") from None
+        except NotADirectoryError:
+            raise UsageError(f"cannot make the output folder {path}: a file is in the way on its path") from None
         except OSError as exc:
             raise UsageError(f"cannot make the output folder {path}: {exc.strerror or exc}") from None
-        if not os.access(path, os.W_OK):
-            raise UsageError(f"cannot write in the output folder {path}: no permission")
+        problem = _cannot_write_in(path)
+        if problem:
+            raise UsageError(f"cannot write in the output folder {path}: {problem}")
+
+
+@contextlib.contextmanager
+def written(path: str | Path):
+    """Write a file so that it cannot half-exist: the body writes to a temporary name beside ``path`` (with
+    the same suffix), renamed to ``path`` once it is whole; if the writing fails (a full disk), the temporary
+    file is removed and ``path`` is left as it was.
+
+    >>> with written("out.txt") as tmp:  # doctest: +SKIP
+    ...     tmp.write_text("whole")
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.partial-{os.getpid()}{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """Write a text file (UTF-8) whole or not at all (see :func:`written`)."""
+    with written(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
 
 
 def write_wav(path: str | Path, track: Track) -> Path:
@@ -52,7 +99,7 @@ def write_wav(path: str | Path, track: Track) -> Path:
     import soundfile
 
     path = Path(path)
-    with soundfile.SoundFile(str(path), "w", track.rate, 1, "PCM_16", format="WAV") as f:
+    with written(path) as tmp, soundfile.SoundFile(str(tmp), "w", track.rate, 1, "PCM_16", format="WAV") as f:
         f.comment = f"agentsim: {AXIS}"
         f.software = "agentsim"
         f.write(track.samples)
@@ -63,7 +110,12 @@ def write_npz(path: str | Path, stream) -> Path:
     """The poses as :func:`agentsim.animation.write_npz` writes them, plus ``time_axis``."""
     from agentsim.animation import write_npz as write_poses
 
-    return write_poses(path, stream, time_axis=AXIS)
+    path = Path(path)
+    if path.suffix != ".npz":  # numpy adds it
+        path = path.with_name(path.name + ".npz")
+    with written(path) as tmp:
+        write_poses(tmp, stream, time_axis=AXIS)
+    return path
 
 
 def heard_words(heard) -> list[tuple[str, float, float]]:
@@ -125,5 +177,6 @@ def write_textgrid(path: str | Path, recording, gestures=(), end: float | None =
     grid.addTier(textgrid.PointTier("strokes", [Point(t, " ".join(v)) for t, v in sorted(strokes.items())], 0.0, end))
     grid.addTier(textgrid.PointTier(f"axis: {AXIS}", [], 0.0, end))
     path = Path(path)
-    grid.save(str(path), format="long_textgrid", includeBlankSpaces=True)
+    with written(path) as tmp:
+        grid.save(str(tmp), format="long_textgrid", includeBlankSpaces=True)
     return path

@@ -262,14 +262,14 @@ def mark_times_from_words(speech: SpeechText, words: Sequence[Word], duration: f
 
     A mark after the last word is placed at the end of the utterance.
     """
+    starts = [word.char_start for word in words]
+    if any(b < a for a, b in zip(starts, starts[1:])):  # words out of text order: look at each
+        return [Mark(name, next((w.start for w in words if w.char_start >= offset), duration))
+                for offset, name in speech.marks]
     marks = []
     for offset, name in speech.marks:
-        time = duration
-        for word in words:
-            if word.char_start >= offset:
-                time = word.start
-                break
-        marks.append(Mark(name, time))
+        k = bisect.bisect_left(starts, offset)  # the first word starting at or after the mark
+        marks.append(Mark(name, words[k].start if k < len(words) else duration))
     return marks
 
 

@@ -230,11 +230,18 @@ def piece_from_dict(data: dict, where: str = "piece") -> Piece:
 
 
 def _read_toml(path: Path) -> dict:
+    if path.is_dir():
+        raise AgentsimError(f"{path} is a folder, not a configuration file")
     if not path.is_file():
         raise AgentsimError(f"no such file: {path}")
     try:
         with open(path, "rb") as f:
-            return tomllib.load(f)
+            data = f.read()
+        return tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise AgentsimError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason}); TOML files are UTF-8") from None
+    except OSError as exc:
+        raise AgentsimError(f"cannot read {path}: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise AgentsimError(f"{path}: not valid TOML ({exc})") from None
 

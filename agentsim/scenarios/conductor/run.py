@@ -64,6 +64,9 @@ def main(args: argparse.Namespace) -> int:
     out = Path(args.out)
     as_json = getattr(args, "json", False)
     table = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
+    from agentsim.media.files import check_writable
+
+    check_writable(folders=[out])  # so does an output folder that cannot be written
     live = args.live or args.device is not None
     if args.seconds is not None and not live:
         raise AgentsimError("--seconds only applies to --input")

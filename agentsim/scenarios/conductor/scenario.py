@@ -365,7 +365,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     from agentsim.animation import evaluate_poses, plot_timelines, write_bvh
     from agentsim.core.feedback import to_json
     from agentsim.media.audio import run_track
-    from agentsim.media.files import write_wav
+    from agentsim.media.files import write_text, write_wav
     from agentsim.media.report import write_report
     from agentsim.media.tables import gesture_rows, write_csv
 
@@ -373,11 +373,9 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     out.mkdir(parents=True, exist_ok=True)
     from agentsim.media import AXIS, GLOSSARY
 
-    (out / "metrics.json").write_text(json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}, indent=2) + "\n")
+    write_text(out / "metrics.json", json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}, indent=2) + "\n")
     recording = run.realizer.recording()
-    with open(out / "feedback.jsonl", "w") as f:
-        for item in recording.feedback:
-            f.write(to_json(item) + "\n")
+    write_text(out / "feedback.jsonl", "".join(to_json(item) + "\n" for item in recording.feedback))
     # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the feedback's)
     track = run_track(recording, [ensemble_source(run)])
     write_wav(out / "ensemble.wav", track)

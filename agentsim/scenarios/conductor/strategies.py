@@ -35,7 +35,7 @@ from agentsim.scenarios.conductor.config import ConductorConfig, Piece
 from agentsim.scenarios.conductor.hearing import Ears
 from agentsim.scenarios.conductor.planning import BudgetPlanner, ResponseEstimator
 
-_BEAT = re.compile(r"^beat(\d+)$")
+_BEAT = re.compile(r"^beat(\d{1,9})$")
 
 #: An ictus closer than this to now (s) is not moved any more.
 FREEZE = 0.12

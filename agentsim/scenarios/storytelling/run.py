@@ -112,18 +112,17 @@ def main(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     strategy = check_strategy(getattr(args, "strategy", "best") or "best")
-    if not args.fps > 0:
-        raise AgentsimError("--fps must be positive")
+    if not 0 < args.fps <= 1000:
+        raise AgentsimError(f"--fps must be positive and at most 1000 frames per second, got {args.fps:g}")
     if not args.window > 0:
         raise AgentsimError("--window must be positive")
     delivery = args.delivery
     scene = read_story(resolve_story(args.scene)).scene if getattr(args, "scene", None) else None
     story = load_story(resolve_story(args.story), scene)
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise AgentsimError(f"cannot create the output directory {str(out)!r}: {exc}") from None
+    from agentsim.media.files import check_writable
+
+    check_writable(folders=[out])  # before anything is synthesised
     voice = make_voice(args.tts, cache_dir=args.cache, cache=not args.no_cache)
     cache = voice.backend
 
@@ -217,7 +216,7 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.core.feedback import to_json
     from agentsim.media.audio import run_track
-    from agentsim.media.files import write_wav
+    from agentsim.media.files import write_text, write_wav
     from agentsim.media.report import write_report
     from agentsim.media.tables import gesture_rows, write_csv
     from agentsim.scenarios.storytelling.praat import export_textgrid
@@ -229,10 +228,8 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
         return time.perf_counter()
 
     t = time.perf_counter()
-    (out / "story.bml").write_text(telling.bml)
-    with open(out / "feedback.jsonl", "w") as f:
-        for item in telling.recording.feedback:
-            f.write(to_json(item) + "\n")
+    write_text(out / "story.bml", telling.bml)
+    write_text(out / "feedback.jsonl", "".join(to_json(item) + "\n" for item in telling.recording.feedback))
     t = stage("feedback", t)
     stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene)
     t = stage("poses", t)

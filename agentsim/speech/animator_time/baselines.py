@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 
 from agentsim.speech.animator_time.base import AnimatorTime
 from agentsim.speech.animator_time.path import Path
@@ -65,7 +64,8 @@ class ChangNaive(AnimatorTime):
     the latest event announced, ``sum_{i+1} t_s`` the plan onset of the next unit, and ``dt`` the time
     since the latest unit started, estimated as ``now - (arrival - delay)`` with the known base delay.
     So ``t_A`` runs at rate 1 from the latest unit, *sticks* at the next unit's onset until its event
-    arrives, and *snaps* to it when an event arrives early, several arrive together, or one is lost.
+    arrives, and *snaps* to it when an event arrives early, several arrive together, or one is lost. It
+    never goes back: an event that arrives out of order, behind what ``t_A`` shows, holds it there.
     Before the first event it runs from ``t0_pred`` and sticks at the first unit. Sentence and mark
     events are ignored.
     """
@@ -90,7 +90,10 @@ class ChangNaive(AnimatorTime):
             return
         cap = plan.next_unit(p)
         start = now - plan.delay  # estimated time at which the unit started
-        self.path = self._capped(now, min(p + (now - start), cap), cap)
+        # t_A never goes back: an event older than what t_A has shown already (it came out of order) holds
+        # t_A where it is until the next one
+        a = self.path.at(now)
+        self.path = self._capped(now, max(min(p + (now - start), cap), a), max(cap, a))
 
 
 class ChangSmooth(AnimatorTime):
@@ -125,7 +128,7 @@ class ChangSmooth(AnimatorTime):
         m = int(event.payload.get("in_word", 0)) if event.kind == "phoneme" else 0
         remaining = int(plan.phonemes_per_word[k]) - 1 - m if k is not None else 2
         base = 1.0 if remaining >= 2 else 0.8 if remaining == 1 else 0.6
-        rate = float(np.clip(base * (1.0 + (target - a) / self.tau), self.min_rate, self.max_rate))
+        rate = min(max(float(base * (1.0 + (target - a) / self.tau)), self.min_rate), self.max_rate)
         nxt = float(plan.word_onsets[k + 1]) if k is not None and k + 1 < plan.n_words else plan.duration
         path = Path(now, a, rate)
         if a < nxt and rate > self.min_rate:
@@ -140,7 +143,8 @@ class Skip70ms(AnimatorTime):
 
     ``t_A = t - t0_pred + c``. On each word, phoneme or end event the estimate of where speech is
     now is ``p + delay`` (the announced unit plus the known delay since it started); when it differs
-    from ``t_A`` by more than 70 ms, ``c`` is changed so that ``t_A`` jumps to it.
+    from ``t_A`` by more than 70 ms, ``c`` is changed so that ``t_A`` jumps to it, forward; ahead of
+    the estimate by as much, ``t_A`` stands still until the estimate has caught up (it never goes back).
     """
 
     name = "skip-70ms"
@@ -153,5 +157,8 @@ class Skip70ms(AnimatorTime):
             return
         a = self.path.at(now)
         estimate = p + plan.delay
-        if abs(estimate - a) > self.threshold:
+        if estimate - a > self.threshold:
             self.path = Path(now, estimate, 1.0)
+        elif a - estimate > self.threshold:
+            # ahead of the speech: t_A never goes back; it stands still until the clock has caught up
+            self.path = Path(now, a, 0.0).then(now + (a - estimate), 1.0)

@@ -64,7 +64,10 @@ class BestTime(AnimatorTime):
     #: Slowest rate for linear plans, which must slow down in pauses the plan does not know.
     warp_min_rate = 0.3
 
+    _due: tuple[float, float] | None = None  # (clock time, t_A then) of events not yet steered by
+
     def reset(self, plan: SpeechPlan, t_request: float) -> None:
+        self._due = None
         super().reset(plan, t_request)
         self._p: list[float] = []
         self._y: list[float] = []
@@ -99,26 +102,48 @@ class BestTime(AnimatorTime):
         keep = p >= latest - self.offset_window
         self._intercept = envelope_intercept(y[keep] - self._slope * p[keep])
 
+    @property
+    def path(self) -> Path:
+        if self._due is not None:
+            self._steer()
+        return self._path
+
+    @path.setter
+    def path(self, path: Path) -> None:
+        self._path = path
+        self._due = None
+
     def on_event(self, event: ProgressEvent, now: float) -> None:
         plan = self.require_plan()
         p = plan.event_position(event)
         if p is None:
             return
         y = (event.arrival_time if math.isfinite(event.arrival_time) else now) - plan.delay
-        a = self.path.at(now)
+        # Events that arrive at one instant are taken together: the path is steered once, when it is next
+        # looked at (the path starts where t_A is now, which they do not change), so a storm of events at
+        # one instant costs one fit, not one per event.
+        if self._due is None or self._due[0] != now:
+            a = self.path.at(now)
+            self._due = (now, a)
         if self._warp is None:
             self._p.append(p)
             self._y.append(y)
+        else:
+            self._warp.observe(event, y, now)
+
+    def _steer(self) -> None:
+        """Steer t_A from where it was when the pending events arrived."""
+        now, a = self._due
+        self._due = None
+        if self._warp is None:
             self._fit_line()
             rate = 1.0 / self._slope
             target = (now - self._intercept) * rate
-            self.path = self._follow(now, a, [(now + self.settle, target + self.settle * rate)], rate,
+            self._path = self._follow(now, a, [(now + self.settle, target + self.settle * rate)], rate,
                                       self.min_rate)
         else:
-            self._warp.observe(event, y, now)
             milestones, rate = self._warp.milestones(now, a)
-            path = self._follow(now, a, milestones, rate, self.warp_min_rate)
-            self.path = path
+            self._path = self._follow(now, a, milestones, rate, self.warp_min_rate)
 
     def _follow(self, now: float, a: float, milestones: Sequence[tuple[float, float]], final_rate: float,
                 min_rate: float) -> Path:

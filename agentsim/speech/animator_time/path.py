@@ -82,7 +82,10 @@ class Path:
         if p >= s:
             return now
         t = now
-        for j in range(i, len(self.times)):
+        # positions never decrease: the first breakpoint after ``now`` at or past ``s`` ends the segment the
+        # crossing is in (a binary search, not a scan: a long speech's path has a breakpoint per word)
+        k = bisect.bisect_left(self.positions, s, i + 1)
+        for j in range(max(i, k - 1), len(self.times)):
             start = t if j == i else self.times[j]
             p_start = p if j == i else self.positions[j]
             stop = self.times[j + 1] if j + 1 < len(self.times) else math.inf

@@ -1,0 +1,88 @@
+"""Event storm: 100,000 progress events reaching an animator-time strategy at one instant.
+
+For every strategy, a long utterance's events (words and phonemes, about 100,000) are delivered at one
+clock instant, in order and shuffled (a seeded numpy Generator), and, shuffled, over 1,000 instants 1 ms
+apart; ``t_A`` is looked at after each instant, as the speech engine does. Prints JSON: seconds per storm
+and whether ``t_A`` stayed monotone (sampled before, after each instant, and up to 10 s later). Target:
+under 5 s for every strategy, ``t_A`` monotone.
+
+Usage: python benchmarks/bench_storm.py [--events N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+
+import numpy as np
+
+from agentsim.speech.animator_time import STRATEGIES, make_strategy
+from agentsim.speech.builtin import BuiltinBackend
+from agentsim.speech.backend import SpeechText
+from agentsim.speech.delivery import true_events
+from agentsim.speech.linear_model import default_linear_model, plan_from_utterance
+
+WORDS = ["we", "walk", "along", "the", "river", "slowly", "today", "and", "talk", "about", "nothing"]
+
+
+def storm_events(n_events: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    backend = BuiltinBackend()
+    text, events, utterance = "", [], None
+    n_words = max(10, n_events // 5)
+    while True:
+        text = " ".join(rng.choice(WORDS, n_words)) + "."
+        utterance = backend.synthesize(SpeechText(text))
+        events = [e for e in true_events(utterance, t0=0.0) if e.kind in ("word", "phoneme", "end")]
+        if len(events) >= n_events:
+            break
+        n_words = int(n_words * n_events / len(events)) + 10
+    return backend, utterance, events[:n_events - 1] + [events[-1]]
+
+
+def run_storm(name: str, backend, utterance, events, order, instant: float, instants: int = 1) -> dict:
+    """Feed ``events`` in ``order``, spread over ``instants`` clock instants 1 ms apart from ``instant`` (all
+    at one instant by default), looking at ``t_A`` after each instant as the speech engine does."""
+    model = default_linear_model(backend) if name == "linear-model" else None
+    plan = plan_from_utterance(utterance, delay=0.05, latency=0.0, t_request=0.0, linear_model=model)
+    strategy = make_strategy(name)
+    strategy.reset(plan, 0.0)
+    seen = [strategy.position(instant)]
+    start = time.perf_counter()
+    for k, chunk in enumerate(np.array_split(np.asarray(order), instants)):
+        now = instant + k * 0.001
+        for i in chunk:
+            event = events[i]
+            event.arrival_time = now
+            strategy.on_event(event, now)
+        seen.append(strategy.position(now))
+    seconds = time.perf_counter() - start
+    now = instant + instants * 0.001
+    seen += [strategy.position(now + d) for d in (0.0, 0.01, 0.1, 1.0, 10.0)]
+    monotone = all(b >= a - 1e-12 for a, b in zip(seen, seen[1:]))
+    return {"seconds": round(seconds, 3), "monotone": bool(monotone)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--events", type=int, default=100_000)
+    args = parser.parse_args()
+    backend, utterance, events = storm_events(args.events)
+    instant = utterance.duration / 2  # mid-speech: the storm arrives while it plays
+    rng = np.random.default_rng(1)
+    results = {}
+    for name in sorted(STRATEGIES):
+        shuffled = rng.permutation(len(events))
+        results[name] = {
+            "one instant, in order": run_storm(name, backend, utterance, events, range(len(events)), instant),
+            "one instant, shuffled": run_storm(name, backend, utterance, events, shuffled, instant),
+            "1000 instants, shuffled": run_storm(name, backend, utterance, events, shuffled, instant, 1000),
+        }
+    print(json.dumps({"events": len(events), "words": len(utterance.words), "machine": platform.machine(),
+                      "python": platform.python_version(), "strategies": results}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
