@@ -99,7 +99,7 @@ def test_an_output_that_cannot_be_written_is_named_before_any_work(tmp_path):
                            str(tmp_path / "afile" / "x.wav")], capture_output=True, timeout=120)
     assert proc.returncode == 2 and not proc.stdout
     assert proc.stderr.decode().strip().splitlines() == [f"agentsim: cannot write {tmp_path}/afile/x.wav: "
-                                                         f"cannot make the folder {tmp_path}/afile (File exists)"]
+                                                         f"a file is in the way of its folder {tmp_path}/afile"]
     proc = subprocess.run([sys.executable, "-m", "agentsim.cli", "realize", str(bml), "--tts", "builtin", "--wav",
                            str(tmp_path / "x.wav")], capture_output=True, timeout=120)
     assert proc.returncode == 2 and b"--tts espeak" in proc.stderr and not (tmp_path / "x.wav").exists()

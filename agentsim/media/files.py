@@ -42,6 +42,8 @@ def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[st
         if not folder.is_dir():
             try:
                 folder.mkdir(parents=True, exist_ok=True)
+            except (FileExistsError, NotADirectoryError):
+                raise UsageError(f"cannot write {path}: a file is in the way of its folder {folder}") from None
             except OSError as exc:
                 raise UsageError(f"cannot write {path}: cannot make the folder {folder} "
                                  f"({exc.strerror or exc})") from None
