@@ -16,7 +16,6 @@ import pytest
 from websockets.sync.client import connect
 
 from agentsim.live.service import Background, Service
-from agentsim.media.report.browser import Chromium, find_chromium
 from agentsim.speech.builtin import BuiltinBackend
 from helpers import whole_run_points
 
@@ -33,16 +32,6 @@ MOVED = 0.2
 #: What the page draws between two frames is the whole run's poses there to this much (measured 0.49 mm: the
 #: frames are sent rounded to the millimetre).
 DRAWN = 0.001
-
-
-@pytest.fixture(scope="module")
-def browser():
-    try:
-        find_chromium()
-    except RuntimeError as e:
-        pytest.fail(str(e))
-    with Chromium(width=1280, height=900) as chromium:
-        yield chromium
 
 
 def free_port() -> int:
