@@ -102,3 +102,11 @@ def test_the_conductors_music_on_the_command_line(tmp_path):
     assert bad.returncode == 1 and not (tmp_path / "never").exists()
     assert bad.stderr.strip().endswith("with --meter 5/4: [piece]: meter '5/4' has no conducting pattern: use 2/4, "
                                        "3/4 or 4/4")
+
+
+def test_realize_says_what_it_wrote(tmp_path):
+    proc = agentsim("realize", "examples/welcome.xml", "--tts", "builtin", "--bvh", "o/w.bvh", "--csv", "o/tables",
+                    cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.strip().splitlines()[-1] == "wrote o/w.bvh, o/tables/"
+    assert (tmp_path / "o" / "w.bvh").is_file() and (tmp_path / "o" / "tables").is_dir()

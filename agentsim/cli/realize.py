@@ -188,6 +188,10 @@ def realize_files(args: argparse.Namespace) -> int:
         realizer.submit_at(at[i], documents[i][1], source=str(resolve(documents[i][0])))
     realizer.run(until=args.until)
     write_run_outputs(args, realizer, title=", ".join(Path(f).name for f in args.files))
+    written = [f"{name}/" if name == args.csv else name
+               for name in (args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report) if name]
+    if written:
+        print(f"wrote {', '.join(written)}", file=sys.stderr)
     return 0
 
 
