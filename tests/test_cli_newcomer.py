@@ -110,3 +110,11 @@ def test_realize_says_what_it_wrote(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr.strip().splitlines()[-1] == "wrote o/w.bvh, o/tables/"
     assert (tmp_path / "o" / "w.bvh").is_file() and (tmp_path / "o" / "tables").is_dir()
+
+
+def test_feedback_times_are_printed_to_the_nanosecond(tmp_path):
+    proc = agentsim("realize", "examples/welcome.xml", "--tts", "builtin", cwd=tmp_path)
+    times = [f["globalTime"] for f in map(json.loads, proc.stdout.splitlines())]
+    # sums of floats print as 3.2410000000000005 unrounded; no time has more than 9 decimals
+    assert times and all(len(repr(t).split(".")[1]) <= 9 for t in times), times
+    assert any(repr(t) == "3.241" for t in times)
