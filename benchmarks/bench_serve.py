@@ -108,6 +108,10 @@ def main() -> None:
             "interrupt_latency": summary(latency),
             "latest": [{"lateness_ms": round(float(x), 2), "globalTime": round(g, 3), "id": i} for x, g, i in worst],
             "targets": {"lateness_spread_ms": 20, "interrupt_latency_ms": 100},
+            "poses": service.service.poses.cost() if service.service.poses is not None else None,
+            "sound": None if service.service.sound is None else {
+                "underruns": service.service.sound.underruns, "errors": service.service.sound.errors,
+                "late_sounds": len(service.service.sound.late)},
         }
         print(json.dumps(result, indent=2))
 

@@ -81,3 +81,111 @@ FALLS_APART = {
     "piece": {"title": "short", "meter": "4/4", "bars": 12, "tempo": 120.0},
     "ensemble": {"model": {"timekeeper_sd": 0.05, "alpha_partner": 0.0, "alpha_conductor": 0.0,
                            "beta_conductor": 0.0}}}
+
+
+def whole_run_points(poses, recording, times):
+    """What an evaluation of the whole run gives at ``times`` (s) for a :class:`~agentsim.live.poses.LivePoses`:
+    world positions (frames, points, 3) of its skeleton's points, each time between the two frames of the
+    ``k / fps`` grid around it (linearly, as the viewer draws it), the background's saccades and blinks those
+    the live poses drew (:class:`~agentsim.live.poses.Liveliness`)."""
+    import numpy as np
+
+    from agentsim.animation import evaluate_poses
+    from agentsim.animation.manager import DriverManager
+    from agentsim.media.report.data import body_points
+
+    times = np.asarray(times, dtype=float)
+    n = int(np.ceil(times.max() * poses.fps)) + 2
+    grid = np.arange(n) / poses.fps
+    manager = DriverManager(body=poses.body, seed=poses.seed)
+    poses.liveliness.pin(manager, 0.0, grid[-1] + 1.0)
+    points = body_points(poses.body, evaluate_poses(recording, fps=poses.fps, manager=manager, times=grid).values)
+    flat = points.reshape(n, -1)
+    out = np.stack([np.interp(times, grid, flat[:, q]) for q in range(flat.shape[1])], axis=1)
+    return out.reshape(len(times), -1, 3)
+
+
+# ------------------------------------------------------------------------------------------------ sweeps
+#: A short text: a point of 'eval speech-sync --tts builtin' on it takes some 60 ms.
+SWEEP_TEXT = ("The clock on the wall struck nine while the old man counted coins beside the window and hummed "
+              "a quiet tune.\n")
+#: The 12-point grid of the sweep tests (the spec's order: the last key varies fastest).
+SWEEP_GRID = {"strategy": ["best", "chang-naive"], "seed": [1, 2, 3], "jitter": [0.03, 0.1]}
+#: Figures that are wall-clock times, not results: they differ from run to run.
+WALL_CLOCK = {"wall_seconds"}
+
+
+def write_sweep_spec(folder, grid=None, text=SWEEP_TEXT, extra="") -> "Path":
+    """A spec of 'eval speech-sync' with the built-in backend (deterministic, unlike espeak-ng across calls
+    in one process) on a short text in ``folder``."""
+    import json
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    if text is not None:
+        (folder / "story.txt").write_text(text)
+    lines = ['command = ["eval", "speech-sync"]', "[grid]"]
+    lines += [f"{key} = {json.dumps(values)}" for key, values in (grid or SWEEP_GRID).items()]
+    lines += ["[fixed]", 'tts = "builtin"', 'text = "story.txt"', extra]
+    path = folder / "spec.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def sweep_points(grid=None) -> list[dict]:
+    """The points of a grid, in the order a sweep lists them."""
+    import itertools
+
+    grid = grid or SWEEP_GRID
+    return [dict(zip(grid, values)) for values in itertools.product(*grid.values())]
+
+
+def run_alone(folder, points: list[dict], timeout: float = 300.0) -> list[dict]:
+    """Each point as its own 'agentsim eval speech-sync ... --json' process (two at a time); their JSON."""
+    import json
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parent.parent
+    results: list = [None] * len(points)
+    queue = list(enumerate(points))
+    while queue:
+        batch, queue = queue[:2], queue[2:]
+        running = []
+        for index, point in batch:
+            argv = ["eval", "speech-sync", "--tts", "builtin", "--text", str(Path(folder) / "story.txt"), "--json"]
+            for key, value in point.items():
+                argv += [f"--{key}", str(value)]
+            running.append((index, subprocess.Popen([sys.executable, "-m", "agentsim", *argv], cwd=root,
+                                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)))
+        for index, proc in running:
+            out, err = proc.communicate(timeout=timeout)
+            assert proc.returncode == 0, err
+            results[index] = json.loads(out)
+    return results
+
+
+def flat_json(value, prefix: str = "") -> dict:
+    """Nested JSON objects as one level of dotted keys (the tests' own reading of a row's columns)."""
+    flat = {}
+    for key, item in value.items():
+        if isinstance(item, dict):
+            flat.update(flat_json(item, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = item
+    return flat
+
+
+def row_differences(row: dict, alone: dict, grid_keys) -> list[str]:
+    """Where a sweep's row differs from the JSON of the same point run alone (wall-clock times aside); a
+    figure named like a grid key is in the row as ``result.<name>``."""
+    found = []
+    for key, value in flat_json(alone).items():
+        column = f"result.{key}" if key in grid_keys else key
+        if key in WALL_CLOCK:
+            continue
+        if column not in row:
+            found.append(f"{column} missing")
+        elif row[column] != value:
+            found.append(f"{column}: {row[column]!r} != {value!r}")
+    return found

@@ -54,7 +54,8 @@ def test_tap_file(tmp_path):
 
 def test_registry_lists_builtins_and_refuses_unknown_names():
     assert {"metronome", "tap"} <= set(registry.available())
-    assert registry.parse_spec("metronome:m2,bpm=90") == ("metronome", "m2", {"bpm": 90.0})
+    assert registry.parse_spec("metronome:m2,bpm=90") == ("metronome", "m2", {"bpm": "90"})
+    assert registry.create("metronome", "m2", bpm="90").bpm == 90.0  # read as the float it is declared
     with pytest.raises(AgentsimError, match="no anticipator named 'nope'"):
         registry.create("nope")
     with pytest.raises(AgentsimError, match="tempo must be positive"):

@@ -251,3 +251,46 @@ def test_beats_modules_use_only_the_core_and_each_others_public_names(path):
             assert isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"), (
                 f"{path.name}:{node.lineno} reads {node.attr} of another object"
             )
+
+
+def test_mel_filters_are_librosas():
+    """The onset envelope's mel filters are librosa's, number for number (made without importing it)."""
+    import math
+
+    import librosa
+
+    from agentsim.beats.envelope import mel_filters
+
+    for sr in (8000, 22050, 44100, 48000):
+        n_fft = int(2 ** round(math.log2(0.03 * sr)))
+        expected = librosa.filters.mel(sr=sr, n_fft=n_fft, n_mels=40, fmin=30.0, fmax=min(16000.0, sr / 2))
+        got = mel_filters(sr, n_fft, 40, 30.0, min(16000.0, sr / 2))
+        assert got.dtype == expected.dtype and np.array_equal(got, expected)
+
+
+def test_beat_f_measure_is_mir_evals():
+    """The F-measure of the beat scores is mir_eval's, number for number, on beats near, far and on the edge
+    of the window."""
+    import warnings
+
+    import mir_eval
+
+    from agentsim.beats.evaluation import beat_f_measure
+
+    rng = np.random.default_rng(0)
+    for trial in range(600):
+        nr, ne = rng.integers(0, 30, 2)
+        ref = np.sort(np.cumsum(rng.uniform(0.3, 0.9, nr)))
+        if trial % 3 == 0:
+            est = np.sort(ref[:ne] + rng.normal(0, 0.06, min(ne, nr)))
+        elif trial % 3 == 1:
+            est = np.sort(rng.uniform(0, 20, ne))
+        else:
+            est = np.sort(np.concatenate([ref + rng.normal(0, 0.04, nr), rng.uniform(0, 20, ne // 3)]))
+        if trial % 5 == 0:
+            ref, est = np.round(ref, 2), np.round(est, 2)  # beats exactly on the window's edge
+        est = est[est >= 0]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            expected = mir_eval.beat.f_measure(ref, est, 0.07)
+        assert beat_f_measure(ref, est, 0.07) == expected

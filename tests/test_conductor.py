@@ -5,9 +5,11 @@ configurations and live input through a PulseAudio null sink."""
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import math
 import time
+from contextlib import redirect_stderr, redirect_stdout
 
 import numpy as np
 import pytest
@@ -132,8 +134,22 @@ def default_run(tmp_path_factory):
     """The default scenario (best strategy, seed 1) through main(), with every output file."""
     out = tmp_path_factory.mktemp("conductor") / "out"
     started = time.perf_counter()
-    assert conductor_cli.main(args(seed=1, out=str(out))) == 0
+    printed, table = io.StringIO(), io.StringIO()
+    with redirect_stdout(printed), redirect_stderr(table):
+        assert conductor_cli.main(args(seed=1, out=str(out), json=True)) == 0
+    DEFAULT_RUN_PRINTED.update(stdout=printed.getvalue(), stderr=table.getvalue())
     return out, json.loads((out / "metrics.json").read_text()), time.perf_counter() - started
+
+
+#: What the default run printed (with --json).
+DEFAULT_RUN_PRINTED: dict = {}
+
+
+def test_json_prints_the_metrics_written_and_the_table_goes_to_stderr(default_run):
+    out, metrics, _ = default_run
+    assert json.loads(DEFAULT_RUN_PRINTED["stdout"]) == metrics  # stdout is the JSON alone
+    assert DEFAULT_RUN_PRINTED["stdout"].count("\n") == 1
+    assert "recovered" in DEFAULT_RUN_PRINTED["stderr"] and f"written to {out}" in DEFAULT_RUN_PRINTED["stderr"]
 
 
 def test_outputs_are_written_and_valid(default_run):
@@ -182,6 +198,7 @@ def test_same_seed_same_metrics(default_run):
     again = collect_metrics(simulate(load_config(), "best", 1))
     written = json.loads((out / "metrics.json").read_text())
     assert written.pop("time_axis").startswith("simulated time")
+    assert written.pop("glossary") == "README.md#glossary"
     assert json.dumps(again, indent=2) == json.dumps(written, indent=2)
 
 

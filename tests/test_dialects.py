@@ -45,7 +45,10 @@ CASES: dict[str, dict] = {
         "realized": ["bml1:s1", "bml1:ges1", "bml1:face1", "bml1:h1"],
         "adapted": ["document type declaration", "text= attribute", "merged into the first",
                     "stroke= smaller than start=", "end= smaller than start=", "affect=joy' read as the expression SMILE"],
-        "warnings": [("BEHAVIOR_TYPE_NOT_SUPPORTED", "<lip>")],
+        # Greta's expressivity parameters are kept on the gesture, and said to be ignored
+        "warnings": [("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", "attribute 'expressivityspc' of ges1"),
+                     ("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", "attribute 'expressivitytmp' of ges1"),
+                     ("BEHAVIOR_TYPE_NOT_SUPPORTED", "<lip>")],
         "times": ["bml1:ges1:start = 1", "bml1:ges1:end = 2.08", "bml1:h1:start = 2", "bml1:h1:stroke = 2.3",
                   "bml1:h1:end = 2.8", "bml1:face1:start = 0.5", "bml1:face1:end = 3.24"],
         "attributes": {"ges1": {"lexeme": "BEAT", "expressivityspc": "-0.1", "expressivitytmp": "0.4"},

@@ -6,7 +6,8 @@ The layers, lowest first (the README's "Layout" says the same in prose):
   interface and recording;
 * libraries that know nothing of the realizer: reading BML, speech, beats, music, animation;
 * the realizer's parts: engines and anticipators;
-* the realizer, which wires them together;
+* the realizer, which wires them together, and the live realizer (``agentsim serve``), which runs it on
+  the real-time clock behind a WebSocket endpoint;
 * scenarios, which use the realizer;
 * the command line.
 
@@ -25,7 +26,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "agentsim"
 
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
-    ("core", ("agentsim", "agentsim.core")),
+    ("core", ("agentsim", "agentsim.core", "agentsim.examples")),
     ("libraries", ("agentsim.bml", "agentsim.speech", "agentsim.beats", "agentsim.music", "agentsim.animation")),
     ("realizer parts", ("agentsim.engines", "agentsim.anticipators", "agentsim.media")),
     ("realizer", ("agentsim.realizer", "agentsim.live")),

@@ -94,11 +94,12 @@ def test_the_cli_writes_audio_and_motion_on_the_feedback_axis(tmp_path):
 def test_an_output_that_cannot_be_written_is_named_before_any_work(tmp_path):
     bml = tmp_path / "talk.xml"
     bml.write_text(BML)
+    (tmp_path / "afile").write_text("")
     proc = subprocess.run([sys.executable, "-m", "agentsim.cli", "realize", str(bml), "--wav",
-                           str(tmp_path / "nowhere" / "x.wav")], capture_output=True, timeout=120)
+                           str(tmp_path / "afile" / "x.wav")], capture_output=True, timeout=120)
     assert proc.returncode == 2 and not proc.stdout
-    assert proc.stderr.decode().strip().splitlines() == [f"agentsim: cannot write {tmp_path}/nowhere/x.wav: "
-                                                         f"there is no folder {tmp_path}/nowhere"]
+    assert proc.stderr.decode().strip().splitlines() == [f"agentsim: cannot write {tmp_path}/afile/x.wav: "
+                                                         f"a file is in the way of its folder {tmp_path}/afile"]
     proc = subprocess.run([sys.executable, "-m", "agentsim.cli", "realize", str(bml), "--tts", "builtin", "--wav",
                            str(tmp_path / "x.wav")], capture_output=True, timeout=120)
     assert proc.returncode == 2 and b"--tts espeak" in proc.stderr and not (tmp_path / "x.wav").exists()

@@ -380,13 +380,21 @@ def test_a_closed_standard_output_is_one_clear_line(tmp_path):
     assert lines == ["agentsim: standard output is closed: there is nowhere to write the feedback"]
 
 
-@pytest.mark.parametrize("where", ["file/poses.npz", "missing/poses.npz"])
+@pytest.mark.parametrize("where", ["file/poses.npz", "file/deeper/poses.npz"])
 def test_an_output_that_cannot_be_written_is_said_before_the_run(tmp_path, where):
     (tmp_path / "good.xml").write_text(GOOD)
     (tmp_path / "file").write_text("a file, not a folder")
     proc = cli("realize", "--tts", "builtin", "--poses", where, "good.xml", cwd=tmp_path)
     assert proc.returncode == 2 and not proc.stdout  # nothing ran
-    assert proc.stderr.splitlines()[-1].startswith(f"agentsim: cannot write {where}: there is no folder")
+    assert proc.stderr.splitlines()[-1] == (f"agentsim: cannot write {where}: a file is in the way of its folder "
+                                            f"{where.rsplit('/', 1)[0]}")
+
+
+def test_an_output_folder_that_is_missing_is_made(tmp_path):
+    (tmp_path / "good.xml").write_text(GOOD)
+    proc = cli("realize", "--tts", "builtin", "--poses", "missing/poses.npz", "good.xml", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "missing" / "poses.npz").stat().st_size > 0
 
 
 def test_a_conductor_output_folder_under_a_file_is_said_before_the_run(tmp_path):

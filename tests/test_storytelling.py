@@ -284,6 +284,7 @@ def _args(tmp_path, cache_dir, **changes) -> argparse.Namespace:
 def test_the_command_writes_every_output_and_repeats_itself(tmp_path, cache_dir, capsys):
     first, second = tmp_path / "a", tmp_path / "b"
     assert story_run.main(_args(first, cache_dir)) == 0
+    assert "The North Wind and the Sun: 152 words" in capsys.readouterr().out
     for name in ("metrics.json", "narration.wav", "story.bvh", "timeline.png", "sync_errors.png",
                  "story.TextGrid", "feedback.jsonl", "story.bml"):
         assert (first / name).stat().st_size > 0, name
@@ -303,12 +304,14 @@ def test_the_command_writes_every_output_and_repeats_itself(tmp_path, cache_dir,
         story_run.STORIES_DIR / f"{SHORT}.story").scene).gestures == read_story(
         story_run.STORIES_DIR / f"{SHORT}.story").gestures
     assert (first / "story.bvh").read_text().startswith("HIERARCHY")
-    # Again with --compare on the same seed: the same figures for best, and a table of every strategy.
-    assert story_run.main(_args(second, cache_dir, compare=True)) == 0
-    out = capsys.readouterr().out
+    # Again with --compare on the same seed: the same figures for best, and a table of every strategy; with
+    # --json that table goes to stderr and stdout is compare.json alone.
+    assert story_run.main(_args(second, cache_dir, compare=True, json=True)) == 0
+    printed = capsys.readouterr()
     from agentsim.speech.animator_time import STRATEGIES
 
-    assert all(f"\n{name} " in out for name in STRATEGIES)
+    assert all(f"\n{name} " in printed.err for name in STRATEGIES)
+    assert json.loads(printed.out) == json.loads((second / "compare.json").read_text())
     again = json.loads((second / "metrics.json").read_text())
     timing = {"wall_seconds", "wall_fraction_of_story", "stages_seconds", "simulation_seconds", "synthesis_seconds",
               "cache_load_seconds", "compare_wall_seconds", "cached"}

@@ -44,15 +44,27 @@ module           what lives there
 Times are seconds, lengths metres, joint angles degrees.
 """
 
-from agentsim.animation.arbitrator import Arbitrator
-from agentsim.animation.body import Body
-from agentsim.animation.drivers import Driver
-from agentsim.animation.manager import DriverManager
-from agentsim.animation.output import PoseStream, evaluate_poses, write_bvh, write_npz
-from agentsim.animation.time_source import TimeSource
-from agentsim.animation.timeline import plot_timeline, plot_timelines
+import importlib
 
-__all__ = [
-    "Arbitrator", "Body", "Driver", "DriverManager", "PoseStream", "TimeSource", "evaluate_poses",
-    "plot_timeline", "plot_timelines", "write_bvh", "write_npz",
-]
+#: What the package offers, and the module it comes from: imported on first use, so that the modules that
+#: need only a part (the units, when planning) do not load the body, numpy and the plots with it.
+_EXPORTS = {
+    "Arbitrator": "arbitrator", "Body": "body", "Driver": "drivers", "DriverManager": "manager",
+    "PoseStream": "output", "evaluate_poses": "output", "write_bvh": "output", "write_npz": "output",
+    "TimeSource": "time_source", "plot_timeline": "timeline", "plot_timelines": "timeline",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -111,14 +111,15 @@ def first_extreme(times: np.ndarray, y: np.ndarray, t0: float, t1: float) -> flo
 def pointing_arrival(stream: PoseStream, side: str, target, t0: float, t1: float, tolerance: float = 1e-6) -> float:
     """First frame time in [t0, t1] where the shoulder-to-wrist line points at ``target`` (radians off
     less than ``tolerance``)."""
-    shoulder = stream.position(f"{side}_shoulder")
-    wrist = stream.position(f"{side}_wrist")
+    window = _window(stream.times, t0, t1)  # only the frames of the window: the stream may be long
+    shoulder = stream.position(f"{side}_shoulder", window)
+    wrist = stream.position(f"{side}_wrist", window)
     a = wrist - shoulder
     b = np.asarray(target, dtype=float) - shoulder
     cos = np.sum(a * b, axis=1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
     off = np.arccos(np.clip(cos, -1.0, 1.0))
-    for k in _window(stream.times, t0, t1):
-        if off[k] < tolerance:
+    for j, k in enumerate(window):
+        if off[j] < tolerance:
             return float(stream.times[k])
     return float("nan")
 

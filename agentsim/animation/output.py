@@ -62,11 +62,14 @@ class PoseStream:
         """Values of one DOF over all frames."""
         return self.values[:, self.channels.index(name)]
 
-    def position(self, joint: str) -> np.ndarray:
-        """World positions (frames, 3) of a tracked joint (or of any joint, computed on demand)."""
+    def position(self, joint: str, frames: np.ndarray | None = None) -> np.ndarray:
+        """World positions (frames, 3) of a tracked joint (or of any joint, computed on demand), of every
+        frame or of the frames (indices) given."""
         if joint in self.joints:
-            return self.positions[:, self.joints.index(joint)]
-        return self.body.forward_kinematics(self.values, [joint])[joint][1]
+            column = self.positions[:, self.joints.index(joint)]
+            return column if frames is None else column[frames]
+        values = self.values if frames is None else self.values[frames]
+        return self.body.forward_kinematics(values, [joint])[joint][1]
 
     def forward(self, joint: str) -> np.ndarray:
         """World direction (frames, 3) of a joint's local +Z axis (where the face or an eye points)."""
@@ -94,7 +97,8 @@ def records_of(source) -> list:
 
 def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | None = None, start: float = 0.0,
                    scene: dict | None = None, animator_time: TimeSource | None = None,
-                   manager: DriverManager | None = None, body: Body | None = None) -> PoseStream:
+                   manager: DriverManager | None = None, body: Body | None = None,
+                   times=None) -> PoseStream:
     """Evaluate the body's pose at ``fps`` frames per second for everything a realizer played.
 
     Parameters
@@ -114,6 +118,12 @@ def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | N
         Time source for the drivers of speech and of behaviours tied to speech (default: the clock).
     manager : DriverManager, optional
         A manager to use (for instance with motor functions already executed); by default a new one.
+    body : Body, optional
+        The skeleton of a new manager (default: a new :class:`~agentsim.animation.body.Body`).
+    times : array of float, optional
+        The frame times to evaluate (increasing, seconds) instead of the grid that ``start``, ``duration``
+        and ``fps`` make; ``fps`` is then only recorded in the stream. The frames a live viewer is due,
+        with a few frames before them where the pose matters to what comes next, say.
     """
     if fps <= 0:
         raise ValueError("fps must be positive")
@@ -121,12 +131,15 @@ def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | N
     if manager is None:
         manager = DriverManager(body=body, seed=seed, scene=scene)
     infos = build_drivers(manager, records, animator_time)
-    if duration is None:
-        ends = [max(u.keys.values()) for u in infos if u.keys]
-        ends += [float(max(d.keys.end, 0.0)) for d in manager.drivers if hasattr(d, "keys")]
-        duration = max([1.0] + [e - start + 1.0 for e in ends if math.isfinite(e)])
-    n = int(math.floor(duration * fps + 1e-9)) + 1
-    times = start + np.arange(n) / fps
+    if times is not None:
+        times = np.asarray(times, dtype=float)
+    else:
+        if duration is None:
+            ends = [max(u.keys.values()) for u in infos if u.keys]
+            ends += [float(max(d.keys.end, 0.0)) for d in manager.drivers if hasattr(d, "keys")]
+            duration = max([1.0] + [e - start + 1.0 for e in ends if math.isfinite(e)])
+        n = int(math.floor(duration * fps + 1e-9)) + 1
+        times = start + np.arange(n) / fps
     values, writers = manager.evaluate(times)
     joints = [j for j in TRACKED_JOINTS if j in manager.body.joint]
     positions = manager.body.positions(values, joints)

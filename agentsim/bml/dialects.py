@@ -16,8 +16,9 @@ import math
 import re
 from dataclasses import dataclass, field
 
-from agentsim.animation.arms import GESTURE_FORMS, conducting_meter
-from agentsim.animation.pose import FACE_LEXEMES, FACS_UNITS, POSTURES
+# The body's lexicons (agentsim.animation.arms and .pose, with numpy) are imported where foreign vocabulary
+# is mapped or noted: reading BML 1.0 does without them.
+from agentsim.bml import lexemes
 from agentsim.bml.tree import FOREST, Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
@@ -54,7 +55,7 @@ COMPOSITIONS = {"blend": "MERGE"}
 #: The prefix given to BMLA where older BMLT names are read as BMLA's.
 BMLA_PREFIX = "bmla"
 #: Lexemes of head movements, which EMBR writes as gestures.
-HEAD_LEXEMES = ("NOD", "SHAKE", "TILT")
+HEAD_LEXEMES = lexemes.HEAD_LEXEMES
 #: What drafts, Greta and EMBR call facial expressions, as our face lexemes.
 EXPRESSIONS = {"happy": "SMILE", "joy": "SMILE", "smile": "SMILE", "angry": "FROWN", "anger": "FROWN",
                "surprised": "SURPRISE", "surprise": "SURPRISE", "sad": "LOWER_BROWS", "sadness": "LOWER_BROWS",
@@ -302,12 +303,12 @@ class Adapter:
                 curves.attrs["start"] = f"{speeches[0].attrs['id']}:start"
                 self.notes.add("<curves> without a time start with the speech (their keys are times in it)")
         self.move_prosody(speeches)
-        if self.notes:
-            self.note_lexemes(behaviours)
         if self.clips:
             shown = ", ".join(f"{name!r} as {lexeme}" for name, lexeme in list(self.clips.items())[:6])
             more = f" and {len(self.clips) - 6} more" if len(self.clips) > 6 else ""
             self.notes.add(f"SmartBody/NVBG <animation> clips played as the closest gesture: {shown}{more}")
+        if self.notes:  # a foreign document: its lexemes are among the adaptations (else the reader warns)
+            self.note_lexemes(behaviours)
         for name, nodes in self.unmapped.items():
             hint = UNMAPPED_HINTS.get(name, UNMAPPED_HINTS.get(name.split(":")[-1], "no counterpart here"))
             count = f"{len(nodes)} <{name}> elements" if len(nodes) > 1 else f"<{name}>"
@@ -316,29 +317,8 @@ class Adapter:
     def note_lexemes(self, behaviours: list[Node]) -> None:
         """Say which lexemes of the foreign vocabulary have no motion of their own here, and what plays
         instead."""
-        fallbacks: dict[str, list[str]] = {}
-        for b in behaviours:
-            lexeme = b.attrs.get("lexeme", "").strip()
-            if b.tag == "faceFacs":
-                au = b.attrs.get("au", "").strip()
-                known = au.isdigit() and int(au) in FACS_UNITS
-                lexeme, instead = f"AU{au}", "no motion"
-            elif b.tag in ("face", "faceLexeme", "faceShift"):
-                known, instead = lexeme.upper() in FACE_LEXEMES, "no motion"
-            elif b.tag == "gesture":
-                known = lexeme.upper() in GESTURE_FORMS or conducting_meter(lexeme.upper()) is not None or not lexeme
-                instead = "a generic gesture"
-            elif b.tag == "head":
-                known, instead = lexeme.upper() in HEAD_LEXEMES or not lexeme, "a nod"
-            elif b.tag in ("posture", "postureShift"):
-                known, instead = lexeme.upper() in POSTURES or not lexeme, "a weight shift"
-            else:
-                continue
-            if not known:
-                fallbacks.setdefault(instead, []).append(f"{lexeme} ({b.attrs.get('id', '')})")
-        for instead, items in fallbacks.items():
-            shown = ", ".join(items[:6]) + (f" and {len(items) - 6} more" if len(items) > 6 else "")
-            self.notes.add(f"lexemes with no motion of their own here, played as {instead}: {shown}")
+        found = lexemes.fallbacks((b.tag, b.attrs.get("id", ""), b.attrs) for b in behaviours)
+        self.notes.extend(lexemes.describe(found))
 
     def read_namespaces(self, node: Node) -> None:
         """The draft namespace is read as BML 1.0 (in every element's declarations)."""
@@ -446,6 +426,8 @@ class Adapter:
             return "head"
         if local == "gesture" and instance and not attrs.get("lexeme"):
             attrs.pop("type")
+            from agentsim.animation.arms import GESTURE_FORMS
+
             attrs["lexeme"] = family if family in GESTURE_FORMS else instance.strip().upper()
             self.notes.add("Greta's lexicon key type=\"class=instance\" read as the lexeme")
         if local == "gesture" and "hand" in attrs and "mode" not in attrs:
@@ -485,6 +467,8 @@ class Adapter:
 
     def map_animation(self, node: Node) -> str:
         """SmartBody/NVBG ``<animation name>``: a gesture of the closest lexeme, or a beat, timing kept."""
+        from agentsim.animation.arms import GESTURE_FORMS
+
         name = node.attrs.pop("name", "")
         low = name.lower()
         lexeme = next((lex for word, lex in CLIP_WORDS if word in low and lex in GESTURE_FORMS), "BEAT")
@@ -497,6 +481,8 @@ class Adapter:
     def map_body(self, node: Node) -> str | None:
         """SmartBody's ``<body posture>``: a posture shift (a lean if the clip's name says so, else a weight
         shift)."""
+        from agentsim.animation.pose import POSTURES
+
         name = node.attrs.pop("posture", None)
         if name is None:
             return None
@@ -508,6 +494,8 @@ class Adapter:
 
     def map_torso(self, node: Node) -> str:
         """Greta's ``<torso>``: a posture shift."""
+        from agentsim.animation.pose import POSTURES
+
         self.notes.add("Greta's <torso> played as a posture shift")
         lexeme = node.attrs.pop("lexeme", "") or node.attrs.pop("type", "")
         reference = next((c.text().strip() for c in node.elements() if c.local == "description"), "")

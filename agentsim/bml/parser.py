@@ -17,13 +17,15 @@ import re
 from dataclasses import dataclass
 from typing import Callable
 
+from agentsim.bml import lexemes
 from agentsim.bml.dialects import Adapter, Notes, find_blocks, fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
 from agentsim.bml.tree import Node, encode, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
-                                     EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN)
+                                     EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
 from agentsim.core.errors import BMLError
+from agentsim.core.gcpause import paused_collection
 
 #: Largest time or offset (seconds) accepted in a reference; beyond it a behaviour is refused.
 MAX_TIME = 1.0e6
@@ -90,6 +92,11 @@ def parse_ref(text: str, line: int | None = None, column: int | None = None, len
         raise BMLError(exc.reason, line, column) from None
 
 
+# The usual form (plain names, an offset with no exponent and no spaces) read without backtracking; what it
+# reads, the general pattern reads the same way.
+_PLAIN_REF = re.compile(r"([A-Za-z_]\w*):([A-Za-z_]\w*)(?::([A-Za-z_]\w*))?(?:([+-])(\d+(?:\.\d*)?))?\Z")
+
+
 _LONG_NUMBER = re.compile(rf"\d{{{MAX_NUMBER + 1},}}")
 
 
@@ -97,18 +104,24 @@ _LONG_NUMBER = re.compile(rf"\d{{{MAX_NUMBER + 1},}}")
 def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
     if _LONG_NUMBER.search(raw):
         raise BMLError(f"invalid sync reference {raw!r}: a number in it has more than {MAX_NUMBER} digits")
-    if _ABSOLUTE.match(raw):
-        value = float(raw)
-        _check_magnitude(value, raw)
-        return SyncRef("absolute", offset=value, text=raw)
-    match = _REF.match(raw) or (_LENIENT_REF.match(raw) if lenient else None)
-    if not match:
-        raise BMLError(f"invalid sync reference {raw!r}: expected a number, behaviour:sync[+-offset], "
-                       "block:behaviour:sync or anticipators:id:sync")
-    parts = match.group("path").split(":")
+    plain = _PLAIN_REF.match(raw)
+    if plain is not None:
+        first, second, third, sign, number = plain.groups()
+        parts = [first, second] if third is None else [first, second, third]
+    else:
+        if _ABSOLUTE.match(raw):
+            value = float(raw)
+            _check_magnitude(value, raw)
+            return SyncRef("absolute", offset=value, text=raw)
+        match = _REF.match(raw) or (_LENIENT_REF.match(raw) if lenient else None)
+        if not match:
+            raise BMLError(f"invalid sync reference {raw!r}: expected a number, behaviour:sync[+-offset], "
+                           "block:behaviour:sync or anticipators:id:sync")
+        parts = match.group("path").split(":")
+        sign, number = match.group("sign"), match.group("offset")
     offset = 0.0
-    if match.group("offset") is not None:
-        offset = float(match.group("offset")) * (-1.0 if match.group("sign") == "-" else 1.0)
+    if number is not None:
+        offset = float(number) * (-1.0 if sign == "-" else 1.0)
         _check_magnitude(offset, raw)
     if len(parts) == 3 and parts[0] == "anticipators":
         return SyncRef("anticipator", offset=offset, anticipator=parts[1], sync=parts[2], text=raw)
@@ -143,7 +156,18 @@ def _checked(text: str | bytes) -> bytes:
 
 def parse_bml(text: str | bytes) -> Block:
     """Parse one BML 1.0 block, strictly. Raises :class:`BMLError` if the block as a whole cannot be used."""
-    return read_block(read_tree(_checked(text)), None)
+    with paused_collection():
+        return warn_lexemes(read_block(read_tree(_checked(text)), None))
+
+
+def warn_lexemes(block: Block) -> Block:
+    """Add a warning for each kind of lexeme in ``block`` that no motion here is made for (it plays as its
+    type's default, :mod:`agentsim.bml.lexemes`); the block itself."""
+    found = lexemes.fallbacks((b.type, b.id, b.attributes) for b in block.behaviours)
+    for (instead, items), line in zip(found.items(), lexemes.describe(found)):
+        ids = [item.rsplit(" (", 1)[1][:-1] for item in items]
+        block.warnings.append(ParseWarning("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", line, ids))
+    return block
 
 
 def parse_document(text: str | bytes, strict: bool = False,
@@ -155,6 +179,11 @@ def parse_document(text: str | bytes, strict: bool = False,
     ``NONSTANDARD_BML`` warning listing the adaptations, first among its warnings. ``name_block`` names the
     blocks that have no id (by default ``bml1``, ``bml2``, ... skipping the ids the document uses).
     """
+    with paused_collection():
+        return _parse_document(text, strict, name_block)
+
+
+def _parse_document(text: str | bytes, strict: bool, name_block: Callable[[], str] | None) -> list[Block | Refused]:
     if strict:
         try:
             return [parse_bml(text)]
@@ -192,6 +221,8 @@ def parse_document(text: str | bytes, strict: bool = False,
         except BMLError as exc:
             results.append(Refused(envelope.node.attrs.get("id", ""), exc))
             continue
+        if not envelope.notes:  # a foreign document's lexemes are among its adaptations
+            warn_lexemes(block)
         if envelope.notes:
             lines = envelope.notes.lines()
             block.warnings.insert(0, ParseWarning(
@@ -324,6 +355,9 @@ class _Reader:
                 self.warn("PARSING_FAILURE", f"{bid}: <{node.tag}> has no sync point {key!r}; behaviour ignored",
                           node, [bid])
                 return
+            elif key not in READ_ATTRIBUTES and key not in beh.sync_ids:
+                self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"attribute {key!r} of {bid} is not one this realizer "
+                          "reads; ignored", node, [bid])
         for child in node.elements():
             extension = child.namespace in EXTENSION_BEHAVIOURS
             if kind.name == "speech" and self.lenient:
@@ -368,24 +402,30 @@ class _Reader:
         return True
 
     def constraint(self, node: Node, required: bool) -> None:
+        lenient = self.lenient
+        owner = node.attrs.get("id", "")
+        constraints = self.block.constraints
         for child in node.elements():
             kind = child.local
             if kind not in ("synchronize", "before", "after"):
                 self.warn("PARSING_FAILURE", f"unknown constraint <{child.tag}> ignored", child)
                 continue
             refs = []
-            for sync in child.elements():
-                if sync.local != "sync" or "ref" not in sync.attrs:
+            for sync in child.children:
+                if isinstance(sync, str):
+                    continue
+                attrs = sync.attrs
+                if sync.local != "sync" or "ref" not in attrs:
                     self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
                     continue
                 try:
-                    refs.append(parse_ref(sync.attrs["ref"], sync.line, sync.column, self.lenient))
+                    refs.append(parse_ref(attrs["ref"], sync.line, sync.column, lenient))
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
             anchor = None
             if "ref" in child.attrs:
                 try:
-                    anchor = parse_ref(child.attrs["ref"], child.line, child.column, self.lenient)
+                    anchor = parse_ref(child.attrs["ref"], child.line, child.column, lenient)
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{exc.reason}; constraint ignored", child)
                     continue
@@ -395,5 +435,4 @@ class _Reader:
             if kind == "synchronize" and anchor is not None:
                 refs.insert(0, anchor)
                 anchor = None
-            self.block.constraints.append(Constraint(kind, refs, anchor, node.attrs.get("id", ""), required,
-                                                     line=child.line, column=child.column))
+            constraints.append(Constraint(kind, refs, anchor, owner, required, line=child.line, column=child.column))

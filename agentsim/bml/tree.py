@@ -24,11 +24,14 @@ MAX_DEPTH = 256
 class Node:
     """An element: tag as written, attributes, children (elements and text) and where it starts."""
 
-    __slots__ = ("tag", "attrs", "line", "column", "children", "namespaces")
+    __slots__ = ("_tag", "local", "prefix", "attrs", "line", "column", "children", "namespaces")
 
     def __init__(self, tag: str, attrs: dict[str, str], line: int | None, column: int | None,
                  namespaces: dict[str, str], children: list | None = None):
-        self.tag = tag
+        self._tag = tag  # as the setter below does
+        prefix, colon, local = tag.partition(":")
+        self.local = local if colon else tag
+        self.prefix = prefix if colon else None
         self.attrs = attrs
         self.line = line
         self.column = column
@@ -36,13 +39,18 @@ class Node:
         self.namespaces = namespaces
 
     @property
-    def local(self) -> str:
-        """The tag without its prefix."""
-        return self.tag.split(":", 1)[-1]
+    def tag(self) -> str:
+        return self._tag
 
-    @property
-    def prefix(self) -> str | None:
-        return self.tag.split(":", 1)[0] if ":" in self.tag else None
+    @tag.setter
+    def tag(self, tag: str) -> None:
+        # the tag's parts are read for every element many times over: split once, here
+        self._tag = tag
+        prefix, colon, local = tag.partition(":")
+        #: the tag without its prefix
+        self.local: str = local if colon else tag
+        #: the prefix of the tag (None if it has none)
+        self.prefix: str | None = prefix if colon else None
 
     @property
     def namespace(self) -> str | None:
@@ -79,10 +87,10 @@ class _TreeBuilder:
         if len(self.stack) >= MAX_DEPTH:
             raise BMLError(f"elements nested more than {MAX_DEPTH} deep", self.expat.CurrentLineNumber,
                            self.expat.CurrentColumnNumber + 1)
-        parent_ns = self.stack[-1].namespaces if self.stack else {}
-        namespaces = parent_ns
-        if any(key.startswith("xmlns") for key in attrs):
-            namespaces = dict(parent_ns)
+        stack = self.stack
+        namespaces = stack[-1].namespaces if stack else {}
+        if attrs and "xmlns" in "".join(attrs) and any(key.startswith("xmlns") for key in attrs):
+            namespaces = dict(namespaces)
             plain = {}
             for key, value in attrs.items():
                 if key == "xmlns":
@@ -92,15 +100,16 @@ class _TreeBuilder:
                 else:
                     plain[key] = value
             attrs = plain
-        line, column = self.expat.CurrentLineNumber, self.expat.CurrentColumnNumber + 1
+        expat = self.expat
+        line, column = expat.CurrentLineNumber, expat.CurrentColumnNumber + 1
         if line == 1:
             column -= self.shift
         node = Node(name, attrs, line, column, namespaces)
-        if self.stack:
-            self.stack[-1].children.append(node)
+        if stack:
+            stack[-1].children.append(node)
         else:
             self.root = node
-        self.stack.append(node)
+        stack.append(node)
 
     def end(self, name: str) -> None:
         self.stack.pop()

@@ -27,6 +27,21 @@ BMLA_BLOCK_ATTRIBUTES = {
 # Children of behaviours that carry parameters, not behaviours of their own.
 PARAMETER_CHILDREN = {"stance", "pose", "description", "text", "sync", "lexeme", "trajectory", "parameter"}
 
+#: Every plain (not namespaced) behaviour attribute some part of this realizer reads, besides the sync
+#: points: BML 1.0's, and the parameters of agentsim's engines. Any other is ignored, with a warning.
+READ_ATTRIBUTES = frozenset({
+    # BML 1.0
+    "id", "lexeme", "mode", "target", "influence", "amount", "repetition", "offsetAngle", "offsetDirection",
+    "au", "side", "manner", "type", "part", "priority", "direction", "characterId", "composition",
+    # BMLA/BMLT and agentsim's engines
+    "include", "exclude", "paramId", "fileName", "value", "name", "alias", "approach", "duration", "hand",
+    "tempo", "retract", "motion", "hold", "audio", "object", "dXRot", "dYRot", "x", "y", "z", "meter", "beats",
+    "shape", "coord", "strength", "level", "rate", "time", "role", "importance", "format", "viseme", "detail",
+    "articulation", "dynamics", "repeat", "args", "class", "start_", "xmlns",
+    # what other realizers write that the lenient reader takes as it comes (a voice, a language, an event)
+    "language", "voice", "message", "ref", "text", "emotion",
+})
+
 # Attributes that are never sync references.
 PLAIN_ATTRIBUTES = {
     "id", "lexeme", "mode", "target", "influence", "amount", "repetition", "offsetAngle",

@@ -9,6 +9,8 @@ module                 commands
 ``beats``              ``anticipate beats``
 ``scenarios``          ``run conductor``, ``run storytelling``, ``demo``
 ``serve``              ``serve``
+``sweep``              ``sweep``, ``sweep report``
+``commands``           the parser of every command but ``sweep`` (which runs those commands)
 ``options``            the options several commands share (speech backend, event delivery, seed, ...)
 =====================  =================================================================================
 """
@@ -27,15 +29,16 @@ INTERNAL_ERROR = 70
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of every command; each command's ``handler`` (set with ``set_defaults``) runs it."""
-    from agentsim.cli import beats, realize, scenarios, serve, speech
+    from agentsim.cli import commands as work
+    from agentsim.cli import sweep
 
-    parser = argparse.ArgumentParser(prog="agentsim", description="A BML realizer on a discrete-event clock.")
+    from agentsim import __version__
+
+    parser = argparse.ArgumentParser(prog=work.PROG, description=work.DESCRIPTION)
+    parser.add_argument("--version", action="version", version=f"agentsim {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
-    realize.add_parsers(commands)
-    beats.add_parsers(commands)
-    speech.add_parsers(commands)
-    scenarios.add_parsers(commands)
-    serve.add_parsers(commands)
+    work.add_parsers(commands)
+    sweep.add_parsers(commands)
     return parser
 
 

@@ -84,8 +84,10 @@ def add_out(parser: argparse.ArgumentParser, default: str | None, what: str = "o
                         help=what + (f" ({default})" if default else ""))
 
 
-def add_fps(parser: argparse.ArgumentParser, what: str) -> None:
-    parser.add_argument("--fps", type=float, default=60.0, help=f"frame rate of {what} (60)")
+def add_fps(parser: argparse.ArgumentParser, what: str, default: float | None = 60.0) -> None:
+    """``--fps``, the frame rate of the motion a command writes (``default`` None: the configuration's)."""
+    parser.add_argument("--fps", type=float, default=default,
+                        help=f"frame rate of {what}" + (f" ({default:g})" if default is not None else ""))
 
 
 #: Highest frame rate of motion output (frames per second): far above any display or motion capture.
@@ -93,7 +95,7 @@ MAX_FPS = 1000.0
 
 
 def check_fps(args: argparse.Namespace) -> None:
-    if not 0 < args.fps <= MAX_FPS:
+    if args.fps is not None and not 0 < args.fps <= MAX_FPS:
         raise UsageError(f"--fps must be positive and at most {MAX_FPS:g} frames per second, got {args.fps:g}")
 
 
@@ -132,3 +134,24 @@ def anticipators(args: argparse.Namespace) -> list:
         name, anticipator_id, params = registry.parse_spec(spec)
         found.append(registry.create(name, anticipator_id, **params))
     return found
+
+
+
+
+def tidy(value, digits: int = 6):
+    """``value`` with every float rounded to ``digits`` decimals (a microsecond of seconds, a nanosecond of
+    milliseconds): what a figure means, without ``3.2410000000000005``. Non-finite floats stay."""
+    if isinstance(value, float):
+        return round(value, digits) if math.isfinite(value) else value
+    if isinstance(value, dict):
+        return {k: tidy(v, digits) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [tidy(v, digits) for v in value]
+    return value
+
+
+def explained(result: dict, units: dict[str, str]) -> dict:
+    """``result`` tidied, with the ``units`` of its fields and a pointer to the glossary."""
+    from agentsim.media import GLOSSARY
+
+    return {**tidy(result), "units": units, "glossary": GLOSSARY}

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from agentsim.cli import options
-from agentsim.core.errors import UsageError
+from agentsim.core.errors import AgentsimError, UsageError
 
 
 def _times(text: str) -> list[float]:
@@ -58,9 +58,29 @@ def add_parsers(commands) -> None:
     options.add_anticipators(plot)
     plot.set_defaults(handler=plot_timeline)
 
-    anticipators = commands.add_parser("anticipators", help="installed anticipators")
-    anticipators.add_argument("action", choices=["list"])
-    anticipators.set_defaults(handler=list_anticipators)
+    anticipators = commands.add_parser("anticipators", help="installed anticipators, and a new plugin",
+                                       description="The anticipators BML can peg behaviours to "
+                                                   "(anticipators:ID:SYNC), built in and installed as plugins.")
+    actions = anticipators.add_subparsers(dest="action", required=True)
+    listing = actions.add_parser("list", help="the installed anticipators with their parameters",
+                                 description="Each installed anticipator: its name, its class, and the "
+                                             "parameters --anticipator NAME:ID,KEY=VALUE takes (type = default).")
+    listing.set_defaults(handler=list_anticipators)
+    new = actions.add_parser("new", help="write a complete, installable anticipator plugin",
+                             description="Write the folder agentsim-NAME: a pyproject.toml registering the "
+                                         "anticipator, its module, a test and a README. 'pip install -e "
+                                         "agentsim-NAME' and 'agentsim anticipators list' shows it.")
+    new.add_argument("name", help="the anticipator's name (lower case letters, digits, underscores)")
+    new.add_argument("--dir", default=".", help="where to write the folder (default: here)")
+    new.set_defaults(handler=new_anticipator)
+
+    examples = commands.add_parser("examples", help="the example documents and programs the README uses",
+                                   description="List the installed examples (a command given examples/NAME "
+                                               "that is not where it runs reads the installed one), or copy "
+                                               "them into DIR/examples.")
+    examples.add_argument("action", nargs="?", choices=["list", "copy"], default="list")
+    examples.add_argument("dir", nargs="?", default=".", help="where 'copy' puts the examples folder (here)")
+    examples.set_defaults(handler=examples_command)
 
 
 def add_outputs(parser: argparse.ArgumentParser) -> None:
@@ -78,6 +98,8 @@ def add_outputs(parser: argparse.ArgumentParser) -> None:
 
 def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sources=(), beat_times=None) -> None:
     """Write the files ``args`` asks for from a finished run, on its time axis."""
+    if not any((args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report)):
+        return  # nothing asked for: nothing to load
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_npz, write_textgrid, write_wav, written
     from agentsim.media.tables import gesture_rows, write_csv
@@ -122,10 +144,17 @@ def read_document(path: str) -> str | bytes:
     """A BML document from a file, or from standard input for ``-``."""
     if path == "-":
         return sys.stdin.buffer.read()
-    p = Path(path)
+    p = resolve(path)
     if not p.is_file():
         raise UsageError(f"no such file: {path}")
     return p.read_bytes()
+
+
+def resolve(path: str) -> Path:
+    """The file ``path`` names: itself, or for ``examples/...`` not found here the installed example."""
+    from agentsim.examples import resolve as find
+
+    return path if path == "-" else find(path)
 
 
 def realize_files(args: argparse.Namespace) -> int:
@@ -156,9 +185,13 @@ def realize_files(args: argparse.Namespace) -> int:
     realizer.feedback.listen(emit)
     order = sorted(range(len(documents)), key=lambda i: (at[i], i))
     for i in order:
-        realizer.submit_at(at[i], documents[i][1], source=documents[i][0])
+        realizer.submit_at(at[i], documents[i][1], source=str(resolve(documents[i][0])))
     realizer.run(until=args.until)
     write_run_outputs(args, realizer, title=", ".join(Path(f).name for f in args.files))
+    written = [f"{name}/" if name == args.csv else name
+               for name in (args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report) if name]
+    if written:
+        print(f"wrote {', '.join(written)}", file=sys.stderr)
     return 0
 
 
@@ -182,11 +215,14 @@ def plot_timeline(args: argparse.Namespace) -> int:
             raise UsageError(f"{option} must be a non-negative number of seconds, got {text}")
         return value
 
+    from agentsim.media.files import check_writable
+
     start, end = seconds("--from", args.start), seconds("--to", args.end)
     if start is not None and end is not None and not end > start:
         raise UsageError(f"--to ({end:g} s) must come after --from ({start:g} s)")
+    check_writable([args.out])
     realizer = Realizer(anticipators=options.anticipators(args))
-    realizer.submit(read_document(args.file), source=args.file)
+    realizer.submit(read_document(args.file), source=str(resolve(args.file)))
     realizer.run()
     recording = realizer.recording()
     stream = evaluate_poses(recording)
@@ -194,14 +230,18 @@ def plot_timeline(args: argparse.Namespace) -> int:
     if start is None and end is None:
         written = plot_timelines(recording, args.out, stream=stream, title=title, width=12.0)
         if len(written) > 1:
-            print(f"the run lasts {run_duration(recording):.1f} s: {args.out} is its overview, "
+            print(f"wrote {args.out}: the run lasts {run_duration(recording):.1f} s, so it is its overview, and "
                   f"{len(written) - 1} windows are next to it ({written[1].name}, ...)", file=sys.stderr)
+        else:
+            print(f"wrote {args.out}", file=sys.stderr)
         return 0
     duration = run_duration(recording)
     start = 0.0 if start is None else start
     if start >= duration:
         raise UsageError(f"--from {start:g} s is after the end of the run ({duration:.2f} s)")
-    draw(recording, args.out, stream=stream, title=title, start=start, end=duration if end is None else end)
+    end = duration if end is None else end
+    draw(recording, args.out, stream=stream, title=title, start=start, end=end)
+    print(f"wrote {args.out} ({start:g} to {end:g} s of the run)", file=sys.stderr)
     return 0
 
 
@@ -209,5 +249,39 @@ def list_anticipators(args: argparse.Namespace) -> int:
     from agentsim.anticipators import registry
 
     for name, target in sorted(registry.available().items()):
-        print(f"{name}\t{target}")
+        try:
+            declared = ", ".join(p.describe() for p in registry.parameters(registry.load(name)))
+        except AgentsimError as exc:  # a broken plugin is listed with why, the others still are
+            declared = f"(cannot be loaded: {exc})"
+        print(f"{name}\t{target}\t{declared}")
+    return 0
+
+
+def new_anticipator(args: argparse.Namespace) -> int:
+    from agentsim.anticipators.template import write_plugin
+
+    folder = write_plugin(args.name, Path(args.dir))
+    print(f"wrote {folder}/ (pyproject.toml, {folder.name.replace('-', '_')}.py, tests/, README.md); "
+          f"install it with: pip install -e {folder}", file=sys.stderr)
+    return 0
+
+
+def examples_command(args: argparse.Namespace) -> int:
+    import shutil
+
+    from agentsim.examples import HOME, describe, names
+
+    if args.action == "list":
+        for name in names():
+            about = describe(name)
+            print(f"{name}\t{about}" if about else name)
+        return 0
+    target = Path(args.dir) / "examples"
+    if target.exists():
+        raise UsageError(f"{target} exists already: copy into another folder")
+    try:
+        shutil.copytree(HOME, target, ignore=shutil.ignore_patterns("__init__.py", "__pycache__"))
+    except OSError as exc:
+        raise UsageError(f"cannot copy the examples into {target}: {exc.strerror or exc}") from None
+    print(f"wrote {target}/ ({len(names())} files)", file=sys.stderr)
     return 0

@@ -23,8 +23,7 @@ def add_parsers(commands) -> None:
 
 
 def add_conductor(scenarios) -> argparse.ArgumentParser:
-    from agentsim.scenarios.conductor.config import STRATEGIES
-    from agentsim.scenarios.conductor.run import DEFAULT_OUT
+    from agentsim.scenarios.conductor.names import DEFAULT_OUT, STRATEGIES
 
     parser = scenarios.add_parser(
         "conductor", help="the virtual orchestra conductor leads a simulated ensemble back to tempo",
@@ -42,6 +41,13 @@ def add_conductor(scenarios) -> argparse.ArgumentParser:
     which.add_argument("--compare", action="store_true", help="run every strategy on the same seed and print a table")
     options.add_seed(parser, "the musicians' noise")
     options.add_out(parser, DEFAULT_OUT)
+    knobs = parser.add_argument_group("the music (each overrides the configuration's piece or ensemble)")
+    knobs.add_argument("--target-bpm", type=float, metavar="BPM", help="the score's tempo (the piece's, 120)")
+    knobs.add_argument("--start-bpm", type=float, metavar="BPM",
+                       help="the tempo the ensemble starts at, and drags back to (the ensemble's, 108)")
+    knobs.add_argument("--meter", metavar="N/4", help="2/4, 3/4 or 4/4 (the piece's)")
+    knobs.add_argument("--bars", type=int, metavar="N", help="how many bars the piece lasts (the piece's, 24)")
+    options.add_fps(parser, "conductor.bvh and the timeline (the configuration's, 30)", default=None)
     parser.add_argument("--input", metavar="DEVICE", dest="device",
                         help="conduct what a live input device plays (a name or number, as 'anticipate beats "
                              "--input' takes; 'default': the system's default input) instead of the simulated "
@@ -52,8 +58,15 @@ def add_conductor(scenarios) -> argparse.ArgumentParser:
                         help="--input: how long to listen (default: the piece's length at its tempo)")
     parser.add_argument("--sample-rate", type=int, metavar="HZ",
                         help="--input: the sample rate to record at (default: the configuration's)")
+    add_json(parser)
     parser.set_defaults(handler=run_conductor)
     return parser
+
+
+def add_json(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true",
+                        help="also print the figures written (metrics.json; compare.json with --compare) as JSON on "
+                             "stdout, and the table on stderr")
 
 
 def run_conductor(args: argparse.Namespace) -> int:
@@ -63,8 +76,7 @@ def run_conductor(args: argparse.Namespace) -> int:
 
 
 def add_storytelling(scenarios) -> argparse.ArgumentParser:
-    from agentsim.scenarios.storytelling.markup import ANCHORS
-    from agentsim.scenarios.storytelling.run import DEFAULT_OUT
+    from agentsim.scenarios.storytelling.names import ANCHORS, DEFAULT_OUT
 
     parser = scenarios.add_parser(
         "storytelling", help="tell a story with gestures on the stressed syllables and measure the sync",
@@ -95,6 +107,7 @@ def add_storytelling(scenarios) -> argparse.ArgumentParser:
                         help="seconds of each detailed timeline picture, timeline_0000-0030s.png, ... "
                              "(30); timeline.png is the overview of the whole story")
     options.add_delivery(parser)
+    add_json(parser)
     parser.set_defaults(handler=run_storytelling)
     return parser
 

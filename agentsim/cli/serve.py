@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 import sys
 
 from agentsim.cli import options
@@ -40,6 +39,8 @@ def run_server(args: argparse.Namespace) -> int:
                       strict=args.strict, fps=args.fps, calibrate=args.calibrate)
     print(f"speech: {options.describe_backend(service.live.realizer.speech.planner.backend)}", file=sys.stderr)
     try:
+        import asyncio
+
         asyncio.run(service.serve(ready=lambda: print(service.describe(), file=sys.stderr, flush=True)))
     finally:
         service.close()

@@ -9,8 +9,18 @@ from pathlib import Path
 
 from agentsim.cli import options
 from agentsim.core.errors import AgentsimError
+from agentsim.core.progress import progress
 
 DEFAULT_MODEL = Path("linear_model.json")
+
+#: The units of ``eval speech-sync``'s figures (README.md, Glossary, says what each one is).
+SYNC_UNITS = {"error_ms": "ms (|stroke - the word's onset as heard|; signed_mean keeps the sign, positive: late)",
+              "snaps": "frames (60 per s) in which animator time jumps a frame ahead of the clock or goes back",
+              "stall_s": "s (clock time in frames where animator time ran at under half speed)",
+              "rate": "animator seconds per clock second", "missed": "count (strokes never reached)",
+              "wall_seconds": "s (this machine's time to compute)", "speech_seconds": "s (of speech)",
+              "delivery": "latency, delay, jitter, burst_hold, start_jitter in s; drift_ppm in ppm; "
+                          "burst_probability, loss as probabilities"}
 
 
 def add_parsers(commands) -> None:
@@ -55,7 +65,9 @@ def read_text(path: str | None) -> str:
         from agentsim.speech.linear_model import TEXTS_DIR
 
         return (TEXTS_DIR / "clocks.txt").read_text(encoding="utf-8")
-    p = Path(path)
+    from agentsim.examples import resolve
+
+    p = resolve(path)
     if not p.is_file():
         raise AgentsimError(f"no text file {path!r}")
     text = p.read_text(encoding="utf-8")
@@ -82,21 +94,27 @@ def speech_sync(args: argparse.Namespace) -> int:
         model = LinearModel.load(args.model)
     text, tts = read_text(args.text), options.backend(args.tts)
     results = []
-    for name in names:
+    for name in progress(names, "strategies", unit="strategy"):
         result = run(text, tts, name, delivery, timing=args.timing, seed=args.seed, linear_model=model)
         results.append(result)
-    report = [{k: v for k, v in r.items() if k not in ("errors_s",)} for r in results]
+    from dataclasses import asdict
+
+    condition = asdict(delivery)
+    report = [options.explained({**{k: v for k, v in r.items() if k not in ("errors_s",)}, "delivery": condition},
+                                SYNC_UNITS) for r in results]
     if args.plot:
         plot_errors(results, args.plot)
     if args.json:
         print(json.dumps(report[0] if args.strategy != "all" else report))
     else:
-        print(f"{'strategy':14} {'p50':>7} {'p95':>7} {'max':>7} {'snaps':>6} {'stall_s':>8} {'rate':>11}")
+        print(f"{'strategy':14} {'p50 ms':>7} {'p95 ms':>7} {'max ms':>7} {'snaps':>6} {'stall s':>8} "
+              f"{'rate x':>11}")
         for r in report:
             e = r["error_ms"]
             print(f"{r['strategy']:14} {e['p50']:7.1f} {e['p95']:7.1f} {e['max']:7.1f} {r['snaps']:6d} "
                   f"{r['stall_s']:8.2f} {r['rate']['min']:5.2f}-{r['rate']['max']:<5.2f}")
-        print(f"{report[0]['gestures']} strokes on {report[0]['words']} words, errors in ms", file=sys.stderr)
+        print(f"{report[0]['gestures']} strokes on {report[0]['words']} words; error = stroke minus the word's "
+              "onset as heard (positive: late); rate = animator seconds per clock second", file=sys.stderr)
     return 0
 
 
@@ -121,28 +139,36 @@ def plot_errors(results: list[dict], path: str) -> None:
 
 
 def calibrate(args: argparse.Namespace) -> int:
+    from agentsim.media.files import check_writable
     from agentsim.speech.linear_model import calibrate as fit
 
     texts = None
     if args.texts:
         texts = [line.strip() for line in read_text(args.texts).splitlines() if line.strip()]
+    check_writable([args.out])
     model = fit(options.backend(args.tts), texts)
     model.save(args.out)
-    print(json.dumps({"multiplier": model.multiplier, "offset": model.offset, "points": model.n_points,
-                      "rms_s": model.rms, "saved": args.out}))
+    print(json.dumps({**json.loads(model.to_json()), "saved": args.out}))  # the keys it saved, as saved
+    print(f"wrote {args.out}", file=sys.stderr)
     return 0
 
 
 def export(args: argparse.Namespace) -> int:
+    from agentsim.media.files import check_writable
     from agentsim.speech.backend import SpeechText
     from agentsim.speech.exports import write_textgrid, write_wav
 
     if not (args.wav or args.textgrid):
         raise AgentsimError("say what to write: --wav FILE.wav and/or --textgrid FILE.TextGrid")
+    check_writable([args.wav, args.textgrid])
     text = " ".join(read_text(args.text).split())
     utterance = options.backend(args.tts).synthesize(SpeechText(text))
+    written = []
     if args.wav:
         write_wav(args.wav, utterance)
+        written.append(args.wav)
     if args.textgrid:
         write_textgrid(args.textgrid, utterance)
+        written.append(args.textgrid)
+    print(f"wrote {' and '.join(written)} ({utterance.duration:.2f} s of speech)", file=sys.stderr)
     return 0

@@ -19,8 +19,6 @@ import bisect
 import math
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
 from agentsim.core.errors import ScheduleError
@@ -425,6 +423,8 @@ class SpeechEngine(Engine):
         else:
             model = planner.linear_model() if config.strategy == "linear-model" else None
             plan = plan_from_utterance(utt, linear_model=model, **known)
+        import numpy as np  # only where speech is played: planning does without it
+
         rng = np.random.default_rng(config.seed + len(self.playbacks))
         t0 = delivery.draw_start(t_request, rng)
         delivered = deliver(true_events(utt, t0, delivery.drift_ppm), delivery, rng)

@@ -232,6 +232,8 @@ class Server:
         self.subscribers: dict[object, set[str]] = {}
         self.loop: asyncio.AbstractEventLoop | None = None
         self.files = files if files is not None else {}
+        #: what a new subscriber of each kind is sent first (set by whoever publishes it)
+        self.hello: dict[str, dict] = {}
         self.sent = 0
         self.refused = 0
         live.listeners.append(self.from_realizer)
@@ -319,7 +321,7 @@ class Server:
 
     def greetings(self, wanted: set[str]) -> list[dict]:
         """What a new subscriber is told first (set by whoever publishes what it subscribes to)."""
-        return [self.hello[w] for w in wanted if w in getattr(self, "hello", {})]
+        return [self.hello[w] for w in sorted(wanted) if w in self.hello]
 
     def request(self, connection, request):
         """Plain HTTP requests get the viewer's files; WebSocket upgrades go on to :meth:`handler`."""

@@ -55,6 +55,7 @@ class Service:
             from agentsim.live.poses import LivePoses
 
             self.poses = LivePoses(self.live, fps)
+            self.poses.start_process()  # poses are evaluated on another core, never in the realizer's way
             files = self.poses.files()
         self.server = Server(self.live, host, port, files=files)
         if self.poses is not None:
@@ -90,7 +91,10 @@ class Service:
         await self.server.serve(ready, stop)
 
     def close(self) -> None:
+        """Stop the realizer, the viewer's worker and the sound."""
         self.live.close()
+        if self.poses is not None:
+            self.poses.close()
         if self.sound is not None:
             self.sound.close()
 

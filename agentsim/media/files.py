@@ -8,12 +8,13 @@ from __future__ import annotations
 import contextlib
 import os
 from pathlib import Path
-from typing import Iterable
+from typing import TYPE_CHECKING, Iterable
 
 
 from agentsim.core.errors import UsageError
 from agentsim.media import AXIS
-from agentsim.media.audio import Track
+if TYPE_CHECKING:  # checking where to write needs no audio
+    from agentsim.media.audio import Track
 
 
 def _cannot_write_in(folder: Path) -> str | None:
@@ -28,8 +29,9 @@ def _cannot_write_in(folder: Path) -> str | None:
 
 
 def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[str | Path | None] = ()) -> None:
-    """Raise :class:`UsageError` naming the first output that cannot be written: a file whose folder does not
-    exist or is not writable, a folder that cannot be made or written. Called before any work is done."""
+    """Raise :class:`UsageError` naming the first output that cannot be written: a file whose folder cannot be
+    made (folders are made on demand) or is not writable, a folder that cannot be made or written. Called
+    before any work is done."""
     for name in files:
         if name is None:
             continue
@@ -38,7 +40,13 @@ def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[st
         if path.is_dir():
             raise UsageError(f"cannot write {path}: it is a folder")
         if not folder.is_dir():
-            raise UsageError(f"cannot write {path}: there is no folder {folder}")
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+            except (FileExistsError, NotADirectoryError):
+                raise UsageError(f"cannot write {path}: a file is in the way of its folder {folder}") from None
+            except OSError as exc:
+                raise UsageError(f"cannot write {path}: cannot make the folder {folder} "
+                                 f"({exc.strerror or exc})") from None
         if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
             raise UsageError(f"cannot write {path}: no permission to write in {folder}")
         problem = _cannot_write_in(folder)

@@ -52,13 +52,12 @@ def _word_heard(recording, block: str, speech: str, sync: str) -> tuple[str, flo
     elif sync == "end":
         t, word = utterance.duration, ""
     else:
-        mark = next((m for m in utterance.marks if m.name == sync), None)
+        mark = utterance.mark(sync)
         if mark is None:
             return "", None
         t = mark.time
-        inside = [w for w in utterance.words if w.start - 1e-9 <= t < w.end]  # a mark on a syllable of a word
-        following = [w for w in utterance.words if w.start >= t - 1e-9]
-        word = inside[0].text if inside else following[0].text if following else ""
+        found = utterance.word_sounding(t)  # a mark on a syllable of a word is on that word
+        word = found.text if found is not None else ""
     sounded = heard.t0 + t * speed
     if heard.stopped is not None and sounded > heard.stopped + 1e-9:
         return word, None

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import bisect
-
 import re
 from dataclasses import dataclass, field
-from typing import Protocol, Sequence, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, Sequence, runtime_checkable
 
-import numpy as np
+if TYPE_CHECKING:  # numpy is not needed to read or time a text
+    import numpy as np
 
 
 #: The kinds of :class:`Prosody` span, as in SSML.
@@ -104,12 +104,72 @@ class Utterance:
                 groups[ph.word_index].append(ph)
         return groups
 
+    def _lookup(self) -> tuple:
+        """The words' character starts and the phonemes of each word, made once (made again if the lists
+        are replaced or change length)."""
+        cache = self.__dict__.get("_cached_lookup")
+        if (cache is None or cache[0] is not self.words or cache[1] is not self.phonemes
+                or cache[2] != len(self.words) or cache[3] != len(self.phonemes)):
+            cache = (self.words, self.phonemes, len(self.words), len(self.phonemes),
+                     [w.char_start for w in self.words], self.phonemes_by_word())
+            self.__dict__["_cached_lookup"] = cache  # not a field: replace(), == and asdict() do not see it
+        return cache
+
+    def word_after(self, offset: int) -> int | None:
+        """Index of the first word starting at or after character ``offset`` (None: none)."""
+        starts = self._lookup()[4]
+        k = bisect.bisect_left(starts, offset)
+        return k if k < len(starts) else None
+
+    def phonemes_of(self, k: int) -> list[Phoneme]:
+        """The phonemes of word ``k``, in order (do not change the list)."""
+        groups = self._lookup()[5]
+        if 0 <= k < len(groups):
+            return groups[k]
+        return [p for p in self.phonemes if p.word_index == k]
+
+    def word_sounding(self, t: float) -> Word | None:
+        """The first word sounding at ``t`` (s; from 1 ns before its onset to its end), else the first word
+        starting from 1 ns before ``t`` on, else None."""
+        words = self.words
+        if self._words_in_order():
+            # onsets and ends both in order: the words that start by t are a prefix, and those of them
+            # still sounding at t its end
+            prefix = bisect.bisect_right(words, t, key=lambda w: w.start - 1e-9)
+            k = bisect.bisect_right(words, t, hi=prefix, key=lambda w: w.end)
+            if k < prefix:
+                return words[k]
+            k = bisect.bisect_left(words, t - 1e-9, key=lambda w: w.start)
+            return words[k] if k < len(words) else None
+        inside = next((w for w in words if w.start - 1e-9 <= t < w.end), None)
+        return inside if inside is not None else next((w for w in words if w.start >= t - 1e-9), None)
+
+    def _words_in_order(self) -> bool:
+        cache = self.__dict__.get("_cached_order")
+        if cache is None or cache[0] is not self.words or cache[1] != len(self.words):
+            w = self.words
+            ordered = all(w[i].start <= w[i + 1].start and w[i].end <= w[i + 1].end for i in range(len(w) - 1))
+            cache = (self.words, len(self.words), ordered)
+            self.__dict__["_cached_order"] = cache
+        return cache[2]
+
+    def mark(self, name: str) -> Mark | None:
+        """The first mark of this name (None if there is none)."""
+        cache = self.__dict__.get("_cached_marks")
+        if cache is None or cache[0] is not self.marks or cache[1] != len(self.marks):
+            by_name: dict[str, Mark] = {}
+            for mark in self.marks:
+                by_name.setdefault(mark.name, mark)
+            cache = (self.marks, len(self.marks), by_name)
+            self.__dict__["_cached_marks"] = cache
+        return cache[2].get(name)
+
     def mark_time(self, name: str) -> float:
         """Time of the named mark, in seconds from utterance start (KeyError if absent)."""
-        for mark in self.marks:
-            if mark.name == name:
-                return mark.time
-        raise KeyError(name)
+        mark = self.mark(name)
+        if mark is None:
+            raise KeyError(name)
+        return mark.time
 
 
 @runtime_checkable

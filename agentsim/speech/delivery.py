@@ -19,9 +19,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Iterable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
-import numpy as np
+if TYPE_CHECKING:  # numpy is imported where events are drawn: the models themselves are plain values
+    import numpy as np
 
 from agentsim.speech.backend import Utterance
 
@@ -198,6 +199,8 @@ def true_events(utterance: Utterance, t0: float, drift_ppm: float = 0.0) -> list
 
 def draw_jitter(model: DeliveryModel, rng: np.random.Generator, n: int) -> np.ndarray:
     """``n`` non-negative jitter values (s) with mean ``model.jitter`` (see :class:`DeliveryModel`)."""
+    import numpy as np
+
     if model.jitter_distribution == "exponential":
         return rng.exponential(model.jitter, n) if model.jitter > 0 else np.zeros(n)
     if model.jitter_distribution == "gamma":
@@ -234,6 +237,8 @@ def deliver(events: Iterable[ProgressEvent], model: DeliveryModel,
     that would arrive during a stall arrives at its end. A lost event neither arrives nor holds others.
     Finally the channel is first in, first out: no event overtakes an earlier one.
     """
+    import numpy as np
+
     events = list(events)
     n = len(events)
     jitter = draw_jitter(model, rng, n)

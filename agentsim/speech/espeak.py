@@ -66,7 +66,10 @@ import threading
 from dataclasses import dataclass, field
 from xml.sax.saxutils import escape
 
-import numpy as np
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # numpy is imported where audio is made: loading the backend does without it
+    import numpy as np
 
 from agentsim.speech.backend import (BREAK_STRENGTHS, Mark, Phoneme, Prosody, SpeechText, Utterance, Word,
                                      check_prosody, nest_spans, parse_number, parse_time)
@@ -206,7 +209,7 @@ class _Engine:
                 f"install it with: {INSTALL_HINT}"
             )
         self.sample_rate = sample_rate
-        self._chunks: list[np.ndarray] = []
+        self._chunks: list[bytes] = []
         self._events: list[_RawEvent] = []
         self._callback_error: BaseException | None = None
         self._callback = _SynthCallback(self._on_synth)  # kept referenced for the library's use
@@ -217,7 +220,7 @@ class _Engine:
         try:
             if wav and num_samples > 0:
                 data = ctypes.string_at(wav, num_samples * ctypes.sizeof(ctypes.c_short))
-                self._chunks.append(np.frombuffer(data, dtype=np.int16))
+                self._chunks.append(data)
             if events:
                 i = 0
                 while events[i].type != _EVENT_LIST_TERMINATED:
@@ -238,6 +241,8 @@ class _Engine:
 
     def synth(self, ssml: str, voice: str, rate: int) -> tuple[np.ndarray, list[_RawEvent]]:
         """Synthesise SSML; return the int16 audio and the events in the order espeak reported them."""
+        import numpy as np
+
         with self.lock:
             self.select(voice, rate)
             self._chunks, self._events, self._callback_error = [], [], None
@@ -250,7 +255,8 @@ class _Engine:
             raise RuntimeError("espeak-ng synthesis callback failed") from error
         if status != _EE_OK:
             raise RuntimeError(f"espeak_Synth failed with status {status}")
-        audio = np.concatenate(chunks) if chunks else np.zeros(0, dtype=np.int16)
+        audio = (np.concatenate([np.frombuffer(c, dtype=np.int16) for c in chunks]) if chunks
+                 else np.zeros(0, dtype=np.int16))
         return audio, events
 
     def transcribe(self, text: str, voice: str, rate: int) -> list[tuple[str, str]]:
@@ -788,6 +794,8 @@ class EspeakBackend:
             if event.kind == _EVENT_SENTENCE:
                 onset = _first_sound_after(events, i)
                 sentences.append((event.sample if onset is None else onset) / rate)
+
+        import numpy as np
 
         audio = pcm.astype(np.float32) / np.float32(32768.0)
         return Utterance(text=text, duration=duration, words=words, phonemes=phonemes, marks=marks,

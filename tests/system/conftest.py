@@ -59,3 +59,16 @@ def pulse_null_sink():
     os.environ["PULSE_SINK"] = NULL_SINK
     os.environ["PULSE_SOURCE"] = f"{NULL_SINK}.monitor"
     yield NULL_SINK
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Headless Chromium (Debian's ``chromium``), driven over the DevTools protocol."""
+    from agentsim.media.report.browser import Chromium, find_chromium
+
+    try:
+        find_chromium()
+    except RuntimeError as e:
+        pytest.fail(str(e))
+    with Chromium(width=1280, height=900) as chromium:
+        yield chromium

@@ -14,7 +14,7 @@ import pytest
 from agentsim.animation import evaluate_poses
 from agentsim.media.audio import run_track
 from agentsim.media.report import write_report
-from agentsim.media.report.browser import Chromium, find_chromium, open_report
+from agentsim.media.report.browser import open_report
 from agentsim.media.tables import gesture_rows
 from agentsim.realizer import Realizer
 from agentsim.speech.builtin import BuiltinBackend
@@ -38,16 +38,6 @@ def spoken():
     realizer.run()
     recording = realizer.recording()
     return recording, run_track(recording), evaluate_poses(recording, fps=60), gesture_rows(recording)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    try:
-        find_chromium()
-    except RuntimeError as e:
-        pytest.fail(str(e))
-    with Chromium(width=1280, height=900) as chromium:
-        yield chromium
 
 
 def moved_wrist(stream, t: float) -> str:

@@ -72,8 +72,12 @@ def point_names(body) -> tuple[list[str], list[int]]:
 def point_positions(stream, frames: np.ndarray | None = None) -> np.ndarray:
     """World positions (frames, points, 3) in metres of :func:`point_names` at the stream's ``frames``
     (indices; all frames by default)."""
-    values = stream.values if frames is None else stream.values[frames]
-    body = stream.body
+    return body_points(stream.body, stream.values if frames is None else stream.values[frames])
+
+
+def body_points(body, values: np.ndarray) -> np.ndarray:
+    """World positions (frames, points, 3) in metres of :func:`point_names` for poses ``values`` (frames x
+    DOFs, as in a PoseStream)."""
     fk = body.forward_kinematics(values)
     out = [fk[j.name][1] for j in body.joints]
     for name in END_SITES:

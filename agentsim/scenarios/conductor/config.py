@@ -45,6 +45,7 @@ from agentsim.core.errors import AgentsimError
 from agentsim.music.instruments import DRUM_CHANNEL, DRUM_KIT, PARTS, default_part, gm_program, program_name
 from agentsim.music.score import DYNAMICS_DB
 from agentsim.music.tempo import Meter, TempoChange, TempoMap
+from agentsim.scenarios.conductor.names import STRATEGIES
 
 HERE = Path(__file__).resolve().parent
 PIECES_DIR = HERE / "pieces"
@@ -53,7 +54,6 @@ DEFAULT_CONFIG = CONFIGS_DIR / "default.toml"
 
 #: Meters with conducting patterns (beats per bar).
 METER_BEATS = (2, 3, 4)
-STRATEGIES = ("follow", "target", "lead", "best")
 
 
 def _fail(where: str, message: str) -> AgentsimError:
@@ -612,8 +612,34 @@ def _triple(table: dict, key: str, where: str, default) -> tuple[float, float, f
     return tuple(float(v) for v in value)
 
 
-def load_config(path: str | Path | None = None) -> ScenarioConfig:
-    """Read and check a configuration file (the default scenario when ``path`` is None)."""
+def load_config(path: str | Path | None = None, overrides: dict | None = None,
+                described: str = "") -> ScenarioConfig:
+    """Read and check a configuration file (the default scenario when ``path`` is None).
+
+    ``overrides`` replaces keys of its tables before anything is checked, as the command line's knobs do:
+    ``{"piece": {"tempo": 132, "meter": "3/4", "bars": 16}, "ensemble": {"start_bpm": 100},
+    "conductor": {"fps": 60}}``; a piece named by the file is read first, so that only those keys change,
+    and fewer ``bars`` drop the piece's markings past its new end. ``described`` says where they came from
+    in error messages (``--meter 5/4``).
+    """
     path = Path(path) if path is not None else DEFAULT_CONFIG
     data = _read_toml(path)
-    return config_from_dict(data, str(path), path.resolve().parent)
+    base_dir = path.resolve().parent
+    for table, values in (overrides or {}).items():
+        values = {k: v for k, v in values.items() if v is not None}
+        if not values:
+            continue
+        current = data.get(table, "steady_4_4" if table == "piece" else {})
+        if table == "piece" and not isinstance(current, dict):
+            try:
+                current = _read_toml(find_piece(str(current), base_dir))
+            except AgentsimError as exc:
+                raise _fail(str(path), str(exc)) from None
+        if table == "piece" and "bars" in values:
+            for key in ("dynamics", "tempo_changes"):
+                if isinstance(current.get(key), list):
+                    current = {**current, key: [m for m in current[key]
+                                                if not isinstance(m, dict) or m.get("bar", 1) <= values["bars"]]}
+        data = {**data, table: {**current, **values}}
+    where = f"{path} with {described}" if described else str(path)
+    return config_from_dict(data, where, base_dir)

@@ -8,6 +8,8 @@ starts and drags 10 % below it) and writes ``metrics.json``, ``tempo.png``, ``ti
 configuration's strategy runs (``best`` unless it says otherwise). ``--compare`` runs every strategy on
 the same seed, writes each into ``--out/<strategy>/`` (all files but the timeline) and prints a table.
 ``--live`` conducts what an input device plays, in real time, instead of the simulated ensemble.
+``--json`` prints the figures written (``metrics.json``, or with ``--compare`` the list of ``compare.json``)
+as JSON on stdout, and the table on stderr instead.
 Shipped configurations: ``configs/default.toml``, ``configs/waltz_3_4.toml``, ``configs/march_2_4.toml``
 and ``configs/falls_apart.toml`` (the conductor stops the piece).
 """
@@ -21,9 +23,9 @@ import time
 from pathlib import Path
 
 from agentsim.core.errors import AgentsimError
-from agentsim.scenarios.conductor.config import STRATEGIES
-
-DEFAULT_OUT = "out/conductor"
+from agentsim.core.progress import progress
+from agentsim.media import AXIS, GLOSSARY
+from agentsim.scenarios.conductor.names import STRATEGIES
 
 
 def _summary_row(m: dict) -> str:
@@ -49,8 +51,19 @@ def main(args: argparse.Namespace) -> int:
     from agentsim.scenarios.conductor.config import load_config
     from agentsim.scenarios.conductor.scenario import collect_metrics, listen_live, simulate, write_outputs
 
-    config = load_config(args.config)  # a bad configuration fails here, before anything runs
+    overrides = {"piece": {"tempo": getattr(args, "target_bpm", None), "meter": getattr(args, "meter", None),
+                           "bars": getattr(args, "bars", None)},
+                 "ensemble": {"start_bpm": getattr(args, "start_bpm", None)},
+                 "conductor": {"fps": getattr(args, "fps", None)}}
+    flags = {"--target-bpm": "target_bpm", "--start-bpm": "start_bpm", "--meter": "meter", "--bars": "bars",
+             "--fps": "fps"}
+    described = " ".join(f"{flag} {getattr(args, key):g}" if isinstance(getattr(args, key), float)
+                         else f"{flag} {getattr(args, key)}" for flag, key in flags.items()
+                         if getattr(args, key, None) is not None)
+    config = load_config(args.config, overrides, described)  # a bad configuration fails here, before anything runs
     out = Path(args.out)
+    as_json = getattr(args, "json", False)
+    table = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
     from agentsim.media.files import check_writable
 
     check_writable(folders=[out])  # so does an output folder that cannot be written
@@ -73,11 +86,13 @@ def main(args: argparse.Namespace) -> int:
         run = listen_live(config, args.strategy, args.seconds, device)
         metrics = collect_metrics(run)
         write_outputs(run, metrics, out)
-        _report(metrics, out, time.perf_counter() - started)
+        _report(metrics, out, time.perf_counter() - started, table)
+        if as_json:
+            print(json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}))  # as metrics.json
         return 0
     strategies = STRATEGIES if args.compare else (args.strategy or config.conductor.strategy,)
     rows = []
-    for name in strategies:
+    for name in progress(strategies, "strategies", unit="strategy"):
         started = time.perf_counter()
         run = simulate(config, name, args.seed)
         metrics = collect_metrics(run)
@@ -85,29 +100,32 @@ def main(args: argparse.Namespace) -> int:
         write_outputs(run, metrics, folder, pictures=not args.compare)
         rows.append(metrics)
         if not args.compare:
-            _report(metrics, folder, time.perf_counter() - started)
+            _report(metrics, folder, time.perf_counter() - started, table)
         else:
             print(f"{name}: {time.perf_counter() - started:.1f} s", file=sys.stderr)
     if args.compare:
         print(f"{config.piece.title}: target {config.piece.tempo:g} BPM, ensemble starts at "
-              f"{config.ensemble.start_bpm:g} BPM, seed {args.seed}")
-        print(TABLE_HEADER)
+              f"{config.ensemble.start_bpm:g} BPM, seed {args.seed}", file=table)
+        print(TABLE_HEADER, file=table)
         for m in rows:
-            print(_summary_row(m))
+            print(_summary_row(m), file=table)
         out.mkdir(parents=True, exist_ok=True)
         (out / "compare.json").write_text(json.dumps(rows, indent=2) + "\n")
-        print(f"written to {out}/<strategy>/ and {out / 'compare.json'}")
+        print(f"written to {out}/<strategy>/ and {out / 'compare.json'}", file=table)
+    if as_json:
+        print(json.dumps(rows if args.compare else {**rows[0], "time_axis": AXIS, "glossary": GLOSSARY}))  # as compare.json, metrics.json
     return 0
 
 
-def _report(metrics: dict, folder: Path, seconds: float) -> None:
-    print(TABLE_HEADER)
-    print(_summary_row(metrics))
+def _report(metrics: dict, folder: Path, seconds: float, file=None) -> None:
+    file = file or sys.stdout
+    print(TABLE_HEADER, file=file)
+    print(_summary_row(metrics), file=file)
     extra = []
     if metrics.get("louder_gestures"):
         extra.append(f"{len(metrics['louder_gestures'])} 'play louder' gesture(s)")
     if metrics.get("stopped"):
         extra.append(f"stopped the piece at {metrics['stopped_at_s']:.2f} s (the tracker lost the beat)")
     if extra:
-        print("; ".join(extra))
-    print(f"written to {folder} in {seconds:.1f} s")
+        print("; ".join(extra), file=file)
+    print(f"written to {folder} in {seconds:.1f} s", file=file)

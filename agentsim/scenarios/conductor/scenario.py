@@ -359,8 +359,9 @@ def run_tempo_figure(run: Run, metrics: dict):
                         events, first_index=run.extra["first_index"], onsets=run.extra["onsets"])
 
 
-def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True) -> Path:
-    """Write the run's files into the folder ``out`` (created if needed)."""
+def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True) -> Path:
+    """Write the run's files into the folder ``out`` (created if needed); ``pictures``: the timeline
+    pictures too, ``plots``: any picture at all (``tempo.png`` and the timeline)."""
     from agentsim.animation import evaluate_poses, plot_timelines, write_bvh
     from agentsim.core.feedback import to_json
     from agentsim.media.audio import run_track
@@ -370,9 +371,9 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    from agentsim.media import AXIS
+    from agentsim.media import AXIS, GLOSSARY
 
-    write_text(out / "metrics.json", json.dumps({**metrics, "time_axis": AXIS}, indent=2) + "\n")
+    write_text(out / "metrics.json", json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}, indent=2) + "\n")
     recording = run.realizer.recording()
     write_text(out / "feedback.jsonl", "".join(to_json(item) + "\n" for item in recording.feedback))
     # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the feedback's)
@@ -385,6 +386,8 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     write_csv(out / "gestures.csv", gestures)
     write_report(out / "report.html", recording=recording, stream=stream, track=track, gestures=gestures,
                  title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})")
+    if not plots:
+        return out
     run_tempo_figure(run, metrics).savefig(out / "tempo.png")
     if pictures:
         plot_timelines(recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW,

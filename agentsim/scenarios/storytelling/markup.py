@@ -37,6 +37,7 @@ tells it; :meth:`Story.to_markup` writes the format back.
 
 from __future__ import annotations
 
+import bisect
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,6 +49,7 @@ from agentsim.animation.scene import DEFAULT_SCENE
 from agentsim.bml.speech_text import normalize_space
 from agentsim.bml.vocabulary import BML_NAMESPACE
 from agentsim.core.errors import AgentsimError
+from agentsim.scenarios.storytelling.names import ANCHORS  # where a gesture's sync point is tied (compile_bml)
 from agentsim.speech.backend import Utterance
 from agentsim.speech.linear_model import written_words
 
@@ -61,8 +63,6 @@ KINDS = {"beat": "gesture", "point": "pointing", "icon": "gesture", "nod": "head
 HANDS = {"left": "LEFT_HAND", "right": "RIGHT_HAND", "both": "BOTH_HANDS"}
 #: Gesture lexemes an ``icon`` may name: the stroke forms of the motion module other than the beat.
 ICON_LEXEMES = tuple(sorted(k for k in GESTURE_FORMS if k not in ("BEAT", "DEFAULT")))
-#: Where a gesture's sync point is tied (see :func:`compile_bml`).
-ANCHORS = ("stress", "offset", "word")
 
 _TAG = re.compile(r"\[([^\[\]\n]*)\]")
 _SCENE = re.compile(r"^(?P<name>[A-Za-z_][\w\-]*)\s*[:=]?\s+(?P<x>\S+)[\s,]+(?P<y>\S+)[\s,]+(?P<z>\S+)\s*$")
@@ -264,8 +264,8 @@ def parse_story(source: str, name: str = "<story>", title: str = "") -> Story:
     gestures: list[Gesture] = []
     for offset, tag, line_no, col in tags:
         at = positions[offset]
-        k = next((i for i, s in enumerate(starts) if s >= at), None)
-        if k is None:
+        k = bisect.bisect_left(starts, at)  # the words' starts are in order
+        if k == len(starts):
             raise StoryError(f"{name}:{line_no}:{col}: the tag [{tag}] stands in front of no word")
         gestures.append(gesture_from_tag(tag, k, targets, f"{name}:{line_no}:{col}", line_no, col))
     gestures.sort(key=lambda g: g.word)  # stable: tags on one word keep their order

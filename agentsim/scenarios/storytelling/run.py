@@ -20,6 +20,9 @@ animator-time strategy under an event-delivery condition, and writes to ``--out`
 ``compare.json``       with ``--compare``: the figures of every strategy on the same seed
 =====================  ==============================================================================
 
+With ``--json`` the figures written (``metrics.json``, or with ``--compare`` those of ``compare.json``) are
+printed as JSON on stdout, and what is otherwise printed goes to stderr.
+
 Every file is on the run's one time axis: simulated time 0 is WAV sample 0, BVH frame 0 and feedback
 ``globalTime`` 0 (the TextGrid says so in its ``axis`` tier, ``metrics.json`` in ``time_axis``).
 
@@ -32,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from collections import OrderedDict
 from pathlib import Path
@@ -39,8 +43,10 @@ from pathlib import Path
 import numpy as np
 
 from agentsim.core.errors import AgentsimError
-from agentsim.media import AXIS
+from agentsim.core.progress import progress
+from agentsim.media import AXIS, GLOSSARY
 from agentsim.scenarios.storytelling.markup import Story, StoryError, read_story
+from agentsim.scenarios.storytelling.names import DEFAULT_OUT
 from agentsim.scenarios.storytelling.telling import Telling, make_voice, syllable_times, tell
 
 __all__ = ["STORIES_DIR", "DEFAULT_OUT", "main", "resolve_story", "load_story", "shipped_stories", "write_outputs",
@@ -48,8 +54,6 @@ __all__ = ["STORIES_DIR", "DEFAULT_OUT", "main", "resolve_story", "load_story", 
 
 #: Where the shipped stories live.
 STORIES_DIR = Path(__file__).resolve().parent / "stories"
-#: Where ``agentsim run storytelling`` writes unless told otherwise.
-DEFAULT_OUT = "storytelling_out"
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -124,7 +128,7 @@ def main(args: argparse.Namespace) -> int:
 
     strategies = list(STRATEGIES) if args.compare else [strategy]
     tellings: dict[str, Telling] = {}
-    for name in strategies:
+    for name in progress(strategies, "strategies", unit="strategy"):
         tellings[name] = tell(story, strategy=name, delivery=delivery, seed=args.seed, voice=voice,
                               anchor=args.anchor, timing=args.timing)
     telling = tellings[strategy]
@@ -142,14 +146,18 @@ def main(args: argparse.Namespace) -> int:
     metrics["stages_seconds"] = OrderedDict([("simulation", telling.wall_seconds)] + list(stages.items()))
     metrics["fps"] = args.fps
     metrics["time_axis"] = AXIS
+    metrics["glossary"] = GLOSSARY
     metrics.update(telling.extra)
+    as_json = getattr(args, "json", False)
+    printed = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
+    compared = None
     if args.compare:
         rows = OrderedDict((name, _row(t)) for name, t in tellings.items())
-        (out / "compare.json").write_text(json.dumps(_clean(OrderedDict(
-            story=story.title, seed=args.seed, anchor=args.anchor, timing=args.timing,
-            delivery=metrics["delivery"], strategies=rows)), indent=2) + "\n")
+        compared = _clean(OrderedDict(story=story.title, seed=args.seed, anchor=args.anchor, timing=args.timing,
+                                      delivery=metrics["delivery"], strategies=rows))
+        (out / "compare.json").write_text(json.dumps(compared, indent=2) + "\n")
         metrics["compare_wall_seconds"] = wall
-        print(comparison_table(rows))
+        print(comparison_table(rows), file=printed)
     (out / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
     e = metrics["sync_error_ms"]
     print(f"{story.title}: {metrics['words']} words, {metrics['gestures']} gestures, "
@@ -157,7 +165,9 @@ def main(args: argparse.Namespace) -> int:
           f"p95 {e['p95']:.2f} ms, max {e['max']:.2f} ms; {metrics['snaps']} snaps, {metrics['warnings']} warnings, "
           f"{metrics['missed']} missed; wall {metrics['wall_seconds']:.2f} s "
           f"({100 * metrics['wall_fraction_of_story']:.2f} % of the story)"
-          + (f", first synthesis {synthesis:.2f} s" if synthesis else "") + f"; written to {out}/")
+          + (f", first synthesis {synthesis:.2f} s" if synthesis else "") + f"; written to {out}/", file=printed)
+    if as_json:
+        print(json.dumps(compared if compared is not None else _clean(metrics)))
     return 0
 
 
@@ -200,16 +210,16 @@ def _clean(value):
 
 
 def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float = 30.0,
-                  seed: int = 0) -> "OrderedDict[str, float]":
+                  seed: int = 0, plots: bool = True) -> "OrderedDict[str, float]":
     """Write a telling's files (all but ``metrics.json``) to ``out``; returns the wall seconds of each
-    stage."""
+    stage. ``plots``: draw the timeline and sync-error pictures too."""
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.core.feedback import to_json
-    from agentsim.scenarios.storytelling.praat import export_textgrid
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_text, write_wav
     from agentsim.media.report import write_report
     from agentsim.media.tables import gesture_rows, write_csv
+    from agentsim.scenarios.storytelling.praat import export_textgrid
 
     stages: OrderedDict[str, float] = OrderedDict()
 
@@ -242,9 +252,10 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     write_report(out / "report.html", recording=telling.recording, stream=stream, track=track, gestures=gestures,
                  title=f"{telling.story.title} (strategy {telling.strategy})")
     t = stage("report", t)
-    plot_window(telling, out / "timeline.png", stream, window)
-    plot_errors(telling, out / "sync_errors.png")
-    stage("plots", t)
+    if plots:
+        plot_window(telling, out / "timeline.png", stream, window)
+        plot_errors(telling, out / "sync_errors.png")
+        stage("plots", t)
     return stages
 
 

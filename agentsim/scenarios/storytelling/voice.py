@@ -31,7 +31,6 @@ Times are seconds from the start of the utterance's audio.
 
 from __future__ import annotations
 
-import bisect
 import hashlib
 import json
 import os
@@ -69,13 +68,11 @@ def default_cache_dir() -> Path:
 
 def word_after(utterance: Utterance, offset: int) -> int | None:
     """Index of the first word of ``utterance`` starting at or after character ``offset`` (None: none)."""
-    starts = [w.char_start for w in utterance.words]
-    k = bisect.bisect_left(starts, offset)
-    return k if k < len(starts) else None
+    return utterance.word_after(offset)
 
 
 def _phonemes_of(utterance: Utterance, k: int) -> list[Phoneme]:
-    return [p for p in utterance.phonemes if p.word_index == k]
+    return utterance.phonemes_of(k)
 
 
 def stressed_onset(utterance: Utterance, k: int) -> tuple[float, bool]:
@@ -253,14 +250,14 @@ class CachedBackend:
         if has_audio:
             pcm = np.round(np.asarray(utt.audio, dtype=np.float64) * 32768.0)
             pcm = np.clip(pcm, -32768, 32767).astype(np.int16)
-            tmp = audio_path.with_suffix(".tmp.npy")
+            tmp = audio_path.with_suffix(f".{os.getpid()}.tmp.npy")  # processes that write at once: one each
             np.save(tmp, pcm)
             tmp.replace(audio_path)
         meta = {"format": CACHE_FORMAT, "backend": _identity(self.backend), "text": utt.text,
                 "duration": utt.duration, "sample_rate": utt.sample_rate, "backend_name": utt.backend,
                 "sentences": list(utt.sentences), "audio": has_audio,
                 "words": [asdict(w) for w in utt.words], "phonemes": [asdict(p) for p in utt.phonemes]}
-        tmp = meta_path.with_suffix(".tmp.json")
+        tmp = meta_path.with_suffix(f".{os.getpid()}.tmp.json")
         tmp.write_text(json.dumps(meta, ensure_ascii=False))
         tmp.replace(meta_path)
 

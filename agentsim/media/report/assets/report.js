@@ -7,20 +7,36 @@
    moves the skeleton, the timeline's cursor and the table's current row.
 
    window.report is the page's API for tests: ready, duration(), seek(t), time(), joint(name),
-   cursor() (the cursor's x in CSS px on the timeline canvas), cursorTime(), play(), pause(), errors. */
+   cursor() (the cursor's x in CSS px on the timeline canvas), cursorTime(), play(), pause(), errors.
+
+   With window.REPORT_LIVE set instead of REPORT_DATA (the page agentsim serve serves at /), the same 3D
+   view plays a live run: see live() at the end of this file. */
 (function () {
   "use strict";
 
   var D = window.REPORT_DATA;
   var P = window.REPORT_POSES || null;
+  var LIVE = window.REPORT_LIVE || null;
   var errors = window.reportErrors || [];
   var api = { ready: false, errors: errors };
   window.report = api;
-  if (!D) { errors.push("REPORT_DATA did not load"); return; }
+  if (!D && !LIVE) { errors.push("REPORT_DATA did not load"); return; }
 
   var $ = function (id) { return document.getElementById(id); };
   var clamp = function (x, lo, hi) { return x < lo ? lo : (x > hi ? hi : x); };
   var fmt = function (x, d) { return x === null || x === undefined ? "" : x.toFixed(d === undefined ? 3 : d); };
+  var COLOURS = { preparation: "#9ecae1", "pre-stroke hold": "#c6dbef", stroke: "#2171b5",
+    "post-stroke hold": "#c6dbef", retraction: "#9ecae1", other: "#bdbdbd", speech: "#a1d99b", speech2: "#74c476" };
+  var PHASES = { start: "preparation", ready: "pre-stroke hold", strokeStart: "stroke", stroke: "stroke",
+    attackPeak: "stroke", strokeEnd: "post-stroke hold", relax: "retraction" };
+  var FEED_COLOURS = { syncPointProgress: "#718096", blockProgress: "#2b6cb0", warningFeedback: "#e53e3e",
+    predictionFeedback: "#38a169" };
+  var LABEL = 190, RIGHT = 12, RULER = 18, FEED = 12, SPEECH_H = 16, WORDS_H = 44, ROW_H = 15, TL_H = 330, OV_H = 40;
+  var three = null;
+  if (LIVE) {
+    try { live(LIVE); } catch (e) { errors.push("report.js: " + e.message); throw e; }
+    return;
+  }
   var duration = Math.max(D.duration || 0, 0.001);
 
   /* ------------------------------------------------------------------------------------- the clock */
@@ -143,9 +159,10 @@
   }
 
   /* ------------------------------------------------------------------------------------- the 3D view */
-  var view = $("view"), three = null;
-  function buildScene() {
-    var T = window.THREE;
+  /* The skeleton M ({points, parents, face, ends}: the joints' names, each one's parent, the face's and the
+     end sites' indices) in a three.js scene, standing in the positions pts (x, y, z of every point, m). */
+  function buildScene(M, pts) {
+    var T = window.THREE, view = $("view"), NP = M.points.length;
     if (!T) { errors.push("three.js did not load"); return null; }
     var s = { T: T, scene: new T.Scene(), spheres: [], bones: [], dirty: true, renderer: null };
     s.scene.background = new T.Color(0xf4f5f7);
@@ -153,7 +170,6 @@
     var sun = new T.DirectionalLight(0xffffff, 1.6);
     sun.position.set(2, 4, 3);
     s.scene.add(sun);
-    poseAt(M.start);
     var floor = Infinity;
     for (var k = 0; k < NP; k++) floor = Math.min(floor, pts[k * 3 + 1]);
     var root = [pts[0], pts[1], pts[2]];
@@ -229,7 +245,11 @@
   function updateSkeleton(t) {
     if (!three) return;
     poseAt(t);
-    var s = three;
+    placeSkeleton(three, pts);
+  }
+  /* Move the joints, bones and head of scene s to the positions pts. */
+  function placeSkeleton(s, pts) {
+    var NP = s.spheres.length;
     for (var i = 0; i < NP; i++) s.spheres[i].position.set(pts[i * 3], pts[i * 3 + 1], pts[i * 3 + 2]);
     for (var k = 0; k < s.bones.length; k++) {
       var bone = s.bones[k];
@@ -262,7 +282,6 @@
 
   /* ------------------------------------------------------------------------------------- the timeline */
   var TL = $("timeline"), OV = $("overview");
-  var LABEL = 190, RIGHT = 12, RULER = 18, FEED = 12, SPEECH_H = 16, WORDS_H = 44, ROW_H = 15, TL_H = 330, OV_H = 40;
   var LANE_GAP = 0.3;  // s between two behaviours that share a lane
   var win = { start: 0, width: Math.min(20, duration) };
   (function () {  // as tall as the run needs, at most TL_H: a short run gets a short timeline
@@ -297,12 +316,6 @@
   G.columns.forEach(function (c, i) { gcol[c] = i; });
   var byName = {};
   G.rows.forEach(function (r) { byName[r[gcol.block] + ":" + r[gcol.behaviour]] = r; });
-  var COLOURS = { preparation: "#9ecae1", "pre-stroke hold": "#c6dbef", stroke: "#2171b5",
-    "post-stroke hold": "#c6dbef", retraction: "#9ecae1", other: "#bdbdbd", speech: "#a1d99b", speech2: "#74c476" };
-  var PHASES = { start: "preparation", ready: "pre-stroke hold", strokeStart: "stroke", stroke: "stroke",
-    attackPeak: "stroke", strokeEnd: "post-stroke hold", relax: "retraction" };
-  var FEED_COLOURS = { syncPointProgress: "#718096", blockProgress: "#2b6cb0", warningFeedback: "#e53e3e",
-    predictionFeedback: "#38a169" };
   function errColour(ms) {
     if (ms === null || ms === undefined) return "#a0aec0";
     var a = Math.abs(ms);
@@ -745,7 +758,7 @@
     summaryText();
     legend();
     buildTable();
-    if (M && P) three = buildScene();
+    if (M && P) { poseAt(M.start); three = buildScene(M, pts); }
     window.addEventListener("resize", function () { overview = null; draw(true); });
     draw(true);
     requestAnimationFrame(loop);
@@ -760,5 +773,400 @@
     setTimeout(done, 10000);
   } else {
     done();
+  }
+  /* ------------------------------------------------------------------------------------- live */
+  /* The live viewer: the page agentsim serve serves at / (agentsim.live.poses has the messages).
+
+     It opens a WebSocket to options.url (by default the page's own host and port), sends
+     {"subscribe": "poses"}, builds the skeleton from the server's "skeleton" message and buffers the frames
+     of its "poses" messages. A message comes when its last frame is due on the server's clock, a few frames
+     at a time; the page plays the frames at a steady delay (hold) behind the newest time it can know, so
+     that motion is smooth: the server's clock is read as the page's clock minus the smallest lag seen lately
+     between a message's arrival and the time of what it carries. When frames come later than the hold
+     allows for (the buffer runs dry: the last frame is held), the hold grows by 50 ms, up to 1 s; after
+     30 s without that it shrinks again by 50 ms, down to a period and 0.1 s. Feedback, which every client is sent, is
+     applied when the play time reaches its globalTime: a timeline of the behaviours (planned phases pale,
+     passed ones solid), what plays now, and a list. When the server goes away the page says so, keeps the
+     last pose and tries again every few seconds; a new connection starts afresh (a new server has a new
+     clock).
+
+     window.report.live is its state for tests: url, state ("connecting", "connected", "disconnected"),
+     connected, skeleton (the skeleton message arrived), connections (opened so far), closed (the code of
+     the last close); and of the current connection: messages and frames received, first (the first
+     frame's index), gaps and repeats (frames missing or sent twice between messages), stalls (the buffer
+     ran dry), feedback, warnings, time (the play time, s of the server's clock), latest (the newest
+     frame's time), hold (s), lag (s: arrival minus time, the smallest lately). report.time() and
+     report.joint(name) are as in the report; report.watch(name) records [time, x, y, z, between] of that
+     joint at every frame drawn from then on (between: 1 if drawn between two frames received, 0 if held on
+     the first or the last one), report.watched(name) returns them. */
+  function live(options) {
+    var host = location.host || "127.0.0.1:8765";
+    var url = options.url || ((location.protocol === "https:" ? "wss://" : "ws://") + host + "/");
+    var NONE = 0, BETWEEN = 1, HELD = 2;
+    var HOLD = 0.2, RETRY = [1, 2, 3, 5], LAGS = 50, KEEP = 3, WINDOW = 10, AHEAD = 2, FEED_ITEMS = 60, WATCH = 50000;
+    var state = { url: url, state: "connecting", connected: false, skeleton: false, connections: 0, messages: 0,
+      frames: 0, first: null, gaps: 0, repeats: 0, stalls: 0, feedback: 0, warnings: 0, time: null, latest: null,
+      hold: HOLD, lag: null, closed: null, fps: null, period: null };
+    var socket = null, attempt = 0, retryAt = null;
+    var M = null, rest = null, pts = null;
+    var ft = [], fp = [], next = null, stalled = false;  // frame times and positions; next index expected
+    var lags = [], lastPlay = null, base = HOLD, steady = 0;  // steady: since when no frame came late (ms)
+    var pending = [], beh = {}, behOrder = 0, ticks = [], blocks = {};
+    var watches = {};
+    api.live = state;
+
+    /* ------------------------------------------------ the page */
+    $("endpoint").textContent = url;
+    var feedList = $("feed");
+    function status() {
+      var el = $("status"), text;
+      if (state.state === "connected") {
+        text = "connected to " + url + (state.fps ? " \u00b7 poses at " + state.fps + " fps" : "") +
+          " \u00b7 " + state.frames + " frames received" + (state.lag !== null ? " \u00b7 playing " +
+          (state.hold).toFixed(2) + " s behind the server" : "");
+      } else if (state.state === "disconnected") {
+        var wait = retryAt === null ? 0 : Math.max(0, Math.ceil((retryAt - performance.now()) / 1000));
+        text = "disconnected: " + (state.connections ? "the server at " + url + " went away" : "no server at " + url) +
+          (state.closed !== null ? " (code " + state.closed + ")" : "") + "; trying again" +
+          (wait ? " in " + wait + " s" : " now") + " (attempt " + attempt + ")";
+      } else {
+        text = "connecting to " + url + "\u2026";
+      }
+      if (el.textContent !== text) el.textContent = text;
+      el.className = "status " + state.state;
+      document.body.classList.toggle("connected", state.connected);
+    }
+    (function legendLive() {
+      var items = [["stroke", "stroke (triangle: stroke point)"], ["preparation", "preparation, retraction"],
+        ["pre-stroke hold", "holds"], ["speech", "speech"]];
+      $("legend").innerHTML = items.map(function (x) {
+        return "<span><i style=\"background:" + COLOURS[x[0]] + "\"></i>" + x[1] + "</span>";
+      }).join("") + "<span>pale: planned; solid: passed</span><span><i style=\"background:#e53e3e\"></i>now, warnings</span>" +
+        "<label><input type=checkbox id=follow checked> camera follows the character</label>";
+    })();
+
+    /* ------------------------------------------------ the connection */
+    function connect() {
+      retryAt = null;
+      state.state = "connecting";
+      status();
+      var ws;
+      try {
+        ws = new WebSocket(url);
+      } catch (e) {  // a malformed address: say so, and try no more
+        state.state = "disconnected";
+        $("status").textContent = "cannot connect to " + url + ": " + e.message;
+        return;
+      }
+      socket = ws;
+      ws.onopen = function () {
+        if (ws !== socket) return;
+        attempt = 0;
+        state.connections++;
+        state.connected = true;
+        state.state = "connected";
+        state.closed = null;
+        afresh();
+        ws.send(JSON.stringify({ subscribe: "poses" }));
+        status();
+      };
+      ws.onmessage = function (event) {
+        if (ws !== socket) return;
+        try {
+          receive(JSON.parse(event.data), performance.now() / 1000);
+        } catch (e) {
+          errors.push("report.js: live message: " + e.message);
+          throw e;
+        }
+      };
+      ws.onclose = function (event) {
+        if (ws !== socket) return;
+        socket = null;
+        state.connected = false;
+        state.state = "disconnected";
+        state.closed = event.code;
+        var wait = RETRY[Math.min(attempt, RETRY.length - 1)];
+        attempt++;
+        retryAt = performance.now() + wait * 1000;
+        setTimeout(connect, wait * 1000);
+        note(state.connections ? "disconnected" : "no server");
+        status();
+      };
+      ws.onerror = function () {};  // a close follows, which says what to do
+    }
+    function afresh() {  // a new connection: a new clock, a new run
+      ft = []; fp = []; next = null; stalled = false; lags = []; lastPlay = null;
+      pending = []; beh = {}; ticks = []; blocks = {};
+      ["messages", "frames", "gaps", "repeats", "stalls", "feedback", "warnings"].forEach(function (k) { state[k] = 0; });
+      state.first = state.time = state.latest = state.lag = null;
+      state.hold = base = HOLD;
+      steady = performance.now();
+      if (state.connections > 1) note("connected again");
+    }
+    function note(text) {
+      var li = document.createElement("li");
+      li.className = "mark";
+      li.textContent = "\u2014 " + text + " \u2014";
+      feedList.insertBefore(li, feedList.firstChild);
+    }
+
+    /* ------------------------------------------------ messages */
+    function lagSample(arrival, t) {
+      lags.push(arrival - t);
+      if (lags.length > LAGS) lags.shift();
+      state.lag = Math.min.apply(null, lags);
+    }
+    function receive(m, arrival) {
+      state.messages++;
+      if (m.type === "skeleton") return skeleton(m);
+      if (m.type === "poses") return poses(m, arrival);
+      state.feedback++;
+      if (typeof m.globalTime === "number") lagSample(arrival, m.globalTime);
+      pending.push(m);
+    }
+    function skeleton(m) {
+      var same = M && M.points.length === m.joints.length && M.points.every(function (n, i) { return n === m.joints[i]; });
+      M = { points: m.joints, parents: m.parents, face: m.face, ends: m.ends };
+      rest = new Float64Array([].concat.apply([], m.rest));
+      state.fps = m.fps;
+      state.period = m.period;
+      base = Math.max(HOLD, m.period + 0.1);
+      state.hold = Math.max(state.hold, base);
+      if (!same) {
+        if (three && three.renderer) three.renderer.domElement.remove();
+        pts = new Float64Array(rest);
+        three = buildScene(M, pts);
+        if (three) placeSkeleton(three, pts);
+      }
+      state.skeleton = true;
+    }
+    function poses(m, arrival) {
+      var n = m.frames.length, first = 0;
+      if (!n) return;
+      if (next !== null && m.index !== next) {
+        if (m.index > next) state.gaps++;
+        else { state.repeats++; first = next - m.index; }
+      }
+      for (var k = first; k < n; k++) {
+        ft.push((m.index + k) / m.fps);
+        fp.push(new Float32Array(m.frames[k]));
+      }
+      next = m.index + n;
+      if (state.first === null) state.first = m.index;
+      state.frames += n;
+      state.latest = (m.index + n - 1) / m.fps;
+      lagSample(arrival, state.latest);
+    }
+    function playTime(clock) {
+      if (state.lag === null) return null;
+      if (state.hold > base && clock * 1000 - steady > 30000) {  // frames came in time for 30 s: come closer
+        state.hold = Math.max(base, state.hold - 0.05);
+        steady = clock * 1000;
+      }
+      var t = clock - state.lag - state.hold;
+      if (!state.connected && state.latest !== null && t > state.latest) t = state.latest;  // the server is gone
+      if (lastPlay !== null && t < lastPlay) t = lastPlay;  // never backwards
+      lastPlay = t;
+      return t;
+    }
+    function poseAt(t) {  // the buffered frames around t, linearly between them: BETWEEN; HELD: the first or
+      var n = ft.length;  // the last one, t being outside them; NONE: no frame yet (the rest pose stays)
+      if (!n || t === null) return NONE;
+      if (t > ft[n - 1]) {
+        if (!stalled && state.connected) {
+          stalled = true;
+          state.stalls++;
+          state.hold = Math.min(1.0, state.hold + 0.05);  // the frames came later than the hold allowed for
+          steady = performance.now();
+        }
+        pts.set(fp[n - 1]);
+        return HELD;
+      }
+      stalled = false;
+      if (t < ft[0]) { pts.set(fp[0]); return HELD; }
+      var lo = 0, hi = n - 1;
+      while (hi - lo > 1) { var mid = (lo + hi) >> 1; if (ft[mid] <= t) lo = mid; else hi = mid; }
+      var w = hi > lo ? (t - ft[lo]) / (ft[hi] - ft[lo]) : 0, a = fp[lo], b = fp[hi];
+      for (var q = 0; q < pts.length; q++) pts[q] = a[q] * (1 - w) + b[q] * w;
+      return BETWEEN;
+    }
+    function trim(t) {  // frames older than KEEP s behind the play time go
+      var k = 0;
+      while (k < ft.length - 2 && ft[k + 1] < t - KEEP) k++;
+      if (k) { ft.splice(0, k); fp.splice(0, k); }
+    }
+
+    /* ------------------------------------------------ feedback: the timeline, the panels, the list */
+    function behaviour(block, id) {
+      var name = block + ":" + id;
+      if (!beh[name]) beh[name] = { name: name, type: "", lexeme: null, sync: [], t: [], passed: [], inf: null,
+        stopped: null, dropped: false, order: behOrder++ };
+      return beh[name];
+    }
+    function setSync(b, sync, t, passed) {
+      var i = b.sync.indexOf(sync);
+      if (i < 0) {
+        i = 0;
+        while (i < b.sync.length && b.t[i] !== null && b.t[i] <= t) i++;
+        b.sync.splice(i, 0, sync); b.t.splice(i, 0, t); b.passed.splice(i, 0, passed);
+      } else if (!b.passed[i] || passed) {
+        b.t[i] = t; b.passed[i] = b.passed[i] || passed;
+      }
+    }
+    function apply(m) {
+      var t = m.globalTime;
+      ticks.push({ t: t, type: m.type });
+      if (m.type === "predictionFeedback" && m.behaviours) {
+        m.behaviours.forEach(function (p) {
+          var b = behaviour(m.id, p.id);
+          b.type = p.type || b.type;
+          Object.keys(p.syncs || {}).forEach(function (sync) {
+            if (typeof p.syncs[sync] === "number") setSync(b, sync, p.syncs[sync], false);
+          });
+        });
+        blocks[m.id] = blocks[m.id] || {};
+      } else if (m.type === "syncPointProgress") {
+        var parts = m.id.split(":");
+        if (parts.length >= 3) setSync(behaviour(parts[0], parts[1]), parts.slice(2).join(":"), t, true);
+      } else if (m.type === "blockProgress") {
+        var bp = m.id.split(":"), block = blocks[bp[0]] = blocks[bp[0]] || {};
+        block[bp[1]] = t;
+      } else if (m.type === "warningFeedback") {
+        state.warnings++;
+      }
+      listItem(m);
+    }
+    function listItem(m) {
+      var li = document.createElement("li"), text = fmt(m.globalTime) + " s  ";
+      if (m.type === "syncPointProgress") text += m.id;
+      else if (m.type === "blockProgress") text += "block " + m.id;
+      else if (m.type === "predictionFeedback") text += "plan of " + m.id + (m.bml ? ": " + fmt(m.bml.globalStart) +
+        "\u2013" + fmt(m.bml.globalEnd) + " s" : "");
+      else if (m.type === "warningFeedback") { text += (m.warningType || "warning") + " " + m.id + ": " + (m.description || ""); li.className = "warning"; }
+      else text += m.type + " " + (m.id || "");
+      li.textContent = text;
+      if (/:stroke$/.test(m.id || "")) li.className = "stroke";
+      feedList.insertBefore(li, feedList.firstChild);
+      while (feedList.children.length > FEED_ITEMS) feedList.removeChild(feedList.lastChild);
+    }
+    function span(b) {
+      var lo = Infinity, hi = -Infinity;
+      b.t.forEach(function (x) { if (x !== null) { lo = Math.min(lo, x); hi = Math.max(hi, x); } });
+      return [lo, hi];
+    }
+    function forget(t) {  // what ended long ago
+      while (ticks.length && ticks[0].t < t - 2 * WINDOW) ticks.shift();
+      Object.keys(beh).forEach(function (k) { if (span(beh[k])[1] < t - 2 * WINDOW) delete beh[k]; });
+    }
+    function drawLive(t) {
+      var H = 210, c = sizeCanvas($("timeline"), H), g = c.g, w = c.w;
+      var t0 = Math.max(0, t + AHEAD - WINDOW), t1 = t0 + WINDOW, span0 = w - LABEL - RIGHT;
+      var X = function (x) { return LABEL + (x - t0) / WINDOW * span0; };
+      g.clearRect(0, 0, w, H);
+      g.font = "11px system-ui, sans-serif";
+      g.textBaseline = "middle";
+      g.fillStyle = "#4a5568"; g.strokeStyle = "#e2e8f0"; g.lineWidth = 1;
+      for (var s = Math.ceil(t0); s <= t1 + 1e-9; s += 1) {
+        var xs = Math.round(X(s)) + 0.5;
+        g.beginPath(); g.moveTo(xs, RULER - 4); g.lineTo(xs, H); g.stroke();
+        g.fillText(s.toFixed(0) + " s", xs + 3, RULER / 2);
+      }
+      var y = RULER;
+      g.fillStyle = "#4a5568"; g.fillText("feedback", 6, y + FEED / 2);
+      ticks.forEach(function (k) {
+        if (k.t < t0 || k.t > t1) return;
+        g.strokeStyle = FEED_COLOURS[k.type] || "#718096";
+        var xf = Math.round(X(k.t)) + 0.5;
+        g.beginPath(); g.moveTo(xf, y + 2); g.lineTo(xf, y + FEED - 1); g.stroke();
+      });
+      y += FEED + 2;
+      var rows = Object.keys(beh).map(function (k) { return beh[k]; }).map(function (b) {
+        var sp = span(b);
+        return { b: b, lo: sp[0], hi: sp[1], until: sp[1], speech: b.type === "speech" };
+      }).filter(function (x) { return x.hi >= t0 && x.lo <= t1; }).sort(function (a, b) {
+        return (b.speech - a.speech) || (a.lo - b.lo) || (a.b.order - b.b.order);
+      });
+      var fit = Math.max(1, Math.floor((H - y - 2) / (ROW_H + 2)));
+      if (rows.length > fit) rows = rows.slice(rows.length - fit);
+      rows.forEach(function (x) {
+        drawBehaviour(g, { x: x, y: y, h: ROW_H }, X, t0, t1, w);
+        y += ROW_H + 2;
+      });
+      if (!rows.length) { g.fillStyle = "#718096"; g.fillText("nothing has played in the last " + WINDOW + " s: send BML to " + url, LABEL + 6, y + 8); }
+      g.clearRect(0, 0, LABEL - 4, RULER);
+      g.strokeStyle = "#e53e3e"; g.lineWidth = 2;
+      var xc = X(t);
+      g.beginPath(); g.moveTo(xc, 0); g.lineTo(xc, H); g.stroke(); g.lineWidth = 1;
+      return rows;
+    }
+    var nowText = null;
+    function nowPanel(t, rows) {
+      var lines = [];
+      Object.keys(blocks).forEach(function (id) {
+        var b = blocks[id];
+        if (b.start !== undefined && b.end === undefined) lines.push("block <b>" + esc(id) + "</b> playing");
+      });
+      rows.filter(function (x) { return x.lo <= t && t <= x.hi && !x.b.passed[x.b.passed.length - 1]; }).slice(0, 8)
+        .forEach(function (x) {
+          var b = x.b, phase = "";
+          for (var i = 0; i + 1 < b.sync.length; i++) {
+            if (b.t[i] !== null && b.t[i] <= t && t < b.t[i + 1]) { phase = x.speech ? "" : (PHASES[b.sync[i]] || b.sync[i]); break; }
+          }
+          lines.push(esc(b.name) + " " + esc(b.type) + (phase ? ": " + phase : ""));
+        });
+      var text = lines.length ? lines.join("<br>") : "idle";
+      if (text !== nowText) { $("now").innerHTML = text; nowText = text; }
+    }
+
+    /* ------------------------------------------------ every frame */
+    var shownAt = 0;
+    function tick() {
+      var t = playTime(performance.now() / 1000);
+      if (t !== null) {
+        state.time = t;
+        while (pending.length && pending[0].globalTime <= t) apply(pending.shift());
+        var how = three ? poseAt(t) : NONE;
+        if (how !== NONE) placeSkeleton(three, pts);
+        trim(t);
+        forget(t);
+        Object.keys(watches).forEach(function (name) {
+          var i = M ? M.points.indexOf(name) : -1, list = watches[name];
+          if (i < 0 || !three || list.length >= WATCH) return;
+          if (list.length && list[list.length - 1][0] === t) return;
+          var p = three.spheres[i].position;
+          list.push([t, p.x, p.y, p.z, how === BETWEEN ? 1 : 0]);
+        });
+      }
+      var rows = drawLive(t === null ? 0 : t);
+      nowPanel(t === null ? 0 : t, rows);
+      var clockNow = performance.now();
+      if (clockNow - shownAt > 250) {
+        shownAt = clockNow;
+        $("clock").textContent = t === null ? "waiting for the server's clock" : t.toFixed(3) + " s";
+        status();
+      }
+      render();
+    }
+    function loop() {
+      requestAnimationFrame(loop);
+      try { tick(); } catch (e) { errors.push("report.js: live: " + e.message); throw e; }
+    }
+
+    api.time = function () { return state.time; };
+    api.joint = function (name) {
+      if (!three || !M) return null;
+      var i = M.points.indexOf(name);
+      if (i < 0) return null;
+      var p = three.spheres[i].position;
+      return [p.x, p.y, p.z];
+    };
+    api.watch = function (name) { watches[name] = []; return true; };
+    api.watched = function (name) { return watches[name] || null; };
+    window.addEventListener("resize", function () { if (three) three.dirty = true; });
+    status();
+    connect();
+    requestAnimationFrame(loop);
+    api.ready = true;
+    document.body.classList.add("ready");
   }
 })();

@@ -1,0 +1,209 @@
+"""A sweep's run: the points missing from the folder's cache sent to Dask as tasks, on a ``LocalCluster``
+of ``workers`` processes or through an existing scheduler, with a progress bar; the results written.
+
+The folder (``--out DIR``) holds:
+
+=====================  ================================================================================
+``points/<key>.json``  each point that finished, written as it finishes (its command's JSON, its time,
+                       worker and the project version): the cache a rerun reads, so that a rerun into
+                       the folder computes only what is missing and a killed sweep resumes
+``results.parquet``    one row per point of the spec (:mod:`agentsim.cli.sweep.results`), and the same
+``results.csv``        as CSV; written when the sweep ends
+``sweep.json``         the spec as read (command, grid, fixed options, report settings), for
+                       ``agentsim sweep report``
+``outputs/<key>/``     with ``keep_outputs = true``: each point's ``--out`` folder
+=====================  ================================================================================
+
+A point that fails is a row with its error and is not cached: a rerun tries it again. A worker that dies
+takes its points with it, and the scheduler runs them on another worker (up to Dask's
+``distributed.scheduler.allowed-failures`` deaths per point; beyond that the point fails).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from agentsim.cli.sweep import results
+from agentsim.cli.sweep.point import run_point, worker_info
+from agentsim.cli.sweep.spec import Point, Spec, project_version
+from agentsim.core.errors import AgentsimError, Unavailable
+
+#: How long to wait for a scheduler to answer and for its first worker to join (seconds).
+CONNECT_TIMEOUT = 30.0
+
+
+@dataclass
+class Outcome:
+    """What a sweep did."""
+
+    points: int
+    computed: int
+    cached: int
+    failed: int
+    seconds: float
+    parquet: Path
+    csv: Path
+    startup_seconds: float = 0.0  # starting or reaching the cluster and checking its workers
+    compute_seconds: float = 0.0  # from the first point sent to the last result
+
+
+def default_workers() -> int:
+    """One worker per core this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:
+        return max(1, os.cpu_count() or 1)
+
+
+def distributed():
+    """The ``distributed`` module, or a message saying what to install."""
+    try:
+        import distributed as dd
+    except ImportError:
+        raise Unavailable("agentsim sweep runs its points on Dask: pip install 'dask[distributed]'") from None
+    return dd
+
+
+@contextlib.contextmanager
+def connect(workers: int | None, scheduler: str | None):
+    """A Dask client: on a new ``LocalCluster`` of ``workers`` processes with one thread each, or on the
+    scheduler at ``scheduler`` (``tcp://host:port``) once a worker has joined it."""
+    dd = distributed()
+    with contextlib.ExitStack() as stack:
+        if scheduler:
+            try:
+                client = stack.enter_context(dd.Client(scheduler, timeout=f"{CONNECT_TIMEOUT}s"))
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise AgentsimError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+            try:
+                client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+            except (TimeoutError, dd.TimeoutError):
+                raise AgentsimError(f"no worker joined the Dask scheduler at {scheduler} within "
+                                    f"{CONNECT_TIMEOUT:g} s: start some with 'dask worker {scheduler} "
+                                    f"--nthreads 1'") from None
+        else:
+            cluster = stack.enter_context(dd.LocalCluster(
+                n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
+                dashboard_address=None, silence_logs=logging.ERROR))
+            client = stack.enter_context(dd.Client(cluster))
+        check_workers(client, scheduler or "the local cluster")
+        yield client
+
+
+def check_workers(client, where: str) -> None:
+    """Every worker can run the commands and runs this project version (else one line before any point)."""
+    mine = project_version()
+    try:
+        infos = client.run(worker_info)
+    except Exception as exc:  # noqa: BLE001 - the workers cannot import agentsim, or run other code
+        raise AgentsimError(f"the workers of {where} cannot run agentsim: {type(exc).__name__}: {exc}") from None
+    for address, info in infos.items():
+        if info["version"] != mine:
+            raise AgentsimError(f"the worker {address} runs agentsim {info['version']}, this one is {mine}: give "
+                                f"the workers the same checkout")
+
+
+def cached_outcomes(folder: Path, points: list[Point]) -> dict[str, dict]:
+    """The finished points of ``points`` that ``folder/points/`` holds, by key."""
+    found = {}
+    for point in points:
+        path = folder / "points" / f"{point.key}.json"
+        if point.key in found or not path.is_file():
+            continue
+        try:
+            outcome = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError):
+            continue  # half written when a sweep was killed: computed again
+        if outcome.get("status") == "ok":
+            found[point.key] = outcome
+    return found
+
+
+def save(folder: Path, point: Point, outcome: dict) -> None:
+    path = folder / "points" / f"{point.key}.json"
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(json.dumps({**outcome, "argv": list(point.argv)}) + "\n")
+    partial.replace(path)
+
+
+def failure(exc: BaseException) -> dict:
+    """The outcome of a point whose task did not return (its workers died, or it was cancelled)."""
+    message = f"{type(exc).__name__}: {exc}".strip()
+    return {"status": "failed", "error": " ".join(message.split()), "result": None, "seconds": None, "worker": None}
+
+
+def progress_bar(total: int, done: int, quiet: bool):
+    """A bar on stderr: points done of all, failed ones, and the time left."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=done, desc="sweep", unit="point", file=sys.stderr, disable=quiet,
+                mininterval=0.5, dynamic_ncols=True, postfix={"failed": 0})
+
+
+def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | None = None,
+        quiet: bool = False) -> Outcome:
+    """Run the points of ``spec`` that ``folder`` lacks and write the results there."""
+    started = time.perf_counter()
+    results.pandas()  # a missing pandas or pyarrow is said before any work, like a missing dask
+    distributed()
+    try:
+        (folder / "points").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise AgentsimError(f"cannot create the sweep folder {str(folder)!r}: {exc}") from None
+    (folder / "sweep.json").write_text(json.dumps(spec.to_json(), indent=2, default=str) + "\n")
+    outcomes = cached_outcomes(folder, spec.points)
+    cached = len({p.key for p in spec.points if p.key in outcomes})
+    todo: dict[str, list[Point]] = {}
+    for point in spec.points:
+        if point.key not in outcomes:
+            todo.setdefault(point.key, []).append(point)
+    total = cached + len(todo)
+    failed = 0
+    startup = compute = 0.0
+    if todo:
+        mine = project_version()
+        out_at = len(spec.command) if spec.takes_out else None
+        bar = progress_bar(total, cached, quiet)
+        connecting = time.perf_counter()
+        with bar, connect(workers, scheduler) as client:
+            sending = time.perf_counter()
+            startup = sending - connecting
+            futures = {}
+            for key, (point, *_) in todo.items():
+                keep = str((folder / "outputs" / key).resolve()) if spec.keep_outputs else None
+                futures[client.submit(run_point, list(point.argv), out_at, keep, key=f"agentsim-point-{key}",
+                                      pure=False)] = point
+            pending = set(futures)
+            try:
+                for future, outcome in distributed().as_completed(futures, with_results=True, raise_errors=False):
+                    pending.discard(future)
+                    point = futures[future]
+                    if isinstance(outcome, BaseException):
+                        outcome = failure(outcome)
+                    elif outcome.get("version") not in (None, mine):
+                        outcome = {**outcome, "status": "failed", "result": None,
+                                   "error": f"the worker ran agentsim {outcome['version']}, not {mine}"}
+                    if outcome["status"] == "ok":
+                        save(folder, point, outcome)
+                    else:
+                        failed += 1
+                    outcomes[point.key] = outcome
+                    bar.set_postfix(failed=failed, refresh=False)
+                    bar.update(1)
+                compute = time.perf_counter() - sending
+            finally:
+                if pending:  # interrupted: nothing keeps running for a sweep that stopped
+                    client.cancel(list(pending))
+    rows = [results.make_row(p, outcomes[p.key]) for p in spec.points]
+    parquet, csv = results.write(results.frame(rows, list(spec.grid)), folder)
+    return Outcome(points=len(spec.points), computed=len(todo), cached=cached,
+                   failed=sum(row["status"] != "ok" for row in rows),
+                   seconds=time.perf_counter() - started, parquet=parquet, csv=csv, startup_seconds=startup,
+                   compute_seconds=compute)

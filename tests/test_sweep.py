@@ -1,0 +1,280 @@
+"""agentsim sweep: a 12-point grid on a real Dask LocalCluster of two worker processes, each row equal to the
+point's command run alone; the cache (a rerun computes only what is missing); failed points as rows; bad
+specs as one line before any work; the report's bootstrap intervals and its picture.
+
+The points are 'eval speech-sync --tts builtin' on a short text: the built-in backend is deterministic, which
+espeak-ng is not across calls in one process, so the rows can be compared exactly. The tests that start a
+dask scheduler and dask worker processes, and kill them, are in tests/system/test_sweep_cluster.py.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+import shutil
+from contextlib import redirect_stderr
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from helpers import (
+    SWEEP_GRID,
+    SWEEP_TEXT,
+    row_differences,
+    run_alone,
+    sweep_points,
+    write_sweep_spec,
+)
+
+from agentsim.cli import main
+from agentsim.cli.sweep import runner, spec
+from agentsim.cli.sweep.report import interval
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory):
+    """The 12-point sweep on a LocalCluster of 2 workers, and what it printed on stderr."""
+    folder = tmp_path_factory.mktemp("sweep")
+    path = write_sweep_spec(folder / "spec")
+    err = io.StringIO()
+    with redirect_stderr(err):
+        status = main(["sweep", str(path), "--workers", "2", "--out", str(folder / "out")])
+    assert status == 0, err.getvalue()
+    return folder / "out", path, err.getvalue()
+
+
+@pytest.fixture(scope="module")
+def alone(swept):
+    """Each of the 12 points run alone, as its own agentsim process."""
+    _, path, _ = swept
+    return run_alone(path.parent, sweep_points())
+
+
+def test_a_sweep_on_a_local_cluster_of_two_workers_equals_each_point_run_alone(swept, alone):
+    out, _, err = swept
+    table = pd.read_parquet(out / "results.parquet")
+    assert len(table) == 12
+    assert table[list(SWEEP_GRID)].to_dict("records") == sweep_points()  # one row per point, in the grid's order
+    assert (table["status"] == "ok").all() and table["error"].isna().all()
+    for row, single in zip(table.to_dict("records"), alone):
+        assert row_differences(row, single, SWEEP_GRID) == [], row["command"]
+    assert table["error_ms.p95"].nunique() == 12  # the points differ: the comparison could fail
+    assert table["worker"].nunique() == 2  # both workers computed points
+    assert table["command"][0] == ("agentsim eval speech-sync --tts builtin --text "
+                                   f"{out.parent / 'spec' / 'story.txt'} --strategy best --seed 1 --jitter 0.03 --json")
+    csv = pd.read_csv(out / "results.csv")
+    assert list(csv.columns) == list(table.columns)
+    assert np.allclose(csv["error_ms.p95"], table["error_ms.p95"], rtol=1e-12, atol=0)
+    # the progress bar (stderr): points done of all, failed ones, time left
+    assert re.search(r"12/12 \[[0-9:]+<[0-9:]+", err) and "failed=0" in err
+    assert "12 points of 'agentsim eval speech-sync': 12 computed, 0 from the cache, 0 failed" in err
+
+
+def copy_of(out: Path, tmp_path: Path) -> Path:
+    copy = tmp_path / "out"
+    shutil.copytree(out, copy)
+    return copy
+
+
+def test_a_rerun_computes_only_what_is_missing(swept, alone, tmp_path, monkeypatch, capsys):
+    out, path, _ = swept
+    out = copy_of(out, tmp_path)
+    before = pd.read_parquet(out / "results.parquet")
+    files = sorted((out / "points").glob("*.json"))
+    assert len(files) == 12
+    # everything is cached: no cluster is started at all
+    real_connect = runner.connect
+    monkeypatch.setattr(runner, "connect", lambda *a: pytest.fail("a cluster was started for nothing missing"))
+    assert main(["sweep", str(path), "--workers", "1", "--out", str(out), "--quiet"]) == 0
+    assert "0 computed, 12 from the cache, 0 failed" in capsys.readouterr().err
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "results.parquet"), before)
+    # two points lost, one half written (a sweep killed while writing it): those three are computed again
+    lost = {p.stem for p in files[:2]}
+    for file in files[:2]:
+        file.unlink()
+    files[2].write_text('{"status": "ok", "res')
+    kept = {p: p.stat().st_mtime_ns for p in files[3:]}
+    monkeypatch.setattr(runner, "connect", real_connect)
+    assert main(["sweep", str(path), "--workers", "1", "--out", str(out), "--quiet"]) == 0
+    assert "3 computed, 9 from the cache, 0 failed" in capsys.readouterr().err
+    assert {p: p.stat().st_mtime_ns for p in files[3:]} == kept
+    after = pd.read_parquet(out / "results.parquet")
+    redone = after["point"].isin(lost | {files[2].stem})
+    assert redone.sum() == 3
+    for column in ("worker", "seconds"):  # the cached rows are the old ones, not computed again
+        assert after.loc[~redone, column].tolist() == before.loc[~redone, column].tolist()
+    for row, single in zip(after.to_dict("records"), alone):
+        assert row_differences(row, single, SWEEP_GRID) == []
+
+
+def test_the_cache_key_is_the_command_line_the_files_it_names_and_the_project_version(tmp_path, monkeypatch):
+    path = write_sweep_spec(tmp_path)
+    keys = [p.key for p in spec.load(path).points]
+    assert len(set(keys)) == 12 and [p.key for p in spec.load(path).points] == keys
+    (tmp_path / "story.txt").write_text("A different story now.\n")  # the text the points read changed
+    changed = [p.key for p in spec.load(path).points]
+    assert not set(changed) & set(keys)
+    monkeypatch.setattr(spec, "project_version", lambda: "0.0.0+other")  # another version of the project
+    assert not {p.key for p in spec.load(path).points} & set(changed)
+
+
+def test_a_point_that_fails_is_a_row_with_its_error_and_the_sweep_finishes(tmp_path, capsys):
+    (tmp_path / "story.txt").write_text(SWEEP_TEXT)
+    path = tmp_path / "spec.toml"
+    path.write_text('command = ["eval", "speech-sync"]\n[grid]\nseed = [1, 2]\n[grid.source]\n'
+                    'short = { text = "story.txt" }\ngone = { text = "gone.txt" }\n[fixed]\ntts = "builtin"\n')
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--workers", "1", "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == f"agentsim: 2 of 4 points failed; their errors are in the 'error' column of {out / 'results.csv'}"
+    table = pd.read_parquet(out / "results.parquet")
+    assert table[["seed", "source", "status"]].values.tolist() == [
+        [1, "short", "ok"], [1, "gone", "failed"], [2, "short", "ok"], [2, "gone", "failed"]]
+    failed = table[table["status"] == "failed"]
+    assert (failed["error"] == "no text file 'gone.txt'").all() and failed["error_ms.p95"].isna().all()
+    assert table.loc[table["status"] == "ok", "error_ms.p95"].notna().all()
+    assert len(list((out / "points").glob("*.json"))) == 2  # failures are not cached: a rerun tries them again
+
+
+BAD_SPECS = [
+    ('command = ["eval", "nope"]', ("unknown command 'eval nope'; a sweep runs one of: anticipate beats, "
+                                    "eval speech-sync, run conductor, run storytelling")),
+    ('command = ["realize"]', "'agentsim realize' prints no --json"),
+    ('command = ["eval"]', "unknown command 'eval'"),
+    ('command = ["eval", "speech-sync"]\n[grid]\njiter = [0.1]', "unknown option 'jiter' of 'agentsim eval speech-sync'"),
+    ('command = ["eval", "speech-sync"]\n[fixed]\ntts = "festival"', "argument --tts: invalid choice: 'festival'"),
+    ('command = ["eval", "speech-sync"]\n[grid]\nseed = [1, "two"]', "argument --seed: invalid int value: 'two' (at seed=two)"),
+    ('command = ["eval", "speech-sync"]\n[grid]\nseed = []', "grid key 'seed' must be a list of at least one value"),
+    ('command = ["eval", "speech-sync"]\n[grid]\nseed = [1]\n[fixed]\nseed = 2', "option 'seed' is set both in [fixed] and in [grid]"),
+    ('command = ["eval", "speech-sync"]\n[fixed]\njson = true', "option 'json' is the sweep's own"),
+    ('command = ["run", "conductor"]\n[fixed]\nout = "x"', "option 'out' is the sweep's own"),
+    ('command = ["eval", "speech-sync"]\n[grid.condition]\nA = { delay = 0.05, jitterr = 0.1 }', "unknown option 'jitterr'"),
+    ('command = ["eval", "speech-sync"]\n[grid]\nseed = [1]\n[report]\naxis = "jitter"', "[report] axis = 'jitter' is no grid key"),
+    ('command = ["eval", "speech-sync"]\ngird = 1', "unknown key 'gird'"),
+    ('command = ["eval", "speech-sync"', "is not TOML"),
+]
+
+
+@pytest.mark.parametrize("text, message", BAD_SPECS, ids=[m.split(":")[0][:40] for _, m in BAD_SPECS])
+def test_a_bad_spec_is_one_line_naming_the_mistake_before_any_work(tmp_path, capsys, text, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(text + "\n")
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--workers", "1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"agentsim: sweep spec {str(path)!r}")
+    assert message in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["sweep", "nowhere.toml", "--out", "x"], "no sweep spec 'nowhere.toml'"),
+    (["sweep", "SPEC", "--workers", "0", "--out", "x"], "--workers must be at least 1"),
+    (["sweep", "SPEC"], "say where the sweep writes: --out DIR"),
+    (["sweep", "SPEC", "--out", "x", "--markdown"], "--markdown is an option of 'agentsim sweep report DIR'"),
+    (["sweep", "report"], "say which sweep: agentsim sweep report DIR"),
+    (["sweep", "report", "nowhere"], "no sweep folder 'nowhere'"),
+])
+def test_bad_command_lines_are_one_line(tmp_path, capsys, monkeypatch, argv, message):
+    monkeypatch.chdir(tmp_path)
+    write_sweep_spec(tmp_path)
+    argv = [str(tmp_path / "spec.toml") if a == "SPEC" else a for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err == f"agentsim: {message}\n"
+    assert not (tmp_path / "x").exists()
+
+
+def test_without_dask_the_sweep_says_what_to_install(tmp_path, capsys, monkeypatch):
+    path = write_sweep_spec(tmp_path)
+    monkeypatch.setitem(__import__("sys").modules, "distributed", None)  # import distributed fails
+    assert main(["sweep", str(path), "--out", str(tmp_path / "out")]) == 1
+    assert capsys.readouterr().err == "agentsim: agentsim sweep runs its points on Dask: pip install 'dask[distributed]'\n"
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_unreachable_scheduler_is_one_line(tmp_path, capsys, monkeypatch):
+    import socket
+
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT", 2.0)
+    with socket.socket() as s:  # a port where nothing listens
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    path = write_sweep_spec(tmp_path)
+    assert main(["sweep", str(path), "--scheduler", f"tcp://127.0.0.1:{port}", "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"agentsim: cannot reach the Dask scheduler at tcp://127.0.0.1:{port}: ")
+
+
+def test_the_report_gives_means_with_bootstrap_intervals_per_strategy_and_draws_them(swept, tmp_path, capsys):
+    out = copy_of(swept[0], tmp_path)
+    assert main(["sweep", "report", str(out), "--metric", "error_ms.p95", "--metric", "snaps"]) == 0
+    printed = capsys.readouterr()
+    text = printed.out
+    assert "12 points (12 ok, 0 failed); mean [95 % bootstrap interval] over seed" in text
+    table = pd.read_parquet(out / "results.parquet")
+    for strategy in ("best", "chang-naive"):
+        block = text.split(f"strategy = {strategy}\n")[1].split("\n\n")[0].splitlines()
+        assert block[0].split() == ["jitter", "n", "error_ms.p95", "snaps"]
+        for line, jitter in zip(block[1:], (0.03, 0.1)):
+            values = table[(table["strategy"] == strategy) & (table["jitter"] == jitter)]["error_ms.p95"]
+            mean, low, high = (float(v) for v in re.findall(r"[-\d.]+", line.split(None, 2)[2])[:3])
+            assert line.split()[:2] == [str(jitter), "3"]
+            assert mean == pytest.approx(values.mean(), rel=1e-3)
+            assert low < mean < high  # printed to 4 significant digits; a mean's interval lies within the data:
+            assert values.min() * (1 - 5e-4) <= low and high <= values.max() * (1 + 5e-4)
+    assert (out / "summary.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert printed.err.strip() == f"drawn: {out / 'summary.png'}"
+    # one Markdown table, a column per metric and jitter
+    assert main(["sweep", "report", str(out), "--markdown", "--metric", "error_ms.p95"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "| strategy | error_ms.p95 (jitter 0.03) | error_ms.p95 (jitter 0.1) | n |"
+    assert [line.split(" | ")[0] for line in lines[2:]] == ["| best", "| chang-naive"]
+    assert main(["sweep", "report", str(out), "--metric", "error_ms.p59"]) == 2
+    assert capsys.readouterr().err.startswith("agentsim: no metric 'error_ms.p59' in this sweep's results")
+
+
+def test_the_interval_is_scipys_bootstrap_of_the_mean():
+    from scipy.stats import bootstrap
+
+    values = [3.0, 1.0, 4.0, 1.0, 5.0, 9.0, 2.0, 6.0]
+    cell = interval(values, np.random.default_rng(0))
+    ci = bootstrap((np.array(values),), np.mean, confidence_level=0.95, n_resamples=9999, method="BCa",
+                   rng=np.random.default_rng(0)).confidence_interval
+    assert (cell.mean, cell.low, cell.high, cell.n) == (np.mean(values), ci.low, ci.high, 8)
+    assert interval([2.0, 2.0, 2.0], np.random.default_rng(0)).text() == "2 [2, 2]"  # no spread
+    assert interval([2.0], np.random.default_rng(0)).text() == "2 (n=1)"  # one replicate: no interval
+    assert interval([None, math.nan], np.random.default_rng(0)).text() == "none"  # null in every replicate
+    assert interval([None, 4.0, None, 6.0], np.random.default_rng(0)).text().endswith(" (2 none)")
+    assert interval([], np.random.default_rng(0)).text() == "-"
+
+
+def test_spec_points_and_their_command_lines(tmp_path):
+    path = tmp_path / "spec.toml"
+    (tmp_path / "beats.wav").write_bytes(b"RIFF")
+    path.write_text('command = "anticipate beats"\n[grid]\ntracker = ["causal", "baseline"]\n'
+                    '[grid.speed]\nfine = { block = 256, lookahead = 0.1 }\ncoarse = { block = 1024 }\n'
+                    '[fixed]\naudio = "beats.wav"\nskip = 4\n')
+    checked = spec.load(path)
+    assert [p.values for p in checked.points] == [
+        {"tracker": t, "speed": s} for t in ("causal", "baseline") for s in ("fine", "coarse")]
+    assert list(checked.points[0].argv) == ["anticipate", "beats", "--skip", "4", "--tracker", "causal", "--block",
+                                            "256", "--lookahead", "0.1", "--json", str(tmp_path / "beats.wav")]
+    assert not checked.takes_out
+    conductor = tmp_path / "conductor.toml"
+    conductor.write_text('command = ["run", "conductor"]\n[grid]\nstrategy = ["best"]\n[fixed]\ncompare = false\n')
+    assert spec.load(conductor).takes_out and list(spec.load(conductor).points[0].argv) == [
+        "run", "conductor", "--strategy", "best", "--json"]
+
+
+def test_the_readmes_example_spec_is_a_valid_spec(tmp_path):
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    example = readme.split("## Sweeps")[1].split("```toml\n")[1].split("```")[0]
+    (tmp_path / "spec.toml").write_text(example)
+    (tmp_path / "story.txt").write_text(SWEEP_TEXT)
+    checked = spec.load(tmp_path / "spec.toml")
+    assert len(checked.points) == 2 * 3 * 2 * 2
+    assert checked.points[-1].values == {"strategy": "chang-naive", "seed": 3, "jitter": 0.1, "channel": "far"}
+    assert "--loss" in checked.points[-1].argv and str(tmp_path / "story.txt") in checked.points[-1].argv
