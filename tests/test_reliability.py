@@ -425,3 +425,13 @@ def test_a_speech_over_the_word_limit_is_ignored_with_a_warning():
     ((target, kind, description),) = warnings_of(r)
     assert target == "b:s" and f"has {MAX_WORDS + 1} words (at most {MAX_WORDS}" in description
     assert "b:h:end" in r.glob
+
+
+def test_an_empty_alsa_configuration_is_one_clear_line_not_an_abort(tmp_path):
+    (tmp_path / "empty.conf").write_text("")
+    env = dict(os.environ, PYTHONPATH=str(ROOT), ALSA_CONFIG_PATH=str(tmp_path / "empty.conf"))
+    proc = subprocess.run([sys.executable, "-m", "agentsim.cli", "anticipate", "beats", "--input", "default",
+                           "--seconds", "1"], capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
+    assert proc.returncode == 1
+    assert proc.stderr.splitlines()[-1].startswith(f"agentsim: the ALSA configuration (ALSA_CONFIG_PATH="
+                                                   f"{tmp_path / 'empty.conf'}) is missing or empty")

@@ -226,6 +226,31 @@ SILENCE = 1e-4
 DEAD_AFTER = 2.0
 
 
+#: Where ALSA reads its configuration when ALSA_CONFIG_PATH does not say.
+ALSA_CONFIG = "/usr/share/alsa/alsa.conf"
+
+
+def alsa_problem() -> str | None:
+    """Why PortAudio cannot be loaded here without aborting the whole process, or None.
+
+    ALSA aborts (SIGABRT) in PortAudio's start-up when its configuration file is missing or empty; loading
+    sounddevice would take the process down with it. So the configuration is looked at first. (Machines
+    without ALSA at all are fine: PortAudio then starts without it.)
+    """
+    import os
+
+    listed = os.environ.get("ALSA_CONFIG_PATH")
+    paths = [p for p in listed.split(":") if p] if listed else [ALSA_CONFIG]
+    if not listed and not os.path.exists(ALSA_CONFIG):
+        return None  # no ALSA here
+    usable = [p for p in paths if os.path.isfile(p) and os.path.getsize(p) > 0]
+    if not usable:
+        where = f"ALSA_CONFIG_PATH={listed}" if listed else ALSA_CONFIG
+        return (f"the ALSA configuration ({where}) is missing or empty: PortAudio would abort on it; reinstall "
+                "alsa-lib's configuration (apt-get install --reinstall libasound2-data) or unset ALSA_CONFIG_PATH")
+    return None
+
+
 class DeviceSource:
     """A live audio input device (sounddevice/PortAudio), delivering mono blocks through a queue.
 
@@ -254,6 +279,9 @@ class DeviceSource:
 
     def check(self):
         """The sounddevice module and the device's info; AgentsimError saying what to do if missing."""
+        problem = alsa_problem()
+        if problem:
+            raise Unavailable(problem)
         try:
             import sounddevice
         except OSError as exc:

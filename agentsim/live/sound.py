@@ -290,7 +290,12 @@ class Steadiness:
 
 
 def _sounddevice():
-    """The sounddevice module, or Unavailable saying what to install."""
+    """The sounddevice module, or Unavailable saying what to install (or what is wrong with ALSA)."""
+    from agentsim.anticipators.audio import alsa_problem
+
+    problem = alsa_problem()
+    if problem:
+        raise Unavailable(problem)
     try:
         import sounddevice
     except ImportError:
