@@ -90,7 +90,7 @@ def mix(sources: Iterable[Source], rate: int | None = None, duration: float | No
         rate = max((s.rate for s in sources), default=22050)
     end = max((s.end for s in sources), default=0.0)
     n = int(np.ceil((duration if duration is not None else end) * rate))
-    out = np.zeros(n, np.float64)
+    placed = []
     for source in sources:
         first = max(0, int(np.floor(source.start * rate)))
         last = min(n, int(np.ceil(source.end * rate)))
@@ -100,13 +100,20 @@ def mix(sources: Iterable[Source], rate: int | None = None, duration: float | No
         if source.gain is not None and last - first >= 200_000:  # the gain sampled every 256 samples
             grid = np.arange(first, last)[::256] / rate
             gain_grid = (grid, [source.gain(x) for x in grid])
-        # a long source is placed a stretch at a time: every sample is computed as it would be at once,
-        # without the temporary arrays of the whole length
-        for a in range(first, last, MIX_CHUNK):
-            b = min(a + MIX_CHUNK, last)
-            out[a:b] += _placed(source, rate, a, b, gain_grid)
+        placed.append((source, first, last, gain_grid))
+    # The track is made a stretch at a time, each sample the sum of the sources in their order as it was
+    # over the whole length, without arrays of the whole length but the track itself.
+    out = np.empty(n, np.float32)
+    for a in range(0, n, MIX_CHUNK):
+        b = min(a + MIX_CHUNK, n)
+        acc = np.zeros(b - a, np.float64)
+        for source, first, last, gain_grid in placed:
+            lo, hi = max(a, first), min(b, last)
+            if hi > lo:
+                acc[lo - a:hi - a] += _placed(source, rate, lo, hi, gain_grid)
+        out[a:b] = np.clip(acc, -1.0, 1.0, out=acc)
     labels = [s.label for s in sources if s.label]
-    return Track(np.clip(out, -1.0, 1.0, out=out).astype(np.float32), int(rate), labels)
+    return Track(out, int(rate), labels)
 
 
 #: Samples of a source placed at a time by :func:`mix`.
