@@ -44,6 +44,15 @@ def story_source(times: int) -> str:
     return "\n".join(head) + "\n" + "\n\n".join([body] * times) + "\n"
 
 
+def child_env() -> dict:
+    """The environment of the measured processes: this checkout first on the path, and bytecode cached (in
+    a folder of the benchmark's own), as an installed package has it."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
+    env["PYTHONPYCACHEPREFIX"] = str(Path(tempfile.gettempdir()) / "agentsim-bench-pycache")
+    return env
+
+
 def child(times: int, cache_dir: str, out: str, tts: str) -> dict:
     """One run, in this process."""
     started = time.perf_counter()
@@ -76,7 +85,7 @@ def child(times: int, cache_dir: str, out: str, tts: str) -> dict:
 
 def run_child(times: int, cache_dir: str, tts: str) -> dict:
     with tempfile.TemporaryDirectory() as out:
-        env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+        env = child_env()
         done = subprocess.run([sys.executable, __file__, "--child", str(times), "--cache", cache_dir, "--out", out,
                                "--tts", tts], env=env, check=True, capture_output=True, text=True)
     return json.loads(done.stdout.strip().splitlines()[-1])

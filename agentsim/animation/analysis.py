@@ -59,8 +59,12 @@ def head_orientation(stream: PoseStream) -> tuple[np.ndarray, np.ndarray, np.nda
 
 
 def _window(times: np.ndarray, t0: float, t1: float) -> np.ndarray:
+    """Indices of the frames from ``t0`` to ``t1`` (1 ns either side). Frame times increase, so the frames
+    are found by bisection, not by looking at every frame of a long stream."""
     eps = 1e-9
-    return np.nonzero((times >= t0 - eps) & (times <= t1 + eps))[0]
+    first = int(np.searchsorted(times, t0 - eps, side="left"))
+    last = int(np.searchsorted(times, t1 + eps, side="right"))
+    return np.arange(first, max(first, last), dtype=np.intp)
 
 
 def _refine_vertex(times: np.ndarray, y: np.ndarray, k: int) -> float:

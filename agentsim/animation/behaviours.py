@@ -8,6 +8,8 @@ the next.
 
 from __future__ import annotations
 
+import bisect
+
 import math
 from dataclasses import dataclass, field
 from typing import Iterable
@@ -198,11 +200,46 @@ def _build_lips(manager: DriverManager, items: list[tuple]) -> None:
         info.drivers.append(drv.name)
 
 
+class _Busy:
+    """The times a hand is taken, ``(start, end)`` each: whether any overlaps a stretch, ``a < end`` and
+    ``start < e`` for one of them, asked in a time that grows with the log of their number (a prefix
+    maximum of the ends by start, over the starts that can come, given beforehand)."""
+
+    def __init__(self, starts: list[float]):
+        self.exact = all(math.isfinite(x) for x in starts)
+        self.starts = sorted(set(starts)) if self.exact else []
+        self.tree = [-math.inf] * (len(self.starts) + 1)  # Fenwick tree of the largest end, by start
+        self.spans: list[tuple[float, float]] = []
+
+    def add(self, start: float, end: float) -> None:
+        if not (self.exact and math.isfinite(end)):
+            self.exact = False
+        self.spans.append((start, end))
+        i = bisect.bisect_left(self.starts, start) + 1
+        if self.exact and not (i <= len(self.starts) and self.starts[i - 1] == start):
+            self.exact = False  # a start not given beforehand
+        if self.exact:
+            while i < len(self.tree):
+                self.tree[i] = max(self.tree[i], end)
+                i += i & -i
+
+    def overlaps(self, start: float, end: float) -> bool:
+        if not self.exact:  # a time that is not a number: look at every one
+            return any(a < end and start < e for a, e in self.spans)
+        i = bisect.bisect_left(self.starts, end)  # the spans starting before ``end``
+        best = -math.inf
+        while i > 0:
+            best = max(best, self.tree[i])
+            i -= i & -i
+        return start < best
+
+
 def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> None:
     """Gestures and pointing: choose hands, number conducting beats, coarticulate on each hand."""
     # Hands: the mode says, else the right hand (pointing: the hand on the target's side), unless that
     # hand is busy then and the other is free. Behaviours with a mode are placed first.
-    busy: dict[str, list[tuple[float, float]]] = {"l": [], "r": []}
+    starts = [it[1].start for it in items]
+    busy = {"l": _Busy(starts), "r": _Busy(starts)}
     planned: list[tuple[str, tuple]] = []
     explicit_modes = {"LEFT_HAND": ["l"], "LEFT": ["l"], "RIGHT_HAND": ["r"], "RIGHT": ["r"],
                       "BOTH_HANDS": ["l", "r"], "BOTH": ["l", "r"]}
@@ -217,10 +254,10 @@ def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> Non
             else:
                 first = "r"
             other = "l" if first == "r" else "r"
-            clash = lambda s: any(a < keys.end and keys.start < e for a, e in busy[s])  # noqa: E731
+            clash = lambda s: busy[s].overlaps(keys.start, keys.end)  # noqa: E731
             sides = [other] if clash(first) and not clash(other) else [first]
         for s in sides:
-            busy[s].append((keys.start, keys.end))
+            busy[s].add(keys.start, keys.end)
             planned.append((s, item))
     # Conducting: number the beats of each hand in stroke order, unless the lexeme or an attribute says.
     counters: dict[tuple[str, int], int] = {}

@@ -10,7 +10,6 @@ metres and Euler degrees in ZXY order, MOTION with Frames / Frame Time) that Ble
 
 from __future__ import annotations
 
-import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -190,13 +189,12 @@ def write_bvh(path: str | Path, stream: PoseStream, precision: int = 5) -> Path:
     body = stream.body
     if list(stream.channels) != list(body.dof_names):
         raise ValueError("the stream's channels do not match its body")
-    buf = io.StringIO()
-    buf.write(bvh_hierarchy(body))
-    buf.write("MOTION\n")
-    buf.write(f"Frames: {stream.n_frames}\n")
-    buf.write(f"Frame Time: {1.0 / stream.fps:.8f}\n")
-    np.savetxt(buf, stream.values, fmt=f"%.{precision}f", delimiter=" ")
-    path.write_text(buf.getvalue())
+    with open(path, "w") as f:  # straight to the file: a long stream's text is not held in memory
+        f.write(bvh_hierarchy(body))
+        f.write("MOTION\n")
+        f.write(f"Frames: {stream.n_frames}\n")
+        f.write(f"Frame Time: {1.0 / stream.fps:.8f}\n")
+        np.savetxt(f, stream.values, fmt=f"%.{precision}f", delimiter=" ")
     return path
 
 

@@ -152,6 +152,25 @@ class TempoEstimator:
         octaves = np.log2(60.0 * fps / self.lags / float(prior_bpm))
         self.prior = np.exp(-0.5 * (octaves / float(prior_octaves)) ** 2)
         self.harmonic_weights = np.array(HARMONIC_WEIGHTS)
+        # the multiples of the candidate lags, split into whole frames and a fraction (see _harmonics)
+        self._multiples = [(float(w), k * self.lags) for k, w in enumerate(self.harmonic_weights, start=1)]
+        self._grid_cache: dict[tuple[float, int], list] = {}
+
+    def _harmonics(self, limit: float, size: int) -> list:
+        """For each harmonic: its weight, which multiples count (below ``limit`` and inside the
+        autocorrelation of ``size`` lags), and their whole frames and fractions (made once per size)."""
+        key = (limit, size)
+        found = self._grid_cache.get(key)
+        if found is None:
+            found = []
+            for w, kl in self._multiples:
+                ok = kl < min(limit, size - 1)
+                whole = np.clip(np.floor(kl), 0, max(size - 2, 0)).astype(np.intp)
+                found.append((w, ok, whole, kl - whole, np.where(ok, w, 0.0)))
+            if len(self._grid_cache) > 64:
+                self._grid_cache.clear()
+            self._grid_cache[key] = found
+        return found
 
     def min_frames(self) -> float:
         """Fewest frames of onset strength that :meth:`estimate` works on."""
@@ -188,11 +207,12 @@ class TempoEstimator:
         grid = np.arange(ac.size)
         total = np.zeros(self.lags.size)
         wsum = np.zeros(self.lags.size)
-        for k, w in enumerate(self.harmonic_weights, start=1):
-            kl = k * self.lags
-            ok = kl < min(lim, ac.size - 1)
-            total += np.where(ok, w * np.interp(kl, grid, ac), 0.0)
-            wsum += np.where(ok, w, 0.0)
+        for w, ok, whole, fraction, weight in self._harmonics(lim, ac.size):
+            # np.interp(k * lags, grid, ac) on the whole-frame grid, as np.interp computes it where it
+            # counts: slope (over one frame) times the fraction, plus the value at the frame below
+            at = (ac[whole + 1] - ac[whole]) * fraction + ac[whole] if ac.size > 1 else np.full(whole.size, ac[0])
+            total += np.where(ok, w * at, 0.0)
+            wsum += weight
         scores = np.where(wsum > 0, total / np.maximum(wsum, 1e-12), 0.0) * self.prior
         i = int(np.argmax(scores))
         lag = self.lags[i]

@@ -9,7 +9,7 @@ from typing import Literal
 RefKind = Literal["absolute", "sync", "anticipator"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SyncRef:
     """A reference to a time: a number (seconds after block start), ``[block:]behaviour:sync[+-offset]``
     or ``anticipators:id:sync[+-offset]``.

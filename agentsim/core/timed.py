@@ -23,7 +23,7 @@ from agentsim.core.pegboard import ComputedPeg, OffsetPeg, TimePeg
 EPSILON = 1e-9
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class KeyRef:
     """Where a key is tied: ``peg.time + offset`` (global seconds)."""
 

@@ -90,31 +90,58 @@ def mix(sources: Iterable[Source], rate: int | None = None, duration: float | No
         rate = max((s.rate for s in sources), default=22050)
     end = max((s.end for s in sources), default=0.0)
     n = int(np.ceil((duration if duration is not None else end) * rate))
-    out = np.zeros(n, np.float64)
+    placed = []
     for source in sources:
         first = max(0, int(np.floor(source.start * rate)))
         last = min(n, int(np.ceil(source.end * rate)))
         if last <= first:
             continue
-        t = np.arange(first, last) / rate
+        gain_grid = None
+        if source.gain is not None and last - first >= 200_000:  # the gain sampled every 256 samples
+            grid = np.arange(first, last)[::256] / rate
+            gain_grid = (grid, [source.gain(x) for x in grid])
+        placed.append((source, first, last, gain_grid))
+    # The track is made a stretch at a time, each sample the sum of the sources in their order as it was
+    # over the whole length, without arrays of the whole length but the track itself.
+    out = np.empty(n, np.float32)
+    for a in range(0, n, MIX_CHUNK):
+        b = min(a + MIX_CHUNK, n)
+        acc = np.zeros(b - a, np.float64)
+        for source, first, last, gain_grid in placed:
+            lo, hi = max(a, first), min(b, last)
+            if hi > lo:
+                acc[lo - a:hi - a] += _placed(source, rate, lo, hi, gain_grid)
+        out[a:b] = np.clip(acc, -1.0, 1.0, out=acc)
+    labels = [s.label for s in sources if s.label]
+    return Track(out, int(rate), labels)
+
+
+#: Samples of a source placed at a time by :func:`mix`.
+MIX_CHUNK = 1 << 20
+
+
+def _placed(source: Source, rate: int, first: int, last: int, gain_grid) -> np.ndarray:
+    """Samples ``first .. last - 1`` of the track that ``source`` makes (before mixing)."""
+    t = np.arange(first, last) / rate
+    if source.speed == 1.0 and source.rate == rate and abs(source.start * rate - round(source.start * rate)) < 1e-6:
+        offset = int(round(source.start * rate))
+        index = np.arange(first, last) - offset
+        ok = (index >= 0) & (index < len(source.samples))
+        values = np.zeros(last - first)
+        values[ok] = source.samples[index[ok]]
+    else:
         # where in the source each output sample falls (in source samples)
         position = (t - source.start) / source.speed * source.rate
-        if source.speed == 1.0 and source.rate == rate and abs(source.start * rate - round(source.start * rate)) < 1e-6:
-            offset = int(round(source.start * rate))
-            index = np.arange(first, last) - offset
-            ok = (index >= 0) & (index < len(source.samples))
-            values = np.zeros(last - first)
-            values[ok] = source.samples[index[ok]]
-        else:
-            values = np.interp(position, np.arange(len(source.samples)), source.samples, left=0.0, right=0.0)
-        if source.gain is not None:
-            values = values * np.array([source.gain(x) for x in t]) if len(t) < 200_000 else \
-                values * np.interp(t, t[::256], [source.gain(x) for x in t[::256]])
-        if source.stop is not None:
-            values = values * np.clip((source.stop - t) / FADE, 0.0, 1.0)
-        out[first:last] += values
-    labels = [s.label for s in sources if s.label]
-    return Track(np.clip(out, -1.0, 1.0).astype(np.float32), int(rate), labels)
+        # the source samples around those positions are enough (the same neighbours, so the same numbers)
+        lo = min(max(int(np.floor(position.min())) - 1, 0), len(source.samples))
+        hi = min(max(int(np.ceil(position.max())) + 2, lo), len(source.samples))
+        values = np.interp(position, np.arange(lo, hi), source.samples[lo:hi], left=0.0, right=0.0)
+    if source.gain is not None:
+        values = values * (np.array([source.gain(x) for x in t]) if gain_grid is None else
+                           np.interp(t, gain_grid[0], gain_grid[1]))
+    if source.stop is not None:
+        values = values * np.clip((source.stop - t) / FADE, 0.0, 1.0)
+    return values
 
 
 def run_track(recording, extra: Iterable[Source] = (), rate: int | None = None,

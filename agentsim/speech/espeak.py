@@ -797,7 +797,8 @@ class EspeakBackend:
 
         import numpy as np
 
-        audio = pcm.astype(np.float32) / np.float32(32768.0)
+        audio = pcm.astype(np.float32)
+        audio /= np.float32(32768.0)  # in place: a long text's audio is not held twice
         return Utterance(text=text, duration=duration, words=words, phonemes=phonemes, marks=marks,
                          sentences=sentences, sample_rate=rate, audio=audio, backend=self.name)
 

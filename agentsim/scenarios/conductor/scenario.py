@@ -113,14 +113,30 @@ def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int
 
     started = time.perf_counter()
     name = strategy_name or config.conductor.strategy
-    reference = sound_check(config)
+    # FluidSynth loads a soundfont (the slow part of making a synthesizer) and renders without Python's
+    # lock: the piece's synthesizer is made, and the renderer's onset offsets measured (for the scores),
+    # on a thread of their own while the sound check renders on this one. Each has a synthesizer of
+    # its own, so what each renders is the same as one after the other.
+    from concurrent.futures import ThreadPoolExecutor
+
+    from agentsim.music.onsets import beat_onset_offset
+
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        made = pool.submit(_renderer, config)
+        pool.submit(beat_onset_offset, config.audio.sample_rate, _soundfont(config))
+        try:
+            reference = sound_check(config)
+        except BaseException:
+            if made.exception() is None:
+                made.result().close()
+            raise
+        renderer = made.result()
     env = make_environment(False)
     ens_cfg = config.ensemble
     ears = Ears("band", sample_rate=config.audio.sample_rate, origin=ens_cfg.start_time - 0.1,
                 block_seconds=config.audio.block_seconds, **config.conductor.tracker_options())
     strategy = make_strategy(name, config.piece, config.conductor, ears)
     realizer = Realizer(env=env, anticipators=[ears, *strategy.anticipators])
-    renderer = _renderer(config)
     ensemble = Ensemble(env, config, renderer, seed)
     realizer.feedback.listen(ensemble.see)
     conductor = Conductor(realizer, ears, strategy, config.piece, config.conductor, reference)

@@ -269,7 +269,8 @@ class CachedBackend:
                 return None
             audio = None
             if meta["audio"]:
-                audio = np.load(audio_path).astype(np.float32) / np.float32(32768.0)
+                audio = np.load(audio_path).astype(np.float32)
+                audio /= np.float32(32768.0)  # in place: a long narration is not held twice
         except (OSError, ValueError, KeyError):
             return None
         return Utterance(text=text, duration=float(meta["duration"]),
