@@ -138,3 +138,28 @@ def test_a_port_in_use_is_one_clear_line():
     assert proc.returncode == 2
     lines = [line for line in proc.stderr.splitlines() if not line.startswith("speech:")]
     assert len(lines) == 1 and f"cannot listen on 127.0.0.1:{port}" in lines[0], proc.stderr
+
+
+def test_sigterm_stops_the_service_and_what_it_started():
+    import signal
+    from pathlib import Path
+
+    proc = subprocess.Popen([sys.executable, "-m", "agentsim.cli", "serve", "--port", "0", "--audio", "none",
+                             "--tts", "builtin"], stderr=subprocess.PIPE, text=True)
+    try:
+        for line in proc.stderr:  # "agentsim serve: ws://..." once it listens
+            if line.startswith("agentsim serve:"):
+                break
+        children = [int(c) for t in Path(f"/proc/{proc.pid}/task").iterdir()
+                    for c in (t / "children").read_text().split()]
+        assert children  # the poses' evaluator (and multiprocessing's resource tracker)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 130
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and any(Path(f"/proc/{c}").exists() for c in children):
+            time.sleep(0.1)
+        assert not [c for c in children if Path(f"/proc/{c}").exists()
+                    and "zombie" not in Path(f"/proc/{c}/status").read_text()]
+    finally:
+        if proc.poll() is None:
+            proc.kill()

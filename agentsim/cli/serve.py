@@ -31,7 +31,13 @@ def add_parsers(commands) -> None:
 
 
 def run_server(args: argparse.Namespace) -> int:
+    import signal
+
     from agentsim.live.service import Service
+
+    # A service is stopped with SIGTERM as with Ctrl-C: it closes what it started (the poses' evaluator
+    # process, the audio stream) instead of leaving them behind.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
 
     if not 0 <= args.fps <= options.MAX_FPS:  # (0: no poses)
         raise UsageError(f"--fps must be between 0 and {options.MAX_FPS:g} poses per second, got {args.fps:g}")
