@@ -222,11 +222,20 @@ def test_the_command_line_realizes_every_good_file_after_bad_ones(tmp_path):
 
 @pytest.mark.parametrize("option", ["--metronome=100,nan", "--metronome=100,inf", "--metronome=inf",
                                     "--anticipator=metronome:m2,start=nan"])
-def test_a_metronome_that_is_not_finite_is_a_usage_error_before_the_run(tmp_path, option):
+def test_a_metronome_that_is_not_finite_is_left_out_and_the_run_goes_on(tmp_path, option):
     (tmp_path / "good.xml").write_text(GOOD)
-    proc = cli("realize", "--tts", "builtin", option, "good.xml", cwd=tmp_path)
-    assert proc.returncode in (1, 2) and "finite" in proc.stderr and not proc.stdout
-    assert "internal error" not in proc.stderr and "Traceback" not in proc.stderr
+    (tmp_path / "beat.xml").write_text(doc('<head id="n" lexeme="NOD" stroke="anticipators:metronome:beat2"/>',
+                                           "beat"))
+    proc = cli("realize", "--tts", "builtin", option, "good.xml", "beat.xml", cwd=tmp_path)
+    assert proc.returncode == 0 and "internal error" not in proc.stderr and "Traceback" not in proc.stderr
+    feedback = [json.loads(line) for line in proc.stdout.splitlines()]
+    warnings = [f for f in feedback if f["type"] == "warningFeedback"]
+    assert warnings[0]["warningType"] == "NO_SUCH_TARGET" and "left out" in warnings[0]["description"]
+    assert "finite" in warnings[0]["description"]
+    assert any(w["id"] == "beat:n" for w in warnings)  # what was tied to it is dropped, with its own warning
+    alone = cli("realize", "--tts", "builtin", "good.xml", cwd=tmp_path)
+    good = [line for line in proc.stdout.splitlines() if '"good' in line and "warningFeedback" not in line]
+    assert good == [line for line in alone.stdout.splitlines() if "warningFeedback" not in line]
 
 
 def test_recording_of_a_complete_run_is_kept():

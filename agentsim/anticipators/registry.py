@@ -23,6 +23,11 @@ GROUP = "agentsim.anticipators"
 TYPES = {"float": float, "int": int, "bool": bool, "str": str}
 
 
+class NotFinite(AgentsimError):
+    """A parameter given a value that is not a finite number (``nan``, ``inf``): the value is well formed,
+    the anticipator cannot be made with it."""
+
+
 @dataclass(frozen=True)
 class Parameter:
     """One constructor parameter of an anticipator: its name, type (None: not declared) and default
@@ -81,7 +86,8 @@ class Parameter:
         return text
 
     def error(self, anticipator: str, value: object, expected: str) -> AgentsimError:
-        return AgentsimError(f"anticipator {anticipator!r}: parameter {self.name!r} expects {expected}, "
+        kind = NotFinite if expected.startswith("a finite") else AgentsimError
+        return kind(f"anticipator {anticipator!r}: parameter {self.name!r} expects {expected}, "
                              f"got {value!r}")
 
 

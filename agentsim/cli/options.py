@@ -106,10 +106,8 @@ def _metronome(text: str) -> tuple[float, float]:
         start = float(parts[1]) if len(parts) > 1 else 0.0
     except (ValueError, IndexError):
         raise argparse.ArgumentTypeError(f"expected BPM[,START], got {text!r}") from None
-    if not (bpm > 0 and math.isfinite(bpm)):
-        raise argparse.ArgumentTypeError(f"the metronome tempo must be a positive, finite number of BPM, got {parts[0]!r}")
-    if not math.isfinite(start):
-        raise argparse.ArgumentTypeError(f"the metronome's first beat must be a finite time, got {parts[1]!r}")
+    if not bpm > 0 and math.isfinite(bpm):  # nan and inf are numbers: the metronome refuses them when made
+        raise argparse.ArgumentTypeError(f"the metronome tempo must be positive, got {parts[0]!r}")
     return bpm, start
 
 
@@ -121,18 +119,30 @@ def add_anticipators(parser: argparse.ArgumentParser) -> None:
                              "metronome:m2,bpm=90 (repeatable; see 'agentsim anticipators list')")
 
 
-def anticipators(args: argparse.Namespace) -> list:
-    """The anticipators that ``--metronome`` and ``--anticipator`` ask for."""
+def anticipators(args: argparse.Namespace, problems: list[str] | None = None) -> list:
+    """The anticipators that ``--metronome`` and ``--anticipator`` ask for. One that cannot be made (a tempo
+    or a time that is not finite) raises AgentsimError; with ``problems`` given, it is left out instead and
+    why is added there (the run goes on without it, and says so). A value of the wrong type or an unknown
+    key is always an error: the command line is wrong, not the world."""
     from agentsim.anticipators import registry
     from agentsim.anticipators.metronome import Metronome
 
     found = []
+
+    def make(what: str, build) -> None:
+        try:
+            found.append(build())
+        except (registry.NotFinite, ValueError) as exc:
+            if problems is None:
+                raise AgentsimError(f"{what}: {exc}") from None
+            problems.append(f"{what} left out: {exc}")
+
     if args.metronome:
         bpm, start = args.metronome
-        found.append(Metronome("metronome", bpm=bpm, start=start))
+        make(f"--metronome {bpm:g},{start:g}", lambda: Metronome("metronome", bpm=bpm, start=start))
     for spec in args.anticipator:
         name, anticipator_id, params = registry.parse_spec(spec)
-        found.append(registry.create(name, anticipator_id, **params))
+        make(f"--anticipator {spec}", lambda: registry.create(name, anticipator_id, **params))
     return found
 
 

@@ -176,13 +176,19 @@ def realize_files(args: argparse.Namespace) -> int:
     out = sys.stdout
     if out is None:  # started with its standard output closed
         raise UsageError("standard output is closed: there is nowhere to write the feedback")
-    realizer = Realizer(realtime=args.realtime, anticipators=options.anticipators(args), strict=args.strict, tts=tts)
+    problems: list[str] = []
+    made = options.anticipators(args, problems)
+    realizer = Realizer(realtime=args.realtime, anticipators=made, strict=args.strict, tts=tts)
 
     def emit(feedback):
         out.write(to_json(feedback) + "\n")
         out.flush()
 
     realizer.feedback.listen(emit)
+    from agentsim.core import feedback as fb
+
+    for problem in problems:  # the run goes on without it: what was tied to it is dropped, with warnings
+        realizer.feedback.send(fb.warning("", "NO_SUCH_TARGET", problem, 0.0, "agent"))
     order = sorted(range(len(documents)), key=lambda i: (at[i], i))
     for i in order:
         realizer.submit_at(at[i], documents[i][1], source=str(resolve(documents[i][0])))
