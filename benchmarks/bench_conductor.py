@@ -24,18 +24,13 @@ import tempfile
 import time
 from pathlib import Path
 
+from common import child_env
+
 ROOT = Path(__file__).resolve().parent.parent
 PER_MINUTE_TARGET_S = 2.0
 PLOT_TARGET_S = 1.0
 
 
-def child_env() -> dict:
-    """The environment of the measured processes: this checkout first on the path, and bytecode cached (in
-    a folder of the benchmark's own), as an installed package has it."""
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-    env["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
-    env["PYTHONPYCACHEPREFIX"] = str(Path(tempfile.gettempdir()) / "agentsim-bench-pycache")
-    return env
 
 
 def child(out: str) -> dict:

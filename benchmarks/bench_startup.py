@@ -17,19 +17,14 @@ import tempfile
 import time
 from pathlib import Path
 
+from common import child_env
+
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_S = 0.3
 ONE = ('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="bml1">'
        '<gesture id="g1" lexeme="BEAT"/></bml>\n')
 
 
-def child_env() -> dict:
-    """The environment of the measured processes: this checkout first on the path, and bytecode cached (in
-    a folder of the benchmark's own), as an installed package has it."""
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-    env["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
-    env["PYTHONPYCACHEPREFIX"] = str(Path(tempfile.gettempdir()) / "agentsim-bench-pycache")
-    return env
 
 
 def wall(argv: list[str], runs: int) -> list[float]:

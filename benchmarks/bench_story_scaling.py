@@ -24,6 +24,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from common import child_env
+
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -44,13 +46,6 @@ def story_source(times: int) -> str:
     return "\n".join(head) + "\n" + "\n\n".join([body] * times) + "\n"
 
 
-def child_env() -> dict:
-    """The environment of the measured processes: this checkout first on the path, and bytecode cached (in
-    a folder of the benchmark's own), as an installed package has it."""
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-    env["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
-    env["PYTHONPYCACHEPREFIX"] = str(Path(tempfile.gettempdir()) / "agentsim-bench-pycache")
-    return env
 
 
 def child(times: int, cache_dir: str, out: str, tts: str) -> dict:
