@@ -746,13 +746,7 @@
   api.cursor = function () { return cursorX; };
   api.cursorTime = function () { return cursorT; };
   api.window = function () { return [win.start, win.start + win.width]; };
-  api.joint = function (name) {
-    if (!three || !M) return null;
-    var i = M.points.indexOf(name);
-    if (i < 0) return null;
-    var p = three.spheres[i].position;
-    return [p.x, p.y, p.z];
-  };
+  api.joint = function (name) { return jointPosition(three, M, name); };
 
   try {
     summaryText();
@@ -799,6 +793,15 @@
      report.joint(name) are as in the report; report.watch(name) records [time, x, y, z, between] of that
      joint at every frame drawn from then on (between: 1 if drawn between two frames received, 0 if held on
      the first or the last one), report.watched(name) returns them. */
+  // The world position [x, y, z] of skeleton point ``name`` as drawn in ``three`` (null before a scene).
+  function jointPosition(three, M, name) {
+    if (!three || !M) return null;
+    var i = M.points.indexOf(name);
+    if (i < 0) return null;
+    var p = three.spheres[i].position;
+    return [p.x, p.y, p.z];
+  }
+
   function live(options) {
     var host = location.host || "127.0.0.1:8765";
     var url = options.url || ((location.protocol === "https:" ? "wss://" : "ws://") + host + "/");
@@ -1153,13 +1156,7 @@
     }
 
     api.time = function () { return state.time; };
-    api.joint = function (name) {
-      if (!three || !M) return null;
-      var i = M.points.indexOf(name);
-      if (i < 0) return null;
-      var p = three.spheres[i].position;
-      return [p.x, p.y, p.z];
-    };
+    api.joint = function (name) { return jointPosition(three, M, name); };
     api.watch = function (name) { watches[name] = []; return true; };
     api.watched = function (name) { return watches[name] || null; };
     window.addEventListener("resize", function () { if (three) three.dirty = true; });
