@@ -91,8 +91,7 @@ def test_a_malformed_message_is_answered_to_its_sender_and_the_next_block_runs(s
 
 def test_two_clients_both_hear_and_one_that_leaves_disturbs_nothing(service):
     block = f'<bml {NS} id="b"><head id="h1" lexeme="NOD"/><head id="h2" lexeme="NOD" start="1"/></bml>'
-    with connect(service.url) as a:
-        b = connect(service.url)
+    with connect(service.url) as a, connect(service.url) as b:
         a.send(block)
         receive_until(b, lambda f: f["id"] == "b:h1:start")
         b.close()  # mid-block

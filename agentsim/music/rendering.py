@@ -3,7 +3,9 @@ MIDI files with the ``fluidsynth`` program."""
 
 from __future__ import annotations
 
+import contextlib
 import heapq
+import io
 import itertools
 import os
 import shutil
@@ -65,7 +67,9 @@ def check_soundfont(soundfont: "str | os.PathLike") -> str:
 
 def _import_fluidsynth():
     try:
-        import fluidsynth  # pyfluidsynth; raises ImportError when libfluidsynth is missing
+        # pyfluidsynth prints where it found the library to stdout when $CI is set; stdout carries our JSON
+        with contextlib.redirect_stdout(io.StringIO()):
+            import fluidsynth  # pyfluidsynth; raises ImportError when libfluidsynth is missing
     except (ImportError, OSError) as exc:
         raise Unavailable(
             f"the FluidSynth library could not be loaded ({exc}); install it with `{INSTALL_HINT}` "
