@@ -125,6 +125,8 @@ class FluidSynthRenderer:
         self._synth = fluidsynth.Synth(gain=float(gain), samplerate=float(sample_rate))
         self._synth.setting("synth.reverb.active", int(bool(reverb)))
         self._synth.setting("synth.chorus.active", int(bool(chorus)))
+        # a sample is read from the soundfont when a preset that plays it is chosen, not all 140 MB up front
+        self._synth.setting("synth.dynamic-sample-loading", 1)
         self._sfid = self._synth.sfload(path)
         if self._sfid < 0:
             raise Unavailable(f"FluidSynth could not load the soundfont {path!r}; reinstall it with `{INSTALL_HINT}`")
