@@ -18,6 +18,7 @@ holds only the page's structure, the title and notes, and a two-line error catch
 
 from __future__ import annotations
 
+import concurrent.futures
 import html
 import shutil
 from pathlib import Path
@@ -111,11 +112,25 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     shutil.copyfile(ASSETS / "report.js", folder / "report.js")
     shutil.copyfile(ASSETS / "report.css", folder / "report.css")
 
+    # the sound is encoded on a thread of its own (libsndfile does not hold the interpreter) while the
+    # timeline and the poses are made
+    with concurrent.futures.ThreadPoolExecutor(1) as encoder:
+        audio = encoder.submit(write_audio, folder, track) if track is not None else None
+        data = _page_data(recording, stream, track, gestures, title, notes, folder)
+        if audio is not None:
+            data["audio"] = {"src": audio.result(), "duration": track.duration, "rate": int(track.rate)}
+    (folder / "data.js").write_text(js_assignment(
+        "REPORT_DATA", data, f"agentsim run report: timeline and tables of {title!r}, see "
+        "agentsim.media.report.data"), encoding="utf-8")
+    path.write_text(page_html(folder.name, title, notes, data), encoding="utf-8")
+    return path
+
+
+def _page_data(recording, stream, track, gestures, title, notes, folder: Path) -> dict:
+    """The page's timeline and tables, and its poses written into ``folder`` (the audio is added by the caller)."""
     duration = run_duration(recording, stream, track)
     data = timeline_payload(recording, gestures, duration)
     data.update(title=title, notes=notes, axis=AXIS, audio=None, motion=None)
-    if track is not None:
-        data["audio"] = {"src": write_audio(folder, track), "duration": track.duration, "rate": int(track.rate)}
     if stream is not None:
         names, parents = point_names(stream.body)
         poses = pose_payload(stream, keep=stroke_times(recording, gestures))
@@ -129,11 +144,7 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
             "face": [i for i, n in enumerate(names) if n.split(".")[0] in FACE],
             "ends": [i for i, n in enumerate(names) if n.endswith(".end")],
         }
-    (folder / "data.js").write_text(js_assignment(
-        "REPORT_DATA", data, f"agentsim run report: timeline and tables of {title!r}, see "
-        "agentsim.media.report.data"), encoding="utf-8")
-    path.write_text(page_html(folder.name, title, notes, data), encoding="utf-8")
-    return path
+    return data
 
 
 def page_html(folder: str, title: str, notes: list[str], data: dict) -> str:
