@@ -3,14 +3,14 @@ MIDI files with the ``fluidsynth`` program."""
 
 from __future__ import annotations
 
-import contextlib
 import heapq
-import io
 import itertools
 import os
 import shutil
 import subprocess
+import sys
 import tempfile
+import threading
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -65,11 +65,20 @@ def check_soundfont(soundfont: "str | os.PathLike") -> str:
     return path
 
 
+_IMPORT_LOCK = threading.Lock()
+
+
 def _import_fluidsynth():
     try:
-        # pyfluidsynth prints where it found the library to stdout when $CI is set; stdout carries our JSON
-        with contextlib.redirect_stdout(io.StringIO()):
-            import fluidsynth  # pyfluidsynth; raises ImportError when libfluidsynth is missing
+        with _IMPORT_LOCK:
+            # pyfluidsynth prints where it found the library onto stdout, which carries our JSON, when $CI is
+            # set as it is first imported (a process-wide setting, like stdout: hence the lock)
+            ci = os.environ.pop("CI", None) if "fluidsynth" not in sys.modules else None
+            try:
+                import fluidsynth  # pyfluidsynth; raises ImportError when libfluidsynth is missing
+            finally:
+                if ci is not None:
+                    os.environ["CI"] = ci
     except (ImportError, OSError) as exc:
         raise Unavailable(
             f"the FluidSynth library could not be loaded ({exc}); install it with `{INSTALL_HINT}` "

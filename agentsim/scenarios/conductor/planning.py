@@ -247,24 +247,24 @@ def plan_ictus(x0: np.ndarray, a: np.ndarray, g: np.ndarray, weights: np.ndarray
     E = rollout(x0, a, g, seqs, conducted)  # (K, 1 + nf, L + 1)
     E0 = E[:, 0, :]
     G = E[:, 1:, :] - E0[:, None, :]  # (K, nf, L + 1): response to a unit of each free ictus
-    rows, rhs = [], []
     sq = np.sqrt(weights / weights.sum())
     periods = np.array([target_period(int(b)) for b in beats[:-1]])
     first_free = idx[free[0]]
-    for k in range(x0.shape[0]):
-        # interval errors from the first free beat on (earlier ones cannot be changed)
-        for i in range(max(first_free - 1, 0), L):
-            scale = sq[k] / (tempo_unit * periods[i])
-            rows.append(scale * (G[k, :, i + 1] - G[k, :, i]))
-            rhs.append(-scale * (E0[k, i + 1] - E0[k, i] - periods[i]))
-        # asynchrony of planned (and tail) beats
-        for i in range(first_free, L + 1):
-            if beats[i] < conducted_from:
-                continue
-            scale = sq[k] * asynchrony_weight / asynchrony_unit
-            w_tail = 1.0 if beats[i] <= free[-1] else 0.5
-            rows.append(w_tail * scale * (G[k, :, i] - M[i]))
-            rhs.append(-w_tail * scale * (E0[k, i] - base[i]))
+    # for each model k: the interval errors from the first free beat on (earlier ones cannot be changed),
+    # then the asynchrony of the planned (and tail) beats
+    i0 = max(first_free - 1, 0)
+    scale = sq[:, None] / (tempo_unit * periods[None, i0:L])  # (K, n)
+    interval_rows = scale[:, :, None] * (G[:, :, i0 + 1:L + 1] - G[:, :, i0:L]).transpose(0, 2, 1)
+    interval_rhs = -scale * (E0[:, i0 + 1:L + 1] - E0[:, i0:L] - periods[None, i0:L])
+    sel = np.arange(first_free, L + 1)
+    sel = sel[beats[sel] >= conducted_from]
+    w_tail = np.where(beats[sel] <= free[-1], 1.0, 0.5)
+    scale = sq * asynchrony_weight / asynchrony_unit  # (K,)
+    coef = w_tail[None, :] * scale[:, None]
+    asynchrony_rows = coef[:, :, None] * (G[:, :, sel].transpose(0, 2, 1) - M[sel][None])
+    asynchrony_rhs = (-w_tail)[None, :] * scale[:, None] * (E0[:, sel] - base[sel][None])
+    rows = list(np.concatenate([interval_rows, asynchrony_rows], axis=1).reshape(-1, nf))
+    rhs = list(np.concatenate([interval_rhs, asynchrony_rhs], axis=1).reshape(-1))
     # smoothness of the conductor's own intervals: second differences of the ictus over the planned part
     ext_base = np.concatenate([[previous_ictus if previous_ictus is not None else 0.0], base])
     ext_M = np.vstack([np.zeros((1, nf)), M])
