@@ -3,6 +3,7 @@ MIDI files with the ``fluidsynth`` program."""
 
 from __future__ import annotations
 
+import ctypes
 import heapq
 import itertools
 import os
@@ -132,6 +133,7 @@ class FluidSynthRenderer:
         fluidsynth = _import_fluidsynth()
         self.sample_rate = int(sample_rate)
         self._synth = fluidsynth.Synth(gain=float(gain), samplerate=float(sample_rate))
+        self._write_s16 = fluidsynth.fluid_synth_write_s16
         self._synth.setting("synth.reverb.active", int(bool(reverb)))
         self._synth.setting("synth.chorus.active", int(bool(chorus)))
         # a sample is read from the soundfont when a preset that plays it is chosen, not all 140 MB up front
@@ -193,7 +195,12 @@ class FluidSynthRenderer:
 
     def _render(self, n: int, out: list) -> None:
         if n > 0:
-            out.append(self._synth.get_samples(n))
+            # FluidSynth's 16-bit interleaved stereo written straight into an array (what the binding's
+            # get_samples does through a fresh ctypes buffer and a copy)
+            samples = np.empty(2 * n, np.int16)
+            pointer = samples.ctypes.data_as(ctypes.c_void_p)
+            self._write_s16(self._synth.synth, n, pointer, 0, 2, pointer, 1, 2)
+            out.append(samples)
             self._pos += n
 
     def render_until(self, t: float) -> np.ndarray:
