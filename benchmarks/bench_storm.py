@@ -6,7 +6,11 @@ apart; ``t_A`` is looked at after each instant, as the speech engine does. Print
 and whether ``t_A`` stayed monotone (sampled before, after each instant, and up to 10 s later). Target:
 under 5 s for every strategy, ``t_A`` monotone.
 
-Usage: python benchmarks/bench_storm.py [--events N]
+A peg storm follows: an anticipator moves all of its 120 pegs every millisecond while a block of 120
+nods, each tied to one of them, plays; it prints the wall seconds per simulated second and whether the
+nods' strokes passed where the pegs last were (the largest error).
+
+Usage: python benchmarks/bench_storm.py [--events N] [--pegs N] [--seconds S]
 """
 
 from __future__ import annotations
@@ -65,9 +69,54 @@ def run_storm(name: str, backend, utterance, events, order, instant: float, inst
     return {"seconds": round(seconds, 3), "monotone": bool(monotone)}
 
 
+class Swarm:
+    """An anticipator of ``n`` pulses that moves every one still to come by 1 us each millisecond."""
+
+    def __new__(cls, n: int):
+        from agentsim.anticipators import Anticipator
+
+        class _Swarm(Anticipator):
+            def make_peg(self, sync_id):
+                return 0.5 + 0.02 * int(sync_id[1:]) if sync_id.startswith("p") else False
+
+            def run(self):
+                return self.move()
+
+            def move(self):
+                while True:
+                    yield self.env.timeout(0.001)
+                    for peg in list(self.pegs.values()):
+                        if peg.time > self.env.now:
+                            peg.set(peg.time + 1e-6)
+
+        return _Swarm("swarm")
+
+
+def peg_storm(n_pegs: int, seconds: float) -> dict:
+    """Wall seconds per simulated second while ``n_pegs`` pegs move every millisecond under a block of nods."""
+    from agentsim.realizer import Realizer
+
+    swarm = Swarm(n_pegs)
+    realizer = Realizer(anticipators=[swarm])
+    ns = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
+    nods = "".join(f'<head id="h{i}" lexeme="NOD" stroke="anticipators:swarm:p{i}"/>' for i in range(n_pegs))
+    realizer.submit(f'<bml {ns} id="b">{nods}</bml>')
+    start = time.perf_counter()
+    realizer.env.run(until=seconds)
+    wall = time.perf_counter() - start
+    strokes = {f["id"].split(":")[1]: f["globalTime"] for f in realizer.recording().feedback
+               if f["type"] == "syncPointProgress" and f["id"].endswith(":stroke")}
+    errors = [abs(t - swarm.pegs[f"p{name[1:]}"].time) for name, t in strokes.items()]
+    return {"pegs": n_pegs, "simulated_s": seconds, "wall_s": round(wall, 3),
+            "wall_per_simulated_s": round(wall / seconds, 3), "strokes_passed": len(strokes),
+            "max_stroke_error_s": max(errors) if errors else None}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--events", type=int, default=100_000)
+    parser.add_argument("--pegs", type=int, default=120)
+    parser.add_argument("--seconds", type=float, default=3.0)
     args = parser.parse_args()
     backend, utterance, events = storm_events(args.events)
     instant = utterance.duration / 2  # mid-speech: the storm arrives while it plays
@@ -81,7 +130,8 @@ def main() -> None:
             "1000 instants, shuffled": run_storm(name, backend, utterance, events, shuffled, instant, 1000),
         }
     print(json.dumps({"events": len(events), "words": len(utterance.words), "machine": platform.machine(),
-                      "python": platform.python_version(), "strategies": results}, indent=1))
+                      "python": platform.python_version(), "strategies": results,
+                      "peg_storm": peg_storm(args.pegs, args.seconds)}, indent=1))
 
 
 if __name__ == "__main__":
