@@ -18,18 +18,60 @@ from agentsim.realizer import Realizer
 
 pytestmark = pytest.mark.system
 
+#: How much the fitted time base (the least delayed capture stamp of the latest second) may add to the
+#: spread of the predictions: it moved by 2.6-5.3 ms over a run, and added at most 1.3 ms to the spread in
+#: 20 runs in a row, with a load of 1.4 to 3.3 on the 2 cores.
+TIME_BASE_JITTER = 0.008
 
-def audio_start_in(capture: np.ndarray, audio: np.ndarray, sr: int) -> int:
-    """Where (sample of ``capture``) ``audio`` begins in it: the peak of their cross-correlation over the
-    first seconds of the audio (the reference taken from the captured signal itself)."""
+
+def heard_at(capture: np.ndarray, audio: np.ndarray, sr: int, beats: np.ndarray) -> tuple[float, np.ndarray]:
+    """Where (in seconds of ``capture``) the audio begins, and where each of ``beats`` (seconds of ``audio``)
+    was heard: the reference
+    taken from the captured signal itself. The ensemble's start is found by cross-correlating its first
+    seconds over every lag, negative ones included (the input may open after the player started); then each
+    beat by cross-correlating 0.8 s of the audio around it within 0.1 s of there, so that a sample the
+    loopback dropped or held moves only the beats after it. A beat too near either end of the capture is
+    placed by its nearest neighbour's lag."""
     from scipy.signal import correlate
 
     template = audio[: int(4 * sr)].astype(np.float64)
-    score = correlate(capture.astype(np.float64), template, mode="valid", method="fft")
-    return int(np.argmax(score))
+    score = correlate(capture.astype(np.float64), template, mode="full", method="fft")
+    lag = int(np.argmax(score)) - (template.size - 1)  # capture sample of the audio's sample 0
+    half, search = int(0.4 * sr), int(0.1 * sr)
+    found = np.full(beats.size, np.nan)
+    for k, beat in enumerate(beats):
+        centre = int(round(beat * sr))
+        a0, a1 = centre - half, centre + half
+        lo, hi = a0 + lag - search, a1 + lag + search
+        if a0 < 0 or lo < 0 or a1 > audio.size or hi > capture.size:
+            continue
+        local = correlate(capture[lo:hi].astype(np.float64), audio[a0:a1].astype(np.float64), mode="valid",
+                          method="fft")
+        found[k] = (lo + int(np.argmax(local)) - a0 + centre) / sr
+    held = np.flatnonzero(np.isfinite(found))
+    if held.size:
+        nearest = held[np.clip(np.searchsorted(held, np.arange(beats.size)), 0, held.size - 1)]
+        found = np.where(np.isfinite(found), found, beats + (found[nearest] - beats[nearest]))
+    return lag / sr, found
 
 
-def test_live_input_through_a_null_sink_loopback(pulse_null_sink, ensemble):
+def prediction_offsets(updates, heard: np.ndarray, after: float) -> np.ndarray:
+    """Predicted minus heard time of the next two beats of every update made after ``after``."""
+    offsets = []
+    for t, predicted in updates:
+        if t > after:
+            for b in predicted[:2]:
+                k = int(np.argmin(np.abs(heard - b)))
+                offsets.append(b - heard[k])
+    return np.asarray(offsets)
+
+
+def spread(offsets: np.ndarray) -> float:
+    """95th percentile of the distance to the median."""
+    return float(np.percentile(np.abs(offsets - np.median(offsets)), 95))
+
+
+def test_live_input_through_a_null_sink_loopback(pulse_null_sink, ensemble, tmp_path):
     import sounddevice
 
     _, audio, sr, beats = ensemble
@@ -59,27 +101,30 @@ def test_live_input_through_a_null_sink_loopback(pulse_null_sink, ensemble):
     player.join()
     assert anticipator.confidence >= 0.4
     # The time base: where the capture's sample 0 lies on the simulated clock, fitted by the anticipator
-    # through the capture stamps (the least delayed of the latest blocks). The reference: where the
-    # ensemble begins in the captured signal, by cross-correlation. True beat k was heard at
-    # start + (lag + beats[k] * sr) / sr on that clock; the predictions must line up with it up to a small
-    # spread, whatever the loopback's latency and however late the player thread got going.
+    # through the capture stamps (the least delayed of the latest blocks). The reference: where each beat
+    # was heard in the captured signal. The predictions must line up with it up to a constant (what the
+    # capture stamps do not say of the device's input latency) and a spread.
     capture = np.concatenate(captured)
-    lag = audio_start_in(capture, audio, sr)
-    heard_from = anticipator.start + lag / sr  # simulated time at which the ensemble's sample 0 was heard
-    offsets = []
-    for t, predicted in anticipator.updates:
-        if t > heard_from + 8:
-            for b in predicted[:2]:
-                k = int(np.argmin(np.abs(beats + heard_from - b)))
-                offsets.append(b - (beats[k] + heard_from))
-    offsets = np.asarray(offsets)
-    assert offsets.size > 10
-    # a constant remains: what the capture stamps do not say of the device's input latency (some 70 ms on a
-    # PulseAudio monitor); the spread around it is the tracker's alone
-    assert abs(np.median(offsets)) < 0.4
-    spread = np.percentile(np.abs(offsets - np.median(offsets)), 95)
-    print(f"loopback: constant {np.median(offsets) * 1e3:.1f} ms, 95th-percentile spread {spread * 1e3:.2f} ms")
-    assert spread < 0.015
+    begins, heard = heard_at(capture, audio, sr, beats)
+    live = prediction_offsets(anticipator.updates, anticipator.start + heard, anticipator.start + begins + 8)
+    assert live.size > 10
+    assert abs(np.median(live)) < 0.1
+    # The spread of predicting a rubato ensemble is the tracker's own, and depends on what the loopback
+    # made of the sound (PulseAudio resamples it twice): the same tracker, run offline over the very
+    # samples the device delivered, sets it. What the live run may add is the time base's jitter.
+    import soundfile
+
+    path = tmp_path / "captured.wav"
+    soundfile.write(path, capture, sr, subtype="FLOAT")
+    offline = AudioBeatAnticipator("offline", source=str(path))
+    Realizer(anticipators=[offline]).env.run(until=capture.size / sr + 0.5)
+    alone = prediction_offsets(offline.updates, heard, begins + 8)
+    print(f"loopback: constant {np.median(live) * 1e3:.1f} ms, 95th-percentile spread {spread(live) * 1e3:.2f} ms "
+          f"live, {spread(alone) * 1e3:.2f} ms offline on the captured samples")
+    assert spread(live) < spread(alone) + TIME_BASE_JITTER
+    # and it is a tracker's: a rubato of 2 % at 120 BPM is some 10 ms of unforeseeable timing (offline over
+    # the captured samples: 7-11 ms in 19 runs of 20, and 34 ms in one whose capture the loopback marred)
+    assert spread(live) < 0.1
 
 
 def test_anticipate_beats_listens_to_a_live_device(pulse_null_sink, ensemble):
