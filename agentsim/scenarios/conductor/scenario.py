@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -107,30 +108,46 @@ def sound_check(config: ScenarioConfig) -> dict[str, float]:
 
 def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int = 0) -> Run:
     """Run the closed loop once, as fast as the computer allows; returns the finished :class:`Run`."""
-    from agentsim.core.clock import make_environment
-    from agentsim.realizer import Realizer
-    from agentsim.scenarios.conductor.ensemble import Ensemble
-
     started = time.perf_counter()
     name = strategy_name or config.conductor.strategy
-    # FluidSynth loads a soundfont (the slow part of making a synthesizer) and renders without Python's
-    # lock: the piece's synthesizer is made, and the renderer's onset offsets measured (for the scores),
-    # on a thread of their own while the sound check renders on this one. Each has a synthesizer of
-    # its own, so what each renders is the same as one after the other.
+    # FluidSynth renders without Python's lock: the sound check renders, and the renderer's onset offsets
+    # are measured (for the scores), on threads of their own while the piece plays on this one; the
+    # conductor waits for the sound check's levels when it first needs them (its first downbeat). Each has
+    # a synthesizer of its own, so what each renders is the same as one after the other.
     from concurrent.futures import ThreadPoolExecutor
 
     from agentsim.music.onsets import beat_onset_offset
 
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        made = pool.submit(_renderer, config)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        checked = pool.submit(sound_check, config)
         pool.submit(beat_onset_offset, config.audio.sample_rate, _soundfont(config))
         try:
-            reference = sound_check(config)
-        except BaseException:
-            if made.exception() is None:
-                made.result().close()
-            raise
-        renderer = made.result()
+            return _simulate(config, name, seed, started, renderer=_renderer(config), reference=Later(checked))
+        finally:
+            checked.cancel()
+
+
+class Later(Mapping):
+    """A mapping computed elsewhere (a future of a dict), waited for when first read."""
+
+    def __init__(self, future):
+        self.future = future
+
+    def __getitem__(self, key):
+        return self.future.result()[key]
+
+    def __iter__(self):
+        return iter(self.future.result())
+
+    def __len__(self):
+        return len(self.future.result())
+
+
+def _simulate(config: ScenarioConfig, name: str, seed: int, started: float, renderer, reference: Later) -> Run:
+    from agentsim.core.clock import make_environment
+    from agentsim.realizer import Realizer
+    from agentsim.scenarios.conductor.ensemble import Ensemble
+
     env = make_environment(False)
     ens_cfg = config.ensemble
     ears = Ears("band", sample_rate=config.audio.sample_rate, origin=ens_cfg.start_time - 0.1,
@@ -166,8 +183,8 @@ def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int
     finally:
         renderer.close()
     run = Run(config, name, seed, realizer, ears, conductor, strategy, ensemble=ensemble)
+    run.extra["reference_db"] = dict(reference)  # (a sound check that failed raises here)
     run.wall_seconds = time.perf_counter() - started
-    run.extra["reference_db"] = reference
     return run
 
 
