@@ -69,9 +69,9 @@ def aubio_run(audio: np.ndarray, sample_rate: int, block_size: int, horizon_beat
         if period > 0:
             beat = float(tracker.get_last_s())
             k = max(int(np.ceil((now - beat) / period)), 0)
-            pred = beat + period * np.arange(k, k + horizon_beats)
-            if last is None or not np.array_equal(pred, last):
-                updates.append({"t": now, "beats": pred.tolist()})
+            pred = (beat + period * np.arange(k, k + horizon_beats)).tolist()
+            if pred != last:  # compared as track_file compares the causal tracker's predictions
+                updates.append({"t": now, "beats": pred})
                 last = pred
     wall = time.perf_counter() - t0
     return {"tracker": "aubio", "audio_seconds": x.size / sample_rate, "wall_seconds": wall,

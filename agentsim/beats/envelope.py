@@ -37,7 +37,9 @@ def mono_samples(block) -> np.ndarray:
     elif x.ndim != 1:
         x = x.reshape(-1)
     x = x.astype(np.float32, copy=False)
-    if not np.isfinite(x).all():
+    # a NaN or an infinity makes the sum of squares non-finite (as does a sum too large for float32:
+    # then the samples are checked one by one)
+    if not math.isfinite(x.dot(x)) and not np.isfinite(x).all():
         x = np.nan_to_num(x, nan=0.0, posinf=0.0, neginf=0.0)
     return x
 

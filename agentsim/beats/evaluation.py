@@ -247,9 +247,9 @@ def track_file(
         t0 = _time.perf_counter()
         for a in range(0, audio.size, block_size):
             tracker.process(audio[a : a + block_size])
-            pred = tracker.predict(horizon_beats)
-            if last is None or pred.size != last.size or not np.array_equal(pred, last):
-                updates.append({"t": tracker.time, "beats": pred.tolist()})
+            pred = tracker.predict(horizon_beats).tolist()
+            if pred != last:  # (a NaN differs from every number, itself too, as in np.array_equal)
+                updates.append({"t": tracker.time, "beats": pred})
                 last = pred
         wall = _time.perf_counter() - t0
     return {

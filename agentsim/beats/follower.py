@@ -30,6 +30,7 @@ Prediction
 
 from __future__ import annotations
 
+import bisect
 import math
 from typing import Callable
 
@@ -121,6 +122,7 @@ class BeatFollower:
         self._cand = None  # (rejected salient onset, beat before it, time it can be judged)
         self._cache_key = None
         self._cache = np.zeros(0)
+        self._cache_list: list[float] = []  # the same beat times, for bisection
         self.confidence = 0.0
         self.tempo_bpm = float("nan")
         self.beats_observed: list[float] = []
@@ -227,16 +229,18 @@ class BeatFollower:
             state = self.last_confident
         if state is None or horizon_beats <= 0:
             return np.zeros(0)
-        key = (id(state), float(state[0]), float(state[1]), float(state[2]))
-        if key != self._cache_key or self._cache.size == 0 or self._cache[-1] < now + 2 * state[1]:
+        key = (id(state), *state.tolist())
+        cache = self._cache_list
+        if key != self._cache_key or not cache or cache[-1] < now + 2 * key[2]:
             self._cache = self.extrapolate(state, now, horizon_beats + 8)
+            self._cache_list = cache = self._cache.tolist()
             self._cache_key = key
-        k = int(np.searchsorted(self._cache, now, side="left"))
-        out = self._cache[k : k + horizon_beats]
-        if out.size < horizon_beats:
+        k = bisect.bisect_left(cache, now)
+        if k + horizon_beats > len(cache):
             self._cache = self.extrapolate(state, now, horizon_beats + 8)
-            out = self._cache[:horizon_beats]
-        return out.copy()
+            self._cache_list = self._cache.tolist()
+            return self._cache[:horizon_beats].copy()
+        return self._cache[k : k + horizon_beats].copy()
 
     def extrapolate(self, state: np.ndarray, now: float, count: int) -> np.ndarray:
         """Beat times from ``state`` onwards: the first ``count`` at or after ``now`` (seconds)."""

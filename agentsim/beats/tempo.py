@@ -154,19 +154,33 @@ class TempoEstimator:
         self.harmonic_weights = np.array(HARMONIC_WEIGHTS)
         # the multiples of the candidate lags, split into whole frames and a fraction (see _harmonics)
         self._multiples = [(float(w), k * self.lags) for k, w in enumerate(self.harmonic_weights, start=1)]
-        self._grid_cache: dict[tuple[float, int], list] = {}
+        self._grid_cache: dict[tuple[float, int], tuple] = {}
+        self._norm_cache: dict[int, np.ndarray] = {}
+        # lags of a pulse faster than max_bpm
+        lo = max(2.0, self.min_lag / 2.0)
+        self._fast_lags = np.arange(math.ceil(lo), math.floor(self.min_lag * 0.95) + 1).astype(np.intp)
 
-    def _harmonics(self, limit: float, size: int) -> list:
-        """For each harmonic: its weight, which multiples count (below ``limit`` and inside the
-        autocorrelation of ``size`` lags), and their whole frames and fractions (made once per size)."""
+    def _harmonics(self, limit: float, size: int) -> tuple:
+        """The harmonics' multiples of the candidate lags that count (below ``limit`` and inside the
+        autocorrelation of ``size`` lags), stacked one harmonic a row: their whole frames (and the frames
+        after them), fractions and weights (0 where a multiple does not count), and the candidates'
+        total weights (made once per ``limit`` and ``size``)."""
         key = (limit, size)
         found = self._grid_cache.get(key)
         if found is None:
-            found = []
+            wholes, fractions, weights = [], [], []
+            wsum = np.zeros(self.lags.size)
             for w, kl in self._multiples:
                 ok = kl < min(limit, size - 1)
                 whole = np.clip(np.floor(kl), 0, max(size - 2, 0)).astype(np.intp)
-                found.append((w, ok, whole, kl - whole, np.where(ok, w, 0.0)))
+                wholes.append(whole)
+                fractions.append(kl - whole)
+                weights.append(np.where(ok, w, 0.0))
+                wsum += weights[-1]
+            whole = np.stack(wholes)
+            counted = wsum > 0
+            found = (whole, np.minimum(whole + 1, size - 1), np.stack(fractions), np.stack(weights), counted,
+                     np.maximum(wsum, 1e-12), np.arange(size))
             if len(self._grid_cache) > 64:
                 self._grid_cache.clear()
             self._grid_cache[key] = found
@@ -192,28 +206,35 @@ class TempoEstimator:
         """
         o = np.asarray(onset_strength, np.float64)
         n = o.size
-        mean = float(o.mean()) if n else 0.0
-        o = o - o.mean()
+        mean = o.mean() if n else 0.0
+        o = o - mean
         energy = float(np.dot(o, o))
         max_needed = int(self.harmonic_weights.size * self.max_lag) + 2
         if n < 2 * self.max_lag + 4 or energy <= 1e-9 * max(n, 1) or mean < 1e-3:
             return None
-        nfft = 1 << int(math.ceil(math.log2(2 * n)))
+        size = min(n, max_needed + 2)
+        # the linear autocorrelation up to lag size - 1 (no wrap-around: nfft >= n + size - 1)
+        nfft = 1 << int(math.ceil(math.log2(n + size - 1)))
         f = np.fft.rfft(o, nfft)
-        ac = np.fft.irfft(f.real**2 + f.imag**2, nfft)[: min(n, max_needed + 2)]
-        ac = ac / (n - np.arange(ac.size))
+        ac = np.fft.irfft(f.real**2 + f.imag**2, nfft)[:size]
+        norm = self._norm_cache.get(n)
+        if norm is None:
+            if len(self._norm_cache) > 64:
+                self._norm_cache.clear()
+            norm = self._norm_cache[n] = n - np.arange(size)
+        ac = ac / norm
         ac = ac / ac[0]
         lim = 0.6 * n  # multiples beyond this are too poorly estimated to count
-        grid = np.arange(ac.size)
-        total = np.zeros(self.lags.size)
-        wsum = np.zeros(self.lags.size)
-        for w, ok, whole, fraction, weight in self._harmonics(lim, ac.size):
-            # np.interp(k * lags, grid, ac) on the whole-frame grid, as np.interp computes it where it
-            # counts: slope (over one frame) times the fraction, plus the value at the frame below
-            at = (ac[whole + 1] - ac[whole]) * fraction + ac[whole] if ac.size > 1 else np.full(whole.size, ac[0])
-            total += np.where(ok, w * at, 0.0)
-            wsum += weight
-        scores = np.where(wsum > 0, total / np.maximum(wsum, 1e-12), 0.0) * self.prior
+        whole, after, fraction, weight, counted, wsum, grid = self._harmonics(lim, size)
+        # np.interp(k * lags, grid, ac) on the whole-frame grid, as np.interp computes it where it counts:
+        # slope (over one frame) times the fraction, plus the value at the frame below
+        low = ac[whole]
+        at = (ac[after] - low) * fraction + low if size > 1 else low
+        parts = weight * at
+        total = parts[0].copy()
+        for row in parts[1:]:  # one harmonic after another, as the weights were summed
+            total += row
+        scores = np.where(counted, total / wsum, 0.0) * self.prior
         i = int(np.argmax(scores))
         lag = self.lags[i]
         if 0 < i < scores.size - 1:
@@ -222,10 +243,8 @@ class TempoEstimator:
             if den < 0:
                 lag += 0.5 * 0.5 * (y0 - y2) / den
         # a pulse faster than max_bpm that is as strong as the chosen beat
-        lo = max(2.0, self.min_lag / 2.0)
-        fast_lags = np.arange(math.ceil(lo), math.floor(self.min_lag * 0.95) + 1)
         best_ac = float(np.interp(lag, grid, ac))
-        fast_ac = float(np.max(ac[fast_lags.astype(int)])) if fast_lags.size else 0.0
+        fast_ac = float(np.max(ac[self._fast_lags])) if self._fast_lags.size else 0.0
         fast = fast_ac >= 0.3 and fast_ac >= 0.85 * best_ac
         return TempoEstimate(self.frame_rate, ac, self.lags, scores, float(lag), float(scores[i]), bool(fast))
 

@@ -235,6 +235,9 @@ class CausalBeatTracker:
         """
         x = mono_samples(block)
         envelope = self.envelope
+        if envelope.n_samples + x.size < self._due_sample:
+            envelope.append(x)  # nothing falls due within this block
+            return
         pos = 0
         while pos < x.size:
             take = min(x.size - pos, max(self._due_sample - envelope.n_samples, 1))
