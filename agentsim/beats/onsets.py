@@ -43,9 +43,10 @@ def waveform_onset(x: np.ndarray, sample_rate: int, first_sample: int = 0) -> fl
     """
     sr = sample_rate
     blk = max(int(round(sr * 0.0005)), 1)
-    y = np.diff(x)
+    y = x[1:] - x[:-1]  # np.diff(x)
     m = (y.size // blk) * blk
-    e = np.sqrt(np.mean(y[:m].reshape(-1, blk).astype(np.float64) ** 2, axis=1))
+    z = y[:m].reshape(-1, blk).astype(np.float64)
+    e = np.sqrt(np.add.reduce(z * z, axis=1) / blk)  # the RMS of each block, as np.mean(z ** 2, axis=1)
     pk = int(np.argmax(e))
     if pk == 0 or e[pk] <= 0:
         return float("nan")

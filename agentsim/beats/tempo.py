@@ -158,7 +158,7 @@ class TempoEstimator:
         self._norm_cache: dict[int, np.ndarray] = {}
         # lags of a pulse faster than max_bpm
         lo = max(2.0, self.min_lag / 2.0)
-        self._fast_lags = np.arange(math.ceil(lo), math.floor(self.min_lag * 0.95) + 1).astype(np.intp)
+        self._fast_lags = (math.ceil(lo), math.floor(self.min_lag * 0.95) + 1)  # first and stop
 
     def _harmonics(self, limit: float, size: int) -> tuple:
         """The harmonics' multiples of the candidate lags that count (below ``limit`` and inside the
@@ -180,7 +180,7 @@ class TempoEstimator:
             whole = np.stack(wholes)
             counted = wsum > 0
             found = (whole, np.minimum(whole + 1, size - 1), np.stack(fractions), np.stack(weights), counted,
-                     np.maximum(wsum, 1e-12), np.arange(size))
+                     np.maximum(wsum, 1e-12))
             if len(self._grid_cache) > 64:
                 self._grid_cache.clear()
             self._grid_cache[key] = found
@@ -206,7 +206,7 @@ class TempoEstimator:
         """
         o = np.asarray(onset_strength, np.float64)
         n = o.size
-        mean = o.mean() if n else 0.0
+        mean = np.add.reduce(o) / n if n else 0.0  # o.mean()
         o = o - mean
         energy = float(np.dot(o, o))
         max_needed = int(self.harmonic_weights.size * self.max_lag) + 2
@@ -225,7 +225,7 @@ class TempoEstimator:
         ac = ac / norm
         ac = ac / ac[0]
         lim = 0.6 * n  # multiples beyond this are too poorly estimated to count
-        whole, after, fraction, weight, counted, wsum, grid = self._harmonics(lim, size)
+        whole, after, fraction, weight, counted, wsum = self._harmonics(lim, size)
         # np.interp(k * lags, grid, ac) on the whole-frame grid, as np.interp computes it where it counts:
         # slope (over one frame) times the fraction, plus the value at the frame below
         low = ac[whole]
@@ -243,8 +243,12 @@ class TempoEstimator:
             if den < 0:
                 lag += 0.5 * 0.5 * (y0 - y2) / den
         # a pulse faster than max_bpm that is as strong as the chosen beat
-        best_ac = float(np.interp(lag, grid, ac))
-        fast_ac = float(np.max(ac[self._fast_lags])) if self._fast_lags.size else 0.0
+        # np.interp(lag, grid, ac), as np.interp computes it
+        j = int(lag)
+        a0 = float(ac[j])
+        best_ac = a0 if j == lag or j + 1 >= size else (float(ac[j + 1]) - a0) * (lag - j) + a0
+        first, stop = self._fast_lags
+        fast_ac = float(ac[first:stop].max()) if stop > first else 0.0
         fast = fast_ac >= 0.3 and fast_ac >= 0.85 * best_ac
         return TempoEstimate(self.frame_rate, ac, self.lags, scores, float(lag), float(scores[i]), bool(fast))
 

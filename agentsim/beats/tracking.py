@@ -296,7 +296,7 @@ class CausalBeatTracker:
         envelope = self.envelope
         follower = self.follower
         strength = envelope.values(envelope.n_frames - self._tempo_frames, envelope.n_frames)
-        self.picker.recent_mean = float(strength.mean()) if strength.size else 0.0
+        self.picker.recent_mean = float(np.add.reduce(strength) / strength.size) if strength.size else 0.0
         estimate = self.tempo.estimate(strength)
         self._estimate = estimate
         if estimate is None:
