@@ -242,6 +242,26 @@ class BeatFollower:
             return self._cache[:horizon_beats].copy()
         return self._cache[k : k + horizon_beats].copy()
 
+    def predict_until(self, now: float, horizon_beats: int = 4) -> tuple[np.ndarray, float]:
+        """:meth:`predict` at ``now``, and a time (s) up to which later calls give the same predictions
+        and change nothing, as long as the follower is not changed (advanced, restarted, ...) meanwhile.
+
+        Returns
+        -------
+        beats : numpy.ndarray
+            As :meth:`predict` returns them.
+        until : float
+            Any later ``now`` not after this time gets ``beats`` again (infinity when nothing is predicted).
+        """
+        beats = self.predict(now, horizon_beats)
+        if beats.size == 0:
+            return beats, math.inf
+        cache = self._cache_list
+        k = bisect.bisect_left(cache, now)
+        # a later time keeps the first beat while it is not after it, and the cache while it reaches
+        # two periods beyond the time (less a margin for the rounding of that sum)
+        return beats, min(cache[k], cache[-1] - 2 * self._cache_key[2] - 1e-9)
+
     def extrapolate(self, state: np.ndarray, now: float, count: int) -> np.ndarray:
         """Beat times from ``state`` onwards: the first ``count`` at or after ``now`` (seconds)."""
         t, p, a = float(state[0]), float(state[1]), float(state[2])

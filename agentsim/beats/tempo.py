@@ -161,26 +161,20 @@ class TempoEstimator:
         self._fast_lags = (math.ceil(lo), math.floor(self.min_lag * 0.95) + 1)  # first and stop
 
     def _harmonics(self, limit: float, size: int) -> tuple:
-        """The harmonics' multiples of the candidate lags that count (below ``limit`` and inside the
-        autocorrelation of ``size`` lags), stacked one harmonic a row: their whole frames (and the frames
-        after them), fractions and weights (0 where a multiple does not count), and the candidates'
-        total weights (made once per ``limit`` and ``size``)."""
+        """The multiples ``k * lags`` of the candidate lags, one harmonic a row, with their weights (0 for
+        a multiple that does not count: at or beyond ``limit`` or the last of ``size`` lags), which
+        candidates have any weight, their total weights, and the lag grid (made once per ``limit`` and
+        ``size``)."""
         key = (limit, size)
         found = self._grid_cache.get(key)
         if found is None:
-            wholes, fractions, weights = [], [], []
+            weights = []
             wsum = np.zeros(self.lags.size)
             for w, kl in self._multiples:
-                ok = kl < min(limit, size - 1)
-                whole = np.clip(np.floor(kl), 0, max(size - 2, 0)).astype(np.intp)
-                wholes.append(whole)
-                fractions.append(kl - whole)
-                weights.append(np.where(ok, w, 0.0))
+                weights.append(np.where(kl < min(limit, size - 1), w, 0.0))
                 wsum += weights[-1]
-            whole = np.stack(wholes)
-            counted = wsum > 0
-            found = (whole, np.minimum(whole + 1, size - 1), np.stack(fractions), np.stack(weights), counted,
-                     np.maximum(wsum, 1e-12))
+            multiples = np.stack([kl for _, kl in self._multiples])
+            found = (multiples, np.stack(weights), wsum > 0, np.maximum(wsum, 1e-12), np.arange(size))
             if len(self._grid_cache) > 64:
                 self._grid_cache.clear()
             self._grid_cache[key] = found
@@ -225,11 +219,8 @@ class TempoEstimator:
         ac = ac / norm
         ac = ac / ac[0]
         lim = 0.6 * n  # multiples beyond this are too poorly estimated to count
-        whole, after, fraction, weight, counted, wsum = self._harmonics(lim, size)
-        # np.interp(k * lags, grid, ac) on the whole-frame grid, as np.interp computes it where it counts:
-        # slope (over one frame) times the fraction, plus the value at the frame below
-        low = ac[whole]
-        at = (ac[after] - low) * fraction + low if size > 1 else low
+        multiples, weight, counted, wsum, grid = self._harmonics(lim, size)
+        at = np.interp(multiples, grid, ac)  # (a multiple that does not count has no weight)
         parts = weight * at
         total = parts[0].copy()
         for row in parts[1:]:  # one harmonic after another, as the weights were summed

@@ -262,7 +262,55 @@ class CausalBeatTracker:
         numpy.ndarray
             Increasing beat times in seconds, all ``>= time``; empty before the first beat grid.
         """
-        return self.follower.predict(self.time, horizon_beats)
+        return self.follower.predict(self.envelope.n_samples / self.sample_rate, horizon_beats)  # at self.time
+
+    def track(self, audio, block_size: int = 512, horizon_beats: int = 4) -> list[dict]:
+        """Hear ``audio`` block by block, predicting after each block, and return the predictions that changed.
+
+        The same as calling :meth:`process` with each block of ``block_size`` samples and then
+        :meth:`predict`, keeping each prediction that differs from the one before: after a block within
+        which nothing falls due, the predictions are asked for only once they may have changed (the
+        beat follower says until when they hold).
+
+        Parameters
+        ----------
+        audio : array_like
+            Mono samples at ``sample_rate`` (NaNs count as silence).
+        block_size : int
+            Samples per block.
+        horizon_beats : int
+            Beats predicted after each block.
+
+        Returns
+        -------
+        list of dict
+            ``{"t": time, "beats": [...]}`` after each block whose predictions differ from the previous
+            ones (the first block's always), ``time`` being :attr:`time` after that block.
+        """
+        x = mono_samples(audio)
+        envelope = self.envelope
+        follower = self.follower
+        size = max(int(block_size), 1)
+        sample_rate = self.sample_rate
+        updates: list[dict] = []
+        last = None
+        until = -math.inf
+        for a in range(0, x.size, size):
+            block = x[a : a + size]
+            if envelope.n_samples + block.size < self._due_sample:  # as process() does it
+                envelope.append(block)
+                now = envelope.n_samples / sample_rate
+                if now <= until:
+                    continue  # the same predictions as after the block before
+            else:
+                self.process(block)
+                now = envelope.n_samples / sample_rate
+            beats, until = follower.predict_until(now, horizon_beats)
+            beats = beats.tolist()
+            if beats != last:
+                updates.append({"t": now, "beats": beats})
+                last = beats
+        return updates
 
     # ------------------------------------------------------------------ internals
 
