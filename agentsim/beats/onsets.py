@@ -60,16 +60,17 @@ def waveform_onset(x: np.ndarray, sample_rate: int, first_sample: int = 0) -> fl
     # sample-level: the first sample after a quiet stretch that reaches 10 % of the rise
     a = max((k + 1) * blk - int(0.012 * sr), 0)
     q = (k + 1) * blk - int(0.002 * sr)
-    mag = np.abs(y)
     if q - a < blk:
         de = e[k + 1] - e[k]
         frac = (level - e[k]) / de if de > 0 else 1.0
         return (start + (k + frac + 0.5) * blk) / sr
-    floor_s = float(mag[a:q].max())
-    peak_s = float(mag[q : q + int(0.02 * sr)].max())
+    floor_s = float(np.abs(y[a:q]).max())
+    rise = np.abs(y[q : q + int(0.02 * sr)])
+    peak_s = float(rise.max())
     if peak_s <= floor_s:
         return (start + (k + 1) * blk) / sr
-    j = q + int(np.argmax(mag[q:] >= floor_s + 0.1 * (peak_s - floor_s)))
+    # the first sample from q on that reaches the level: no later than the peak, so within the rise
+    j = q + int(np.argmax(rise >= floor_s + 0.1 * (peak_s - floor_s)))
     return (start + j) / sr
 
 

@@ -161,20 +161,25 @@ class TempoEstimator:
         self._fast_lags = (math.ceil(lo), math.floor(self.min_lag * 0.95) + 1)  # first and stop
 
     def _harmonics(self, limit: float, size: int) -> tuple:
-        """The multiples ``k * lags`` of the candidate lags, one harmonic a row, with their weights (0 for
-        a multiple that does not count: at or beyond ``limit`` or the last of ``size`` lags), which
-        candidates have any weight, their total weights, and the lag grid (made once per ``limit`` and
-        ``size``)."""
+        """The harmonics' multiples of the candidate lags, one harmonic a row, on the autocorrelation's
+        grid of ``size`` lags: their whole frames (clipped to the grid), the frames after them and their
+        fractions; their weights (0 for a multiple that does not count: at or beyond ``limit`` or the
+        last lag), which candidates have any weight, and their total weights (made once per ``limit``
+        and ``size``)."""
         key = (limit, size)
         found = self._grid_cache.get(key)
         if found is None:
-            weights = []
+            wholes, fractions, weights = [], [], []
             wsum = np.zeros(self.lags.size)
             for w, kl in self._multiples:
+                whole = np.clip(np.floor(kl), 0, max(size - 2, 0)).astype(np.intp)
+                wholes.append(whole)
+                fractions.append(kl - whole)
                 weights.append(np.where(kl < min(limit, size - 1), w, 0.0))
                 wsum += weights[-1]
-            multiples = np.stack([kl for _, kl in self._multiples])
-            found = (multiples, np.stack(weights), wsum > 0, np.maximum(wsum, 1e-12), np.arange(size))
+            whole = np.stack(wholes)
+            found = (whole, np.minimum(whole + 1, size - 1), np.stack(fractions), np.stack(weights), wsum > 0,
+                     np.maximum(wsum, 1e-12))
             if len(self._grid_cache) > 64:
                 self._grid_cache.clear()
             self._grid_cache[key] = found
@@ -219,8 +224,11 @@ class TempoEstimator:
         ac = ac / norm
         ac = ac / ac[0]
         lim = 0.6 * n  # multiples beyond this are too poorly estimated to count
-        multiples, weight, counted, wsum, grid = self._harmonics(lim, size)
-        at = np.interp(multiples, grid, ac)  # (a multiple that does not count has no weight)
+        whole, after, fraction, weight, counted, wsum = self._harmonics(lim, size)
+        # np.interp(k * lags, grid, ac) on the whole-frame grid, as np.interp computes it where it counts:
+        # slope (over one frame) times the fraction, plus the value at the frame below
+        low = ac[whole]
+        at = (ac[after] - low) * fraction + low
         parts = weight * at
         total = parts[0].copy()
         for row in parts[1:]:  # one harmonic after another, as the weights were summed
