@@ -113,6 +113,8 @@ class BeatFollower:
         self._R_coarse = coarse_noise**2
         rho = self.PERIOD_CHANGE_DECAY
         self._F = np.array([[1.0, 1.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, rho]])
+        self._rho = float(rho)
+        self._q = [float(q_t**2), float(q_p**2), float(q_a**2)]  # the diagonal of _Q
         self.state: np.ndarray | None = None
         self.covariance: np.ndarray | None = None
         self.hit_rate = 0.0
@@ -169,27 +171,42 @@ class BeatFollower:
             expected = t + p
             tol = min(0.2 * p, 0.1)
             # Kalman prediction to the next beat
-            x_pred = self._F @ self.state
-            P_pred = self._F @ self.covariance @ self._F.T + self._Q
+            x_pred, P_pred = self._predict_step()
             z, r, strength = self._observe(expected, tol)
-            S = P_pred[0, 0] + r
+            S = P_pred[0][0] + r
             accept = z is not None and abs(z - x_pred[0]) <= max(4.0 * math.sqrt(S), 0.035)
             if self._cand is not None and self._switch_hypothesis(p, strength if accept else 0.0):
                 continue
             if accept:
-                K = P_pred[:, 0] / S
-                x_pred = x_pred + K * (z - x_pred[0])
-                P_pred = P_pred - np.outer(K, P_pred[0, :])
+                # x + K (z - x_0) and P - K P_0 with the gain K = P[:, 0] / S
+                gain = [row[0] / S for row in P_pred]
+                innovation = z - x_pred[0]
+                x_pred = [x + k * innovation for x, k in zip(x_pred, gain)]
+                first = P_pred[0]
+                P_pred = [[v - k * f for v, f in zip(row, first)] for row, k in zip(P_pred, gain)]
                 self._note_observed(z)
             elif z is not None:
                 self._set_candidate(z, t, p)
             p_min, p_max = self.period_range
             x_pred[1] = min(max(x_pred[1], p_min), p_max)
-            self.state = x_pred
-            self.covariance = P_pred
+            self.state = np.array(x_pred)
+            self.covariance = np.array(P_pred)
             self.hit_rate = 0.75 * self.hit_rate + 0.25 * float(accept)
             self.tempo_bpm = 60.0 / self.state[1]
             self.update_confidence()
+
+    def _predict_step(self) -> tuple[list[float], list[list[float]]]:
+        """The Kalman prediction ``F x`` and ``F P F^T + Q`` of the state and covariance to the next beat,
+        as lists. ``F`` (beat time plus period, period plus change, decayed change) holds only ones,
+        zeros and the decay, so these sums and products are exactly what the matrix products give."""
+        t, p, a = self.state.tolist()
+        rho = self._rho
+        P = self.covariance.tolist()
+        m = [[x + y for x, y in zip(P[0], P[1])], [x + y for x, y in zip(P[1], P[2])], [rho * x for x in P[2]]]
+        cov = [[row[0] + row[1], row[1] + row[2], rho * row[2]] for row in m]
+        for i in range(3):
+            cov[i][i] += self._q[i]
+        return [t + p, p + a, rho * a], cov
 
     def update_confidence(self) -> None:
         """Recompute :attr:`confidence` (module notes); remember the state when confident."""
