@@ -164,8 +164,8 @@ class TempoEstimator:
         """The harmonics' multiples of the candidate lags, one harmonic a row, on the autocorrelation's
         grid of ``size`` lags: their whole frames (clipped to the grid), the frames after them and their
         fractions; their weights (0 for a multiple that does not count: at or beyond ``limit`` or the
-        last lag), which candidates have any weight, and their total weights (made once per ``limit``
-        and ``size``)."""
+        last lag), which candidates have any weight (None: all), and their total weights (made once per
+        ``limit`` and ``size``)."""
         key = (limit, size)
         found = self._grid_cache.get(key)
         if found is None:
@@ -178,8 +178,9 @@ class TempoEstimator:
                 weights.append(np.where(kl < min(limit, size - 1), w, 0.0))
                 wsum += weights[-1]
             whole = np.stack(wholes)
-            found = (whole, np.minimum(whole + 1, size - 1), np.stack(fractions), np.stack(weights), wsum > 0,
-                     np.maximum(wsum, 1e-12))
+            counted = wsum > 0
+            found = (whole, np.minimum(whole + 1, size - 1), np.stack(fractions), np.stack(weights),
+                     None if counted.all() else counted, np.maximum(wsum, 1e-12))
             if len(self._grid_cache) > 64:
                 self._grid_cache.clear()
             self._grid_cache[key] = found
@@ -229,11 +230,9 @@ class TempoEstimator:
         # slope (over one frame) times the fraction, plus the value at the frame below
         low = ac[whole]
         at = (ac[after] - low) * fraction + low
-        parts = weight * at
-        total = parts[0].copy()
-        for row in parts[1:]:  # one harmonic after another, as the weights were summed
-            total += row
-        scores = np.where(counted, total / wsum, 0.0) * self.prior
+        # the harmonics added one after another (a reduction over the first axis), as the weights were
+        total = np.add.reduce(weight * at, axis=0)
+        scores = total / wsum * self.prior if counted is None else np.where(counted, total / wsum, 0.0) * self.prior
         i = int(np.argmax(scores))
         lag = self.lags[i]
         if 0 < i < scores.size - 1:
