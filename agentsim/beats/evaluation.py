@@ -205,6 +205,10 @@ def track_file(
 ) -> dict:
     """Run a tracker over audio block by block and record its predictions.
 
+    A tracker with a ``track`` method (:meth:`~agentsim.beats.tracking.CausalBeatTracker.track`) records
+    them itself: the same updates as asking for predictions after every block, without asking while
+    they cannot have changed.
+
     Parameters
     ----------
     source : str or path-like or numpy.ndarray

@@ -143,6 +143,6 @@ class OnsetPicker:
         d = 0.5 * (y0 - y2) / den if den < 0 else 0.0
         t_coarse = float(envelope.frame_time(i0 + k + max(min(d, 0.5), -0.5))) - self.peak_bias
         fine = self.onset_near(t_coarse)
-        if np.isfinite(fine) and abs(fine - t_coarse) < 0.03:
+        if math.isfinite(fine) and abs(fine - t_coarse) < 0.03:
             return fine, True, float(peak)
         return t_coarse, False, float(peak)

@@ -387,7 +387,7 @@ class CausalBeatTracker:
         while t_beat > self.time - 0.06 - self.envelope.latency:
             t_beat -= period
         fine = self.picker.onset_near(t_beat)
-        if np.isfinite(fine) and abs(fine - t_beat) < 0.04:
+        if math.isfinite(fine) and abs(fine - t_beat) < 0.04:
             t_beat = fine
         self._period_bad = 0
         self._phase_bad = 0
