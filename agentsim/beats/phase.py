@@ -91,12 +91,12 @@ def comb_phase(onset_strength: np.ndarray, lag: float, start: int = 0) -> CombPh
     """
     o = onset_strength
     end, j, w = _teeth(o, lag, start)
-    phases = np.arange(0.0, lag, PHASE_STEP)
+    phases = _grid(math.ceil(lag / PHASE_STEP)) * PHASE_STEP  # np.arange(0.0, lag, PHASE_STEP)
     pos = end - phases[:, None] - j[None, :] * lag - start  # positions in o
     vals = np.interp(pos, _grid(o.size), o, left=0.0)
     score = vals @ w
     k = int(np.argmax(score))
-    return CombPhase(float(end - phases[k]), float(score[k]), float(score.mean()))
+    return CombPhase(float(end - phases[k]), float(score[k]), float(np.add.reduce(score) / score.size))
 
 
 def comb_score(onset_strength: np.ndarray, lag: float, beat_frame: float, start: int = 0) -> float:
