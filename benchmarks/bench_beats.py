@@ -8,8 +8,8 @@ processing time over audio time; the target is at most 0.0015 for the causal tra
 (22.05 and 44.1 kHz by default), with its F-measure and mean absolute error as they were. The causal
 tracker's time is that of ``track_file``, which lets the tracker record its updates
 (:meth:`~agentsim.beats.tracking.CausalBeatTracker.track`: the same updates as predicting after every
-block, without asking while they cannot have changed; a live caller asking after every block pays about
-one microsecond more per block). When aubio is
+block, without asking while they cannot have changed; a live caller asking after every block adds
+0.0001-0.0002 to the real-time factor). When aubio is
 importable (``pip install aubio``; a comparison here only, not a dependency of the package), its causal
 beat tracker runs beside it on the same renders, in the same process: its predictions are its last beat
 plus whole periods.
