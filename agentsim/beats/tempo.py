@@ -153,8 +153,8 @@ class TempoEstimator:
         self.prior = np.exp(-0.5 * (octaves / float(prior_octaves)) ** 2)
         self.harmonic_weights = np.array(HARMONIC_WEIGHTS)
         # the multiples of the candidate lags, split into whole frames and a fraction (see _harmonics)
-        self._multiples = [(float(w), k * self.lags) for k, w in enumerate(self.harmonic_weights, start=1)]
-        self._grid_cache: dict[tuple[float, int], tuple] = {}
+        self._multiple_rows = np.stack([k * self.lags for k in range(1, self.harmonic_weights.size + 1)])
+        self._grid_cache: dict = {}  # by (limit, size), and the grid part by size
         self._norm_cache: dict[int, np.ndarray] = {}
         # lags of a pulse faster than max_bpm
         lo = max(2.0, self.min_lag / 2.0)
@@ -163,24 +163,20 @@ class TempoEstimator:
     def _harmonics(self, limit: float, size: int) -> tuple:
         """The harmonics' multiples of the candidate lags, one harmonic a row, on the autocorrelation's
         grid of ``size`` lags: their whole frames (clipped to the grid), the frames after them and their
-        fractions; their weights (0 for a multiple that does not count: at or beyond ``limit`` or the
-        last lag), which candidates have any weight (None: all), and their total weights (made once per
-        ``limit`` and ``size``)."""
+        fractions (made once per ``size``); their weights (0 for a multiple that does not count: at or
+        beyond ``limit`` or the last lag), which candidates have any weight (None: all), and their total
+        weights (made once per ``limit`` and ``size``)."""
         key = (limit, size)
         found = self._grid_cache.get(key)
         if found is None:
-            wholes, fractions, weights = [], [], []
-            wsum = np.zeros(self.lags.size)
-            for w, kl in self._multiples:
-                whole = np.clip(np.floor(kl), 0, max(size - 2, 0)).astype(np.intp)
-                wholes.append(whole)
-                fractions.append(kl - whole)
-                weights.append(np.where(kl < min(limit, size - 1), w, 0.0))
-                wsum += weights[-1]
-            whole = np.stack(wholes)
+            grid = self._grid_cache.get(size)
+            if grid is None:
+                whole = np.clip(np.floor(self._multiple_rows), 0, max(size - 2, 0)).astype(np.intp)
+                grid = self._grid_cache[size] = (whole, np.minimum(whole + 1, size - 1), self._multiple_rows - whole)
+            weight = np.where(self._multiple_rows < min(limit, size - 1), self.harmonic_weights[:, None], 0.0)
+            wsum = np.add.reduce(weight, axis=0)  # one harmonic after another
             counted = wsum > 0
-            found = (whole, np.minimum(whole + 1, size - 1), np.stack(fractions), np.stack(weights),
-                     None if counted.all() else counted, np.maximum(wsum, 1e-12))
+            found = (*grid, weight, None if counted.all() else counted, np.maximum(wsum, 1e-12))
             if len(self._grid_cache) > 64:
                 self._grid_cache.clear()
             self._grid_cache[key] = found
