@@ -5,7 +5,11 @@ ramp of +10 % over 16 bars (from bar 4) and +-2 % smooth rubato, about 60 s long
 hears it block by block; predictions made at least 200 ms before each true beat are scored after the
 first 8 seconds (:func:`agentsim.beats.evaluation.evaluate_predictions`). The real-time factor is
 processing time over audio time; the target is at most 0.0015 for the causal tracker at every sample rate
-(22.05 and 44.1 kHz by default), with its F-measure and mean absolute error as they were. When aubio is
+(22.05 and 44.1 kHz by default), with its F-measure and mean absolute error as they were. The causal
+tracker's time is that of ``track_file``, which lets the tracker record its updates
+(:meth:`~agentsim.beats.tracking.CausalBeatTracker.track`: the same updates as predicting after every
+block, without asking while they cannot have changed; a live caller asking after every block adds
+0.0001-0.0002 to the real-time factor). When aubio is
 importable (``pip install aubio``; a comparison here only, not a dependency of the package), its causal
 beat tracker runs beside it on the same renders, in the same process: its predictions are its last beat
 plus whole periods.
@@ -69,9 +73,9 @@ def aubio_run(audio: np.ndarray, sample_rate: int, block_size: int, horizon_beat
         if period > 0:
             beat = float(tracker.get_last_s())
             k = max(int(np.ceil((now - beat) / period)), 0)
-            pred = beat + period * np.arange(k, k + horizon_beats)
-            if last is None or not np.array_equal(pred, last):
-                updates.append({"t": now, "beats": pred.tolist()})
+            pred = (beat + period * np.arange(k, k + horizon_beats)).tolist()
+            if pred != last:  # compared as track_file compares the causal tracker's predictions
+                updates.append({"t": now, "beats": pred})
                 last = pred
     wall = time.perf_counter() - t0
     return {"tracker": "aubio", "audio_seconds": x.size / sample_rate, "wall_seconds": wall,

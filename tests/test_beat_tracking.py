@@ -126,6 +126,43 @@ def test_same_input_same_predictions(render_34):
     assert a["updates"] == b["updates"]
 
 
+def _block_by_block(tracker, audio, block, horizon=4):
+    updates, last = [], None
+    for a in range(0, audio.size, block):
+        tracker.process(audio[a : a + block])
+        pred = tracker.predict(horizon).tolist()
+        if pred != last:
+            updates.append({"t": tracker.time, "beats": pred})
+            last = pred
+    return updates
+
+
+@pytest.mark.parametrize("block", [512, 700, 4096])
+def test_track_gives_the_updates_of_process_and_predict(render_34, block):
+    x = render_34.audio.copy()
+    x[4 * SR : 4 * SR + 3000] = np.nan  # silence as NaNs, a lost grid and a new one
+    x[12 * SR : 13 * SR] = 0.0
+    want = _block_by_block(CausalBeatTracker(SR), x, block)
+    got = CausalBeatTracker(SR).track(x, block)
+    assert len(want) > 50 and got == want
+    # and track_file (which uses track) records the same updates
+    assert track_file(x, "causal", block, sample_rate=SR)["updates"] == want
+
+
+def test_predict_until_holds_until_then(render_44):
+    tr = CausalBeatTracker(SR)
+    n = int(12 * SR)
+    tr.process(render_44.audio[:n])
+    follower = tr.follower
+    beats, until = follower.predict_until(tr.time, 4)
+    assert beats.size == 4 and tr.time < until <= beats[0]
+    for t in np.linspace(tr.time, until, 50):
+        np.testing.assert_array_equal(follower.predict(float(t), 4), beats)
+    # past the first predicted beat, the predictions move on
+    assert follower.predict(float(beats[0]) + 1e-6, 4)[0] == beats[1]
+    assert CausalBeatTracker(SR).follower.predict_until(0.0, 4)[1] == math.inf
+
+
 @pytest.mark.parametrize("rate", [16000, 48000])
 def test_other_sample_rates(render_44, rate):
     r = render_44

@@ -24,6 +24,8 @@ import numpy as np
 
 __all__ = ["mono_samples", "EnvelopeSource", "SpectralFluxEnvelope", "ArrayEnvelope"]
 
+_FLOAT32 = np.dtype(np.float32)
+
 
 def mono_samples(block) -> np.ndarray:
     """Mono float32 samples with NaN and infinities replaced by zeros.
@@ -31,13 +33,17 @@ def mono_samples(block) -> np.ndarray:
     A 2-D block is taken as ``(samples, channels)`` (or ``(channels, samples)`` when its first axis is
     shorter than 9) and averaged over channels.
     """
-    x = np.asarray(block)
-    if x.ndim == 2:
-        x = x.mean(axis=0 if x.shape[0] < 9 and x.shape[1] > x.shape[0] else 1)
-    elif x.ndim != 1:
-        x = x.reshape(-1)
-    x = x.astype(np.float32, copy=False)
-    if not np.isfinite(x).all():
+    x = block
+    if type(x) is not np.ndarray or x.ndim != 1 or x.dtype != _FLOAT32:
+        x = np.asarray(block)
+        if x.ndim == 2:
+            x = x.mean(axis=0 if x.shape[0] < 9 and x.shape[1] > x.shape[0] else 1)
+        elif x.ndim != 1:
+            x = x.reshape(-1)
+        x = x.astype(np.float32, copy=False)
+    # a NaN or an infinity makes the sum of squares non-finite (as does a sum too large for float32:
+    # then the samples are checked one by one)
+    if not math.isfinite(x.dot(x)) and not np.isfinite(x).all():
         x = np.nan_to_num(x, nan=0.0, posinf=0.0, neginf=0.0)
     return x
 
@@ -185,10 +191,14 @@ class SpectralFluxEnvelope:
 
     def frame_time(self, index) -> np.ndarray | float:
         """Time in seconds of frame ``index`` (absolute index; scalars or arrays)."""
+        if isinstance(index, (int, float)):  # the same arithmetic on one number
+            return (float(index) * self.hop + self.n_fft / 2) / self.sample_rate
         return (np.asarray(index, np.float64) * self.hop + self.n_fft / 2) / self.sample_rate
 
     def frame_index(self, time) -> np.ndarray | float:
         """Fractional absolute frame index at ``time`` seconds (inverse of :meth:`frame_time`)."""
+        if isinstance(time, (int, float)):  # the same arithmetic on one number
+            return (float(time) * self.sample_rate - self.n_fft / 2) / self.hop
         return (np.asarray(time, np.float64) * self.sample_rate - self.n_fft / 2) / self.hop
 
     @property
@@ -242,15 +252,20 @@ class SpectralFluxEnvelope:
         if count <= 0:
             return 0
         a = first * self.hop - self._raw_start
-        base = self._raw[a:]
-        stride = base.strides[0]
-        frames = np.lib.stride_tricks.as_strided(base, (count, self.n_fft), (self.hop * stride, stride), writeable=False)
-        spec = np.abs(np.fft.rfft(frames * self.window, axis=1)).astype(np.float32)
-        logmel = np.log1p(100.0 * (spec @ self.mel_t))
-        prev = logmel[:1] if self._prev is None else self._prev[None, :]
-        diff = np.diff(np.concatenate([prev, logmel]), axis=0)
-        self._prev = logmel[-1]
-        self._append(np.maximum(diff, 0.0).sum(axis=1))
+        itemsize = self._raw.itemsize
+        # frame k is _raw[a + k * hop : a + k * hop + n_fft], a strided view
+        frames = np.ndarray((count, self.n_fft), np.float32, buffer=self._raw, offset=a * itemsize,
+                            strides=(self.hop * itemsize, itemsize))
+        spec = np.abs(np.fft.rfft(frames * self.window, axis=1)).astype(np.float32, copy=False)
+        mel = spec @ self.mel_t
+        mel *= 100.0
+        logmel = np.log1p(mel, out=mel)
+        diff = np.empty_like(logmel)
+        np.subtract(logmel[0], logmel[0] if self._prev is None else self._prev, out=diff[0])
+        np.subtract(logmel[1:], logmel[:-1], out=diff[1:])
+        self._prev = logmel[-1].copy()
+        np.maximum(diff, 0.0, out=diff)
+        self._append(diff.sum(axis=1))
         return count
 
     def push(self, x: np.ndarray) -> int:

@@ -205,6 +205,10 @@ def track_file(
 ) -> dict:
     """Run a tracker over audio block by block and record its predictions.
 
+    A tracker with a ``track`` method (:meth:`~agentsim.beats.tracking.CausalBeatTracker.track`) records
+    them itself: the same updates as asking for predictions after every block, without asking while
+    they cannot have changed.
+
     Parameters
     ----------
     source : str or path-like or numpy.ndarray
@@ -245,12 +249,15 @@ def track_file(
         block_size = max(int(block_size), 1)
         last = None
         t0 = _time.perf_counter()
-        for a in range(0, audio.size, block_size):
-            tracker.process(audio[a : a + block_size])
-            pred = tracker.predict(horizon_beats)
-            if last is None or pred.size != last.size or not np.array_equal(pred, last):
-                updates.append({"t": tracker.time, "beats": pred.tolist()})
-                last = pred
+        if hasattr(tracker, "track"):  # the same updates, asked for only when they may change
+            updates = tracker.track(audio, block_size, horizon_beats)
+        else:
+            for a in range(0, audio.size, block_size):
+                tracker.process(audio[a : a + block_size])
+                pred = tracker.predict(horizon_beats).tolist()
+                if pred != last:  # (a NaN differs from every number, itself too, as in np.array_equal)
+                    updates.append({"t": tracker.time, "beats": pred})
+                    last = pred
         wall = _time.perf_counter() - t0
     return {
         "tracker": tracker_name,

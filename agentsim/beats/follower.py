@@ -30,6 +30,7 @@ Prediction
 
 from __future__ import annotations
 
+import bisect
 import math
 from typing import Callable
 
@@ -112,6 +113,8 @@ class BeatFollower:
         self._R_coarse = coarse_noise**2
         rho = self.PERIOD_CHANGE_DECAY
         self._F = np.array([[1.0, 1.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, rho]])
+        self._rho = float(rho)
+        self._q = [float(q_t**2), float(q_p**2), float(q_a**2)]  # the diagonal of _Q
         self.state: np.ndarray | None = None
         self.covariance: np.ndarray | None = None
         self.hit_rate = 0.0
@@ -121,6 +124,7 @@ class BeatFollower:
         self._cand = None  # (rejected salient onset, beat before it, time it can be judged)
         self._cache_key = None
         self._cache = np.zeros(0)
+        self._cache_list: list[float] = []  # the same beat times, for bisection
         self.confidence = 0.0
         self.tempo_bpm = float("nan")
         self.beats_observed: list[float] = []
@@ -167,27 +171,42 @@ class BeatFollower:
             expected = t + p
             tol = min(0.2 * p, 0.1)
             # Kalman prediction to the next beat
-            x_pred = self._F @ self.state
-            P_pred = self._F @ self.covariance @ self._F.T + self._Q
+            x_pred, P_pred = self._predict_step()
             z, r, strength = self._observe(expected, tol)
-            S = P_pred[0, 0] + r
+            S = P_pred[0][0] + r
             accept = z is not None and abs(z - x_pred[0]) <= max(4.0 * math.sqrt(S), 0.035)
             if self._cand is not None and self._switch_hypothesis(p, strength if accept else 0.0):
                 continue
             if accept:
-                K = P_pred[:, 0] / S
-                x_pred = x_pred + K * (z - x_pred[0])
-                P_pred = P_pred - np.outer(K, P_pred[0, :])
+                # x + K (z - x_0) and P - K P_0 with the gain K = P[:, 0] / S
+                gain = [row[0] / S for row in P_pred]
+                innovation = z - x_pred[0]
+                x_pred = [x + k * innovation for x, k in zip(x_pred, gain)]
+                first = P_pred[0]
+                P_pred = [[v - k * f for v, f in zip(row, first)] for row, k in zip(P_pred, gain)]
                 self._note_observed(z)
             elif z is not None:
                 self._set_candidate(z, t, p)
             p_min, p_max = self.period_range
             x_pred[1] = min(max(x_pred[1], p_min), p_max)
-            self.state = x_pred
-            self.covariance = P_pred
+            self.state = np.array(x_pred)
+            self.covariance = np.array(P_pred)
             self.hit_rate = 0.75 * self.hit_rate + 0.25 * float(accept)
             self.tempo_bpm = 60.0 / self.state[1]
             self.update_confidence()
+
+    def _predict_step(self) -> tuple[list[float], list[list[float]]]:
+        """The Kalman prediction ``F x`` and ``F P F^T + Q`` of the state and covariance to the next beat,
+        as lists. ``F`` (beat time plus period, period plus change, decayed change) holds only ones,
+        zeros and the decay, so these sums and products are exactly what the matrix products give."""
+        t, p, a = self.state.tolist()
+        rho = self._rho
+        P = self.covariance.tolist()
+        m = [[x + y for x, y in zip(P[0], P[1])], [x + y for x, y in zip(P[1], P[2])], [rho * x for x in P[2]]]
+        cov = [[row[0] + row[1], row[1] + row[2], rho * row[2]] for row in m]
+        for i in range(3):
+            cov[i][i] += self._q[i]
+        return [t + p, p + a, rho * a], cov
 
     def update_confidence(self) -> None:
         """Recompute :attr:`confidence` (module notes); remember the state when confident."""
@@ -227,16 +246,38 @@ class BeatFollower:
             state = self.last_confident
         if state is None or horizon_beats <= 0:
             return np.zeros(0)
-        key = (id(state), float(state[0]), float(state[1]), float(state[2]))
-        if key != self._cache_key or self._cache.size == 0 or self._cache[-1] < now + 2 * state[1]:
+        key = (id(state), *state.tolist())
+        cache = self._cache_list
+        if key != self._cache_key or not cache or cache[-1] < now + 2 * key[2]:
             self._cache = self.extrapolate(state, now, horizon_beats + 8)
+            self._cache_list = cache = self._cache.tolist()
             self._cache_key = key
-        k = int(np.searchsorted(self._cache, now, side="left"))
-        out = self._cache[k : k + horizon_beats]
-        if out.size < horizon_beats:
+        k = bisect.bisect_left(cache, now)
+        if k + horizon_beats > len(cache):
             self._cache = self.extrapolate(state, now, horizon_beats + 8)
-            out = self._cache[:horizon_beats]
-        return out.copy()
+            self._cache_list = self._cache.tolist()
+            return self._cache[:horizon_beats].copy()
+        return self._cache[k : k + horizon_beats].copy()
+
+    def predict_until(self, now: float, horizon_beats: int = 4) -> tuple[np.ndarray, float]:
+        """:meth:`predict` at ``now``, and a time (s) up to which later calls give the same predictions
+        and change nothing, as long as the follower is not changed (advanced, restarted, ...) meanwhile.
+
+        Returns
+        -------
+        beats : numpy.ndarray
+            As :meth:`predict` returns them.
+        until : float
+            Any later ``now`` not after this time gets ``beats`` again (infinity when nothing is predicted).
+        """
+        beats = self.predict(now, horizon_beats)
+        if beats.size == 0:
+            return beats, math.inf
+        cache = self._cache_list
+        k = bisect.bisect_left(cache, now)
+        # a later time keeps the first beat while it is not after it, and the cache while it reaches
+        # two periods beyond the time (less a margin for the rounding of that sum)
+        return beats, min(cache[k], cache[-1] - 2 * self._cache_key[2] - 1e-9)
 
     def extrapolate(self, state: np.ndarray, now: float, count: int) -> np.ndarray:
         """Beat times from ``state`` onwards: the first ``count`` at or after ``now`` (seconds)."""

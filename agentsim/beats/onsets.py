@@ -43,9 +43,10 @@ def waveform_onset(x: np.ndarray, sample_rate: int, first_sample: int = 0) -> fl
     """
     sr = sample_rate
     blk = max(int(round(sr * 0.0005)), 1)
-    y = np.diff(x)
+    y = x[1:] - x[:-1]  # np.diff(x)
     m = (y.size // blk) * blk
-    e = np.sqrt(np.mean(y[:m].reshape(-1, blk).astype(np.float64) ** 2, axis=1))
+    z = y[:m].reshape(-1, blk).astype(np.float64)
+    e = np.sqrt(np.add.reduce(z * z, axis=1) / blk)  # the RMS of each block, as np.mean(z ** 2, axis=1)
     pk = int(np.argmax(e))
     if pk == 0 or e[pk] <= 0:
         return float("nan")
@@ -59,16 +60,17 @@ def waveform_onset(x: np.ndarray, sample_rate: int, first_sample: int = 0) -> fl
     # sample-level: the first sample after a quiet stretch that reaches 10 % of the rise
     a = max((k + 1) * blk - int(0.012 * sr), 0)
     q = (k + 1) * blk - int(0.002 * sr)
-    mag = np.abs(y)
     if q - a < blk:
         de = e[k + 1] - e[k]
         frac = (level - e[k]) / de if de > 0 else 1.0
         return (start + (k + frac + 0.5) * blk) / sr
-    floor_s = float(mag[a:q].max())
-    peak_s = float(mag[q : q + int(0.02 * sr)].max())
+    floor_s = float(np.abs(y[a:q]).max())
+    rise = np.abs(y[q : q + int(0.02 * sr)])
+    peak_s = float(rise.max())
     if peak_s <= floor_s:
         return (start + (k + 1) * blk) / sr
-    j = q + int(np.argmax(mag[q:] >= floor_s + 0.1 * (peak_s - floor_s)))
+    # the first sample from q on that reaches the level: no later than the peak, so within the rise
+    j = q + int(np.argmax(rise >= floor_s + 0.1 * (peak_s - floor_s)))
     return (start + j) / sr
 
 
@@ -141,6 +143,6 @@ class OnsetPicker:
         d = 0.5 * (y0 - y2) / den if den < 0 else 0.0
         t_coarse = float(envelope.frame_time(i0 + k + max(min(d, 0.5), -0.5))) - self.peak_bias
         fine = self.onset_near(t_coarse)
-        if np.isfinite(fine) and abs(fine - t_coarse) < 0.03:
+        if math.isfinite(fine) and abs(fine - t_coarse) < 0.03:
             return fine, True, float(peak)
         return t_coarse, False, float(peak)

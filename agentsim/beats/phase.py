@@ -41,12 +41,34 @@ class CombPhase(NamedTuple):
     mean_score: float
 
 
+_TEETH: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # tooth numbers and weights by number of teeth
+_GRIDS: dict[int, np.ndarray] = {}  # frame indices 0 .. size - 1 by size
+
+
 def _teeth(onset_strength: np.ndarray, lag: float, start: int) -> tuple[int, np.ndarray, np.ndarray]:
     """Index of the last frame, tooth numbers ``0 .. n_beats - 1`` and their weights."""
     end = start + onset_strength.size - 1
     n_beats = max(int((end - start) / lag), 1)
-    j = np.arange(n_beats)
-    return end, j, COMB_DECAY**j
+    found = _TEETH.get(n_beats)
+    if found is None:
+        if len(_TEETH) > 256:
+            _TEETH.clear()
+        j = np.arange(n_beats)
+        w = COMB_DECAY**j
+        j.flags.writeable = w.flags.writeable = False
+        found = _TEETH[n_beats] = (j, w)
+    return end, found[0], found[1]
+
+
+def _grid(size: int) -> np.ndarray:
+    """``np.arange(size)``, made once per size."""
+    found = _GRIDS.get(size)
+    if found is None:
+        if len(_GRIDS) > 256:
+            _GRIDS.clear()
+        found = _GRIDS[size] = np.arange(size)
+        found.flags.writeable = False
+    return found
 
 
 def comb_phase(onset_strength: np.ndarray, lag: float, start: int = 0) -> CombPhase:
@@ -69,12 +91,12 @@ def comb_phase(onset_strength: np.ndarray, lag: float, start: int = 0) -> CombPh
     """
     o = onset_strength
     end, j, w = _teeth(o, lag, start)
-    phases = np.arange(0.0, lag, PHASE_STEP)
+    phases = _grid(math.ceil(lag / PHASE_STEP)) * PHASE_STEP  # np.arange(0.0, lag, PHASE_STEP)
     pos = end - phases[:, None] - j[None, :] * lag - start  # positions in o
-    vals = np.interp(pos, np.arange(o.size), o, left=0.0)
+    vals = np.interp(pos, _grid(o.size), o, left=0.0)
     score = vals @ w
     k = int(np.argmax(score))
-    return CombPhase(float(end - phases[k]), float(score[k]), float(score.mean()))
+    return CombPhase(float(end - phases[k]), float(score[k]), float(np.add.reduce(score) / score.size))
 
 
 def comb_score(onset_strength: np.ndarray, lag: float, beat_frame: float, start: int = 0) -> float:
@@ -102,5 +124,5 @@ def comb_score(onset_strength: np.ndarray, lag: float, beat_frame: float, start:
     i_beat = float(beat_frame)
     # move the beat to the latest one not after the end
     i_beat += math.floor((end - i_beat) / lag) * lag
-    vals = np.interp(i_beat - j * lag - start, np.arange(o.size), o, left=0.0)
+    vals = np.interp(i_beat - j * lag - start, _grid(o.size), o, left=0.0)
     return float(vals @ w)

@@ -153,20 +153,30 @@ class TempoEstimator:
         self.prior = np.exp(-0.5 * (octaves / float(prior_octaves)) ** 2)
         self.harmonic_weights = np.array(HARMONIC_WEIGHTS)
         # the multiples of the candidate lags, split into whole frames and a fraction (see _harmonics)
-        self._multiples = [(float(w), k * self.lags) for k, w in enumerate(self.harmonic_weights, start=1)]
-        self._grid_cache: dict[tuple[float, int], list] = {}
+        self._multiple_rows = np.stack([k * self.lags for k in range(1, self.harmonic_weights.size + 1)])
+        self._grid_cache: dict = {}  # by (limit, size), and the grid part by size
+        self._norm_cache: dict[int, np.ndarray] = {}
+        # lags of a pulse faster than max_bpm
+        lo = max(2.0, self.min_lag / 2.0)
+        self._fast_lags = (math.ceil(lo), math.floor(self.min_lag * 0.95) + 1)  # first and stop
 
-    def _harmonics(self, limit: float, size: int) -> list:
-        """For each harmonic: its weight, which multiples count (below ``limit`` and inside the
-        autocorrelation of ``size`` lags), and their whole frames and fractions (made once per size)."""
+    def _harmonics(self, limit: float, size: int) -> tuple:
+        """The harmonics' multiples of the candidate lags, one harmonic a row, on the autocorrelation's
+        grid of ``size`` lags: their whole frames (clipped to the grid), the frames after them and their
+        fractions (made once per ``size``); their weights (0 for a multiple that does not count: at or
+        beyond ``limit`` or the last lag), which candidates have any weight (None: all), and their total
+        weights (made once per ``limit`` and ``size``)."""
         key = (limit, size)
         found = self._grid_cache.get(key)
         if found is None:
-            found = []
-            for w, kl in self._multiples:
-                ok = kl < min(limit, size - 1)
-                whole = np.clip(np.floor(kl), 0, max(size - 2, 0)).astype(np.intp)
-                found.append((w, ok, whole, kl - whole, np.where(ok, w, 0.0)))
+            grid = self._grid_cache.get(size)
+            if grid is None:
+                whole = np.clip(np.floor(self._multiple_rows), 0, max(size - 2, 0)).astype(np.intp)
+                grid = self._grid_cache[size] = (whole, np.minimum(whole + 1, size - 1), self._multiple_rows - whole)
+            weight = np.where(self._multiple_rows < min(limit, size - 1), self.harmonic_weights[:, None], 0.0)
+            wsum = np.add.reduce(weight, axis=0)  # one harmonic after another
+            counted = wsum > 0
+            found = (*grid, weight, None if counted.all() else counted, np.maximum(wsum, 1e-12))
             if len(self._grid_cache) > 64:
                 self._grid_cache.clear()
             self._grid_cache[key] = found
@@ -192,28 +202,33 @@ class TempoEstimator:
         """
         o = np.asarray(onset_strength, np.float64)
         n = o.size
-        mean = float(o.mean()) if n else 0.0
-        o = o - o.mean()
+        mean = np.add.reduce(o) / n if n else 0.0  # o.mean()
+        o = o - mean
         energy = float(np.dot(o, o))
         max_needed = int(self.harmonic_weights.size * self.max_lag) + 2
         if n < 2 * self.max_lag + 4 or energy <= 1e-9 * max(n, 1) or mean < 1e-3:
             return None
-        nfft = 1 << int(math.ceil(math.log2(2 * n)))
+        size = min(n, max_needed + 2)
+        # the linear autocorrelation up to lag size - 1 (no wrap-around: nfft >= n + size - 1)
+        nfft = 1 << int(math.ceil(math.log2(n + size - 1)))
         f = np.fft.rfft(o, nfft)
-        ac = np.fft.irfft(f.real**2 + f.imag**2, nfft)[: min(n, max_needed + 2)]
-        ac = ac / (n - np.arange(ac.size))
+        ac = np.fft.irfft(f.real**2 + f.imag**2, nfft)[:size]
+        norm = self._norm_cache.get(n)
+        if norm is None:
+            if len(self._norm_cache) > 64:
+                self._norm_cache.clear()
+            norm = self._norm_cache[n] = n - np.arange(size)
+        ac = ac / norm
         ac = ac / ac[0]
         lim = 0.6 * n  # multiples beyond this are too poorly estimated to count
-        grid = np.arange(ac.size)
-        total = np.zeros(self.lags.size)
-        wsum = np.zeros(self.lags.size)
-        for w, ok, whole, fraction, weight in self._harmonics(lim, ac.size):
-            # np.interp(k * lags, grid, ac) on the whole-frame grid, as np.interp computes it where it
-            # counts: slope (over one frame) times the fraction, plus the value at the frame below
-            at = (ac[whole + 1] - ac[whole]) * fraction + ac[whole] if ac.size > 1 else np.full(whole.size, ac[0])
-            total += np.where(ok, w * at, 0.0)
-            wsum += weight
-        scores = np.where(wsum > 0, total / np.maximum(wsum, 1e-12), 0.0) * self.prior
+        whole, after, fraction, weight, counted, wsum = self._harmonics(lim, size)
+        # np.interp(k * lags, grid, ac) on the whole-frame grid, as np.interp computes it where it counts:
+        # slope (over one frame) times the fraction, plus the value at the frame below
+        low = ac[whole]
+        at = (ac[after] - low) * fraction + low
+        # the harmonics added one after another (a reduction over the first axis), as the weights were
+        total = np.add.reduce(weight * at, axis=0)
+        scores = total / wsum * self.prior if counted is None else np.where(counted, total / wsum, 0.0) * self.prior
         i = int(np.argmax(scores))
         lag = self.lags[i]
         if 0 < i < scores.size - 1:
@@ -222,10 +237,12 @@ class TempoEstimator:
             if den < 0:
                 lag += 0.5 * 0.5 * (y0 - y2) / den
         # a pulse faster than max_bpm that is as strong as the chosen beat
-        lo = max(2.0, self.min_lag / 2.0)
-        fast_lags = np.arange(math.ceil(lo), math.floor(self.min_lag * 0.95) + 1)
-        best_ac = float(np.interp(lag, grid, ac))
-        fast_ac = float(np.max(ac[fast_lags.astype(int)])) if fast_lags.size else 0.0
+        # np.interp(lag, grid, ac), as np.interp computes it
+        j = int(lag)
+        a0 = float(ac[j])
+        best_ac = a0 if j == lag or j + 1 >= size else (float(ac[j + 1]) - a0) * (lag - j) + a0
+        first, stop = self._fast_lags
+        fast_ac = float(ac[first:stop].max()) if stop > first else 0.0
         fast = fast_ac >= 0.3 and fast_ac >= 0.85 * best_ac
         return TempoEstimate(self.frame_rate, ac, self.lags, scores, float(lag), float(scores[i]), bool(fast))
 
