@@ -102,7 +102,7 @@ _LONG_NUMBER = re.compile(rf"\d{{{MAX_NUMBER + 1},}}")
 
 @functools.lru_cache(maxsize=4096)
 def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
-    if _LONG_NUMBER.search(raw):
+    if len(raw) > MAX_NUMBER and _LONG_NUMBER.search(raw):
         raise BMLError(f"invalid sync reference {raw!r}: a number in it has more than {MAX_NUMBER} digits")
     plain = _PLAIN_REF.match(raw)
     if plain is not None:
@@ -292,10 +292,18 @@ class _Reader:
         self.lenient = notes is not None
         self.seen: set[str] = set()
         self.full = False  # the block reached MAX_BEHAVIOURS
+        self.refs: dict[str, SyncRef] = {}  # references read so far, by their text (blocks repeat them)
 
     def warn(self, kind: str, text: str, node: Node, behaviours: list[str] | None = None) -> None:
         self.block.warnings.append(ParseWarning(kind, f"{text} (line {node.line}, column {node.column})",
                                                 behaviours or [], node.line, node.column))
+
+    def ref(self, text: str, node: Node) -> SyncRef:
+        """The reference ``text`` (of ``node``) read; :class:`BMLError` located at ``node`` if it is not one."""
+        ref = self.refs.get(text)
+        if ref is None:
+            ref = self.refs[text] = parse_ref(text, node.line, node.column, self.lenient)
+        return ref
 
     def is_bml(self, node: Node) -> bool:
         uri = node.namespace
@@ -347,7 +355,7 @@ class _Reader:
                 self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"attribute {key!r} of {bid} ignored", node, [bid])
             elif key in beh.sync_ids and key in kind.syncs:
                 try:
-                    beh.refs[key] = parse_ref(value, node.line, node.column, self.lenient)
+                    beh.refs[key] = self.ref(value, node)
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{bid}: {exc.reason}; behaviour ignored", node, [bid])
                     return
@@ -402,7 +410,6 @@ class _Reader:
         return True
 
     def constraint(self, node: Node, required: bool) -> None:
-        lenient = self.lenient
         owner = node.attrs.get("id", "")
         constraints = self.block.constraints
         for child in node.elements():
@@ -419,13 +426,13 @@ class _Reader:
                     self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
                     continue
                 try:
-                    refs.append(parse_ref(attrs["ref"], sync.line, sync.column, lenient))
+                    refs.append(self.ref(attrs["ref"], sync))
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
             anchor = None
             if "ref" in child.attrs:
                 try:
-                    anchor = parse_ref(child.attrs["ref"], child.line, child.column, lenient)
+                    anchor = self.ref(child.attrs["ref"], child)
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{exc.reason}; constraint ignored", child)
                     continue
