@@ -107,6 +107,8 @@ def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
     plain = _PLAIN_REF.match(raw)
     if plain is not None:
         first, second, third, sign, number = plain.groups()
+        if third is None and number is None:  # the commonest form, ``g1:stroke``, made at once
+            return SyncRef("sync", 0.0, None, first, second, None, raw)
         parts = [first, second] if third is None else [first, second, third]
     else:
         if _ABSOLUTE.match(raw):
@@ -126,7 +128,7 @@ def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
     if len(parts) == 3 and parts[0] == "anticipators":
         return SyncRef("anticipator", offset=offset, anticipator=parts[1], sync=parts[2], text=raw)
     block = parts[0] if len(parts) == 3 else None
-    return SyncRef("sync", offset=offset, block=block, behaviour=parts[-2], sync=parts[-1], text=raw)
+    return SyncRef("sync", offset, block, parts[-2], parts[-1], None, raw)
 
 
 def _check_magnitude(value: float, raw: str) -> None:
@@ -412,6 +414,7 @@ class _Reader:
     def constraint(self, node: Node, required: bool) -> None:
         owner = node.attrs.get("id", "")
         constraints = self.block.constraints
+        cache = self.refs
         for child in node.elements():
             kind = child.local
             if kind not in ("synchronize", "before", "after"):
@@ -421,14 +424,18 @@ class _Reader:
             for sync in child.children:
                 if isinstance(sync, str):
                     continue
-                attrs = sync.attrs
-                if sync.local != "sync" or "ref" not in attrs:
+                text = sync.attrs.get("ref") if sync.local == "sync" else None
+                if text is None:
                     self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
                     continue
-                try:
-                    refs.append(self.ref(attrs["ref"], sync))
-                except BMLError as exc:
-                    self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
+                ref = cache.get(text)
+                if ref is None:
+                    try:
+                        ref = self.ref(text, sync)
+                    except BMLError as exc:
+                        self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
+                        continue
+                refs.append(ref)
             anchor = None
             if "ref" in child.attrs:
                 try:
