@@ -27,7 +27,7 @@ from typing import Iterator
 FEW = 5_000
 #: A full collection is made when the objects moved since the last one exceed this many times those alive
 #: after it (with at least :data:`FLOOR` alive counted).
-GROWTH = 8
+GROWTH = 16
 FLOOR = 100_000
 
 _moved = 0
