@@ -13,7 +13,7 @@ When there are many (more than :data:`FEW`), they are moved to the oldest genera
 (``gc.freeze`` then ``gc.unfreeze``, which only relink lists): they are looked at by full collections
 only. So that garbage among them (a block released later, with its cycles) cannot pile up, a full
 collection is made here once the objects moved since the last one outnumber :data:`GROWTH` times those
-alive after it. Nothing is moved while objects are frozen by the program itself (``gc.freeze``, as the
+alive after it (or made in the pause that called for it, if they were more). Nothing is moved while objects are frozen by the program itself (``gc.freeze``, as the
 live service does once it has warmed up): unfreezing would put those back among the collected.
 """
 
@@ -26,7 +26,7 @@ from typing import Iterator
 #: Fewer new objects than this are left in the youngest generation as usual (their collection is cheap).
 FEW = 5_000
 #: A full collection is made when the objects moved since the last one exceed this many times those alive
-#: after it (with at least :data:`FLOOR` alive counted).
+#: after it, or made by the pause that called for it if they were more (counting at least :data:`FLOOR`).
 GROWTH = 16
 FLOOR = 100_000
 
@@ -62,4 +62,4 @@ def _settle() -> None:
         gc.freeze()
         alive = gc.get_freeze_count()
         gc.unfreeze()
-        _moved, _budget = 0, GROWTH * max(alive, FLOOR)
+        _moved, _budget = 0, GROWTH * max(alive, young, FLOOR)
