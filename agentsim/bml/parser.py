@@ -102,11 +102,13 @@ _LONG_NUMBER = re.compile(rf"\d{{{MAX_NUMBER + 1},}}")
 
 @functools.lru_cache(maxsize=4096)
 def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
-    if _LONG_NUMBER.search(raw):
+    if len(raw) > MAX_NUMBER and _LONG_NUMBER.search(raw):
         raise BMLError(f"invalid sync reference {raw!r}: a number in it has more than {MAX_NUMBER} digits")
     plain = _PLAIN_REF.match(raw)
     if plain is not None:
         first, second, third, sign, number = plain.groups()
+        if third is None and number is None:  # the commonest form, ``g1:stroke``, made at once
+            return SyncRef("sync", 0.0, None, first, second, None, raw)
         parts = [first, second] if third is None else [first, second, third]
     else:
         if _ABSOLUTE.match(raw):
@@ -126,7 +128,7 @@ def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
     if len(parts) == 3 and parts[0] == "anticipators":
         return SyncRef("anticipator", offset=offset, anticipator=parts[1], sync=parts[2], text=raw)
     block = parts[0] if len(parts) == 3 else None
-    return SyncRef("sync", offset=offset, block=block, behaviour=parts[-2], sync=parts[-1], text=raw)
+    return SyncRef("sync", offset, block, parts[-2], parts[-1], None, raw)
 
 
 def _check_magnitude(value: float, raw: str) -> None:
@@ -292,10 +294,18 @@ class _Reader:
         self.lenient = notes is not None
         self.seen: set[str] = set()
         self.full = False  # the block reached MAX_BEHAVIOURS
+        self.refs: dict[str, SyncRef] = {}  # references read so far, by their text (blocks repeat them)
 
     def warn(self, kind: str, text: str, node: Node, behaviours: list[str] | None = None) -> None:
         self.block.warnings.append(ParseWarning(kind, f"{text} (line {node.line}, column {node.column})",
                                                 behaviours or [], node.line, node.column))
+
+    def ref(self, text: str, node: Node) -> SyncRef:
+        """The reference ``text`` (of ``node``) read; :class:`BMLError` located at ``node`` if it is not one."""
+        ref = self.refs.get(text)
+        if ref is None:
+            ref = self.refs[text] = parse_ref(text, node.line, node.column, self.lenient)
+        return ref
 
     def is_bml(self, node: Node) -> bool:
         uri = node.namespace
@@ -347,7 +357,7 @@ class _Reader:
                 self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"attribute {key!r} of {bid} ignored", node, [bid])
             elif key in beh.sync_ids and key in kind.syncs:
                 try:
-                    beh.refs[key] = parse_ref(value, node.line, node.column, self.lenient)
+                    beh.refs[key] = self.ref(value, node)
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{bid}: {exc.reason}; behaviour ignored", node, [bid])
                     return
@@ -402,9 +412,9 @@ class _Reader:
         return True
 
     def constraint(self, node: Node, required: bool) -> None:
-        lenient = self.lenient
         owner = node.attrs.get("id", "")
         constraints = self.block.constraints
+        cache = self.refs
         for child in node.elements():
             kind = child.local
             if kind not in ("synchronize", "before", "after"):
@@ -414,18 +424,22 @@ class _Reader:
             for sync in child.children:
                 if isinstance(sync, str):
                     continue
-                attrs = sync.attrs
-                if sync.local != "sync" or "ref" not in attrs:
+                text = sync.attrs.get("ref") if sync.local == "sync" else None
+                if text is None:
                     self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
                     continue
-                try:
-                    refs.append(parse_ref(attrs["ref"], sync.line, sync.column, lenient))
-                except BMLError as exc:
-                    self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
+                ref = cache.get(text)
+                if ref is None:
+                    try:
+                        ref = self.ref(text, sync)
+                    except BMLError as exc:
+                        self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
+                        continue
+                refs.append(ref)
             anchor = None
             if "ref" in child.attrs:
                 try:
-                    anchor = parse_ref(child.attrs["ref"], child.line, child.column, lenient)
+                    anchor = self.ref(child.attrs["ref"], child)
                 except BMLError as exc:
                     self.warn("PARSING_FAILURE", f"{exc.reason}; constraint ignored", child)
                     continue

@@ -10,6 +10,7 @@ know stands in the text, still speaks the words inside it and says so.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 from agentsim.bml.tree import Node
@@ -34,25 +35,38 @@ class SpeechReading:
     problems: list[tuple[str, Node]] = field(default_factory=list)
 
 
+_SPACE = re.compile(r"\s+")
+
+
 def normalize_space(raw: str) -> tuple[str, list[int]]:
     """Collapse runs of white space to one space and strip the ends.
 
     Returns the new text and, for every offset into ``raw`` (0 to ``len(raw)``), the offset it maps to.
     """
-    out: list[str] = []
-    positions = [0] * (len(raw) + 1)
-    after_space = True
-    for i, ch in enumerate(raw):
-        positions[i] = len(out)
-        if ch.isspace():
-            if not after_space:
-                out.append(" ")
-                after_space = True
+    pieces: list[str] = []
+    positions: list[int] = []
+    length = 0  # of the text made so far
+    done = 0  # of ``raw`` read so far
+    for run in _SPACE.finditer(raw):  # (\s is what str.isspace says is white space)
+        start, end = run.span()
+        if start > done:
+            pieces.append(raw[done:start])
+            positions.extend(range(length, length + start - done))
+            length += start - done
+        if start > 0:  # a run inside the text (or at its end) becomes one space; a leading one is dropped
+            positions.append(length)
+            pieces.append(" ")
+            length += 1
+            positions.extend([length] * (end - start - 1))
         else:
-            out.append(ch)
-            after_space = False
-    positions[len(raw)] = len(out)
-    return "".join(out).rstrip(), positions
+            positions.extend([length] * end)
+        done = end
+    if len(raw) > done:
+        pieces.append(raw[done:])
+        positions.extend(range(length, length + len(raw) - done))
+        length += len(raw) - done
+    positions.append(length)
+    return "".join(pieces).rstrip(), positions
 
 
 class _Walk:

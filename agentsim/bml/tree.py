@@ -71,6 +71,9 @@ class Node:
         return f"<{self.tag} {self.attrs!r} at {self.where()}>"
 
 
+_new_node = object.__new__
+
+
 class _TreeBuilder:
     """Builds :class:`Node` trees from expat callbacks, recording where each element starts.
 
@@ -82,12 +85,13 @@ class _TreeBuilder:
         self.shift = first_line_shift
         self.root: Node | None = None
         self.stack: list[Node] = []
+        self.tags: dict[str, tuple[str, str | None]] = {}
 
     def start(self, name: str, attrs: dict[str, str]) -> None:
-        if len(self.stack) >= MAX_DEPTH:
+        stack = self.stack
+        if len(stack) >= MAX_DEPTH:
             raise BMLError(f"elements nested more than {MAX_DEPTH} deep", self.expat.CurrentLineNumber,
                            self.expat.CurrentColumnNumber + 1)
-        stack = self.stack
         namespaces = stack[-1].namespaces if stack else {}
         if attrs and "xmlns" in "".join(attrs) and any(key.startswith("xmlns") for key in attrs):
             namespaces = dict(namespaces)
@@ -101,10 +105,23 @@ class _TreeBuilder:
                     plain[key] = value
             attrs = plain
         expat = self.expat
-        line, column = expat.CurrentLineNumber, expat.CurrentColumnNumber + 1
+        line = expat.CurrentLineNumber
+        column = expat.CurrentColumnNumber + 1
         if line == 1:
             column -= self.shift
-        node = Node(name, attrs, line, column, namespaces)
+        # (a Node made without its __init__: the tag's parts are split once per tag name, not per element)
+        node = _new_node(Node)
+        node._tag = name
+        parts = self.tags.get(name)
+        if parts is None:
+            prefix, colon, local = name.partition(":")
+            parts = self.tags[name] = (local, prefix) if colon else (name, None)
+        node.local, node.prefix = parts
+        node.attrs = attrs
+        node.line = line
+        node.column = column
+        node.children = []
+        node.namespaces = namespaces
         if stack:
             stack[-1].children.append(node)
         else:

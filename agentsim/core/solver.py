@@ -111,6 +111,9 @@ class BlockSolver:
         self.anchors: list[OffsetPeg] = []
         self.timed: dict[str, TimedBehaviour] = {}
         self._anchor_cache: dict[int, int | None] = {}
+        # what each reference to this block's own sync points stands for, by the reference's id (the
+        # references live as long as the block; a block refers to one sync point many times)
+        self._local_refs: dict[int, tuple[int, float]] = {}
 
     # ----------------------------------------------------------------- problems
     def drop(self, behaviour_id: str, reason: str, kind: str = "IMPOSSIBLE_TO_SCHEDULE") -> None:
@@ -152,12 +155,16 @@ class BlockSolver:
                     raise ScheduleError(f"no sync point {ref.target()} in a planned block")
                 self.nodes[key] = self.ties.add(found)
             return self.nodes[key], ref.offset
+        found = self._local_refs.get(id(ref))
+        if found is not None:
+            return found
         beh = self.block.behaviour(ref.behaviour)
         if beh is None:
             raise ScheduleError(f"no behaviour {ref.behaviour!r} in block {self.block.id}")
         if ref.sync not in beh.sync_ids:
             raise ScheduleError(f"behaviour {ref.behaviour!r} has no sync point {ref.sync!r}")
-        return self.local_node(beh.id, ref.sync), ref.offset
+        found = self._local_refs[id(ref)] = (self.local_node(beh.id, ref.sync), ref.offset)
+        return found
 
     def local_node(self, behaviour_id: str, sync_id: str) -> int:
         key = ("sync", behaviour_id, sync_id)

@@ -24,6 +24,7 @@ Prosody spans (:class:`~agentsim.speech.backend.Prosody`) change the timing exac
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 
@@ -73,6 +74,20 @@ def _overlapping(span: Prosody, spans: list[tuple[int, int]]) -> range:
     return range(first, last)
 
 
+@functools.lru_cache(maxsize=4096)
+def _word_units(token: str) -> tuple[bool, tuple[tuple[str, bool, bool], ...]]:
+    """Whether a word is a content word, and its units: (symbol, is a vowel, is the stressed vowel)."""
+    content = token.lower() not in FUNCTION_WORDS
+    units = []
+    stressed_done = False
+    for unit in _UNITS.findall(token):
+        vowel = unit[0].lower() in _VOWELS or unit.isdigit()
+        stressed = vowel and content and not stressed_done
+        stressed_done = stressed_done or stressed
+        units.append((unit.lower(), vowel, stressed))
+    return content, tuple(units)
+
+
 class BuiltinBackend:
     """Times text with fixed phoneme durations (seconds), scaled by ``rate`` (1 = normal)."""
 
@@ -110,18 +125,15 @@ class BuiltinBackend:
             if sentence_starts:
                 sentences.append(start)
                 sentence_starts = False
-            content = token.lower() not in FUNCTION_WORDS
-            stressed_done = emphasised_done = False
+            content, units = _word_units(token)
+            emphasised_done = False
             word_scale = scale / speed[index]
-            for unit in _UNITS.findall(token):
-                vowel = unit[0].lower() in _VOWELS or unit.isdigit()
-                stressed = vowel and content and not stressed_done
-                stressed_done = stressed_done or stressed
+            for symbol, vowel, stressed in units:
                 duration = (self.vowel if vowel else self.consonant) * (self.stress_factor if stressed else 1.0)
                 if emphasis[index] != 1.0 and vowel and not emphasised_done and (stressed or not content):
                     duration *= emphasis[index]
                     emphasised_done = True
-                phonemes.append(Phoneme(unit.lower(), t, t + duration * word_scale, index, stressed))
+                phonemes.append(Phoneme(symbol, t, t + duration * word_scale, index, stressed))
                 t += duration * word_scale
             words.append(Word(index, token, start, t, match.start(), match.end()))
             following = text[match.end():match.end() + 2].strip()[:1]
