@@ -248,8 +248,11 @@ class CachedBackend:
         self.cache_dir.mkdir(parents=True, exist_ok=True)
         has_audio = utt.audio is not None
         if has_audio:
-            pcm = np.round(np.asarray(utt.audio, dtype=np.float64) * 32768.0)
-            pcm = np.clip(pcm, -32768, 32767).astype(np.int16)
+            audio = np.asarray(utt.audio)
+            pcm = np.empty(len(audio), np.int16)
+            for a in range(0, len(audio), READ_BLOCK):  # a block at a time: no float64 copy of a long narration
+                block = np.round(np.asarray(audio[a:a + READ_BLOCK], dtype=np.float64) * 32768.0)
+                pcm[a:a + READ_BLOCK] = np.clip(block, -32768, 32767)
             tmp = audio_path.with_suffix(f".{os.getpid()}.tmp.npy")  # processes that write at once: one each
             np.save(tmp, pcm)
             tmp.replace(audio_path)
@@ -279,7 +282,7 @@ class CachedBackend:
                          audio=audio, backend=meta.get("backend_name", ""))
 
 
-#: 16-bit samples read from a cache file at a time.
+#: 16-bit samples read from (and written to) a cache file at a time.
 READ_BLOCK = 1 << 20
 
 
