@@ -370,24 +370,3 @@ def test_the_default_story_is_the_longest_shipped_one_and_long_enough():
     counts = story.counts()
     assert all(counts.get(kind, 0) > 0 for kind in ("beat", "point", "icon", "nod", "shake", "gaze", "brows"))
     assert not any(math.isnan(x) for p in story.scene.values() for x in p)
-
-
-def test_the_textgrid_is_written_line_by_line_as_praatio_writes_it(tmp_path):
-    """write_long_textgrid gives the bytes of praatio's own long-format save: blanks filled between
-    intervals, quotes doubled, whole numbers without a decimal point, an empty point tier."""
-    from praatio import textgrid
-    from praatio.utilities.constants import Interval, Point
-
-    from agentsim.scenarios.storytelling.praat import write_long_textgrid
-
-    grid = textgrid.Textgrid(0.0, 3.25)
-    grid.addTier(textgrid.IntervalTier('words "q"', [Interval(0.5, 1.0, 'say "hi"'), Interval(1.0000001, 2.0, "ˈa"),
-                                                     Interval(2.5, 3.25, "end")], 0.0, 3.25))
-    grid.addTier(textgrid.PointTier("strokes", [Point(1.0, "g1 +0.3ms"), Point(0.1 + 0.2, "g0 -1.0ms")], 0.0, 3.25))
-    grid.addTier(textgrid.PointTier("axis: run", [], 0.0, 3.25))
-    grid.save(str(tmp_path / "praatio.TextGrid"), format="long_textgrid", includeBlankSpaces=True)
-    write_long_textgrid(grid, tmp_path / "ours.TextGrid")
-    text = (tmp_path / "ours.TextGrid").read_text(encoding="utf-8")
-    assert (tmp_path / "praatio.TextGrid").read_text(encoding="utf-8") == text
-    assert 'text = "say ""hi""" ' in text and "intervals: size = 6 " in text and "xmax = 2 \n" in text
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["ours.TextGrid", "praatio.TextGrid"]  # no scratch left

@@ -20,7 +20,7 @@ from agentsim.animation.scene import DEFAULT_SCENE
 from agentsim.scenarios.storytelling.markup import Story, StoryError, gesture_from_tag, parse_story
 from agentsim.speech.backend import Utterance
 
-__all__ = ["import_textgrid", "export_textgrid", "split_tags", "written_labels", "write_long_textgrid"]
+__all__ = ["import_textgrid", "export_textgrid", "split_tags", "written_labels"]
 
 _BRACKETED = re.compile(r"\[([^\[\]]*)\]")
 
@@ -201,53 +201,5 @@ def export_textgrid(path: str | Path, story: Story, utterance: Utterance, planne
     if axis:
         grid.addTier(textgrid.PointTier(f"axis: {axis}", [], start, end))
     path = Path(path)
-    write_long_textgrid(grid, path)
-    return path
-
-
-def write_long_textgrid(grid, path: str | Path) -> Path:
-    """Write a praatio ``Textgrid`` in the long TextGrid format, line by line, as
-    ``grid.save(path, format="long_textgrid", includeBlankSpaces=True)`` writes it (the same bytes)
-    without building the whole text as one string (which grows worse than in proportion to a long story).
-
-    praatio prepares the grid (blanks filled, entries sorted) and writes it as its ``textgrid_json``; that
-    is read back and written out in the long format with praatio's own number and quote formatting.
-    """
-    import json
-    import os
-    import tempfile
-
-    from praatio.utilities import my_math, utils
-
-    path = Path(path)
-    handle, scratch = tempfile.mkstemp(suffix=".json", dir=path.parent)
-    os.close(handle)
-    try:
-        grid.save(scratch, format="textgrid_json", includeBlankSpaces=True)
-        with open(scratch, encoding="utf-8") as f:
-            prepared = json.load(f)
-    finally:
-        os.unlink(scratch)
-    num, quoted = my_math.numToStr, utils.escapeQuotes
-    tab = " " * 4
-    with open(path, "w", encoding="utf-8") as out:
-        write = out.write
-        write('File type = "ooTextFile"\nObject class = "TextGrid"\n\n')
-        write(f"xmin = {num(prepared['xmin'])} \nxmax = {num(prepared['xmax'])} \ntiers? <exists> \n"
-              f"size = {len(prepared['tiers'])} \nitem []: \n")
-        for k, tier in enumerate(prepared["tiers"]):
-            write(f"{tab}item [{k + 1}]:\n{tab * 2}class = \"{tier['class']}\" \n"
-                  f"{tab * 2}name = \"{quoted(tier['name'])}\" \n"
-                  f"{tab * 2}xmin = {num(tier['xmin'])} \n{tab * 2}xmax = {num(tier['xmax'])} \n")
-            entries = tier["entries"]
-            if tier["class"] == "IntervalTier":
-                write(f"{tab * 2}intervals: size = {len(entries)} \n")
-                for i, (a, b, label) in enumerate(entries):
-                    write(f"{tab * 2}intervals [{i + 1}]:\n{tab * 3}xmin = {num(a)} \n{tab * 3}xmax = {num(b)} \n"
-                          f"{tab * 3}text = \"{quoted(label)}\" \n")
-            else:
-                write(f"{tab * 2}points: size = {len(entries)} \n")
-                for i, (t, label) in enumerate(entries):
-                    write(f"{tab * 2}points [{i + 1}]:\n{tab * 3}number = {num(t)} \n"
-                          f"{tab * 3}mark = \"{quoted(label)}\" \n")
+    grid.save(str(path), format="long_textgrid", includeBlankSpaces=True)
     return path
