@@ -337,3 +337,25 @@ def test_invalid_arguments(backend):
         EspeakBackend(rate=20)
     with pytest.raises(ValueError):
         backend.synthesize(SpeechText("Hi.", ((4, "outside"),)))
+
+
+def test_stress_marked_clause_by_clause_is_that_of_the_whole_text(backend, monkeypatch):
+    """The stressed vowels found by aligning each clause with its transcription are those that aligning the
+    whole text at once finds (which costs the square of a long story's length)."""
+    from agentsim.speech import espeak
+
+    text = (PARAGRAPH + " “Yes!” said the cat; and then — well. Mr. Smith paid $1,000.50 on 3/4/2021, didn't he? "
+            "In the end, of a sort: it's (quite) 'odd'... isn't it?!")
+    clauses = backend._engine.transcribe_clauses(text, backend.voice, backend.rate)
+    assert len(clauses) > 8 and [end for end, _ in clauses] == sorted(end for end, _ in clauses)
+    assert [p for _, c in clauses for p in c] == backend._engine.transcribe(text, backend.voice, backend.rate)
+    by_clause = EspeakBackend().synthesize(SpeechText(text))
+
+    def whole(groups, tokens, clauses):
+        espeak._mark_stress([p for g in groups for p in g.phonemes], [p for _, c in clauses for p in c])
+
+    monkeypatch.setattr(espeak, "_mark_stress_by_clause", whole)
+    at_once = EspeakBackend().synthesize(SpeechText(text))
+    marks = [(p.symbol, p.stressed) for p in by_clause.phonemes]
+    assert marks == [(p.symbol, p.stressed) for p in at_once.phonemes]
+    assert sum(stressed for _, stressed in marks) > 40

@@ -16,7 +16,8 @@ import soundfile
 from agentsim.animation import evaluate_poses
 from agentsim.animation.body import Body
 from agentsim.animation.output import PoseStream
-from agentsim.media.audio import Track
+from agentsim.media.audio import MIX_CHUNK, Source, Track, mix, mix_stream
+from agentsim.media.files import write_wav
 from agentsim.media.report import write_report
 from agentsim.media.report import data as report_data
 from agentsim.media.report import page as report_page
@@ -213,6 +214,29 @@ def test_audio_falls_back_to_wav(run, tmp_path, monkeypatch):
     assert 'src="run_files/audio.wav"' in path.read_text()
     info = soundfile.info(tmp_path / "run_files" / "audio.wav")
     assert info.frames == len(track.samples) and info.samplerate == track.rate
+
+
+def test_a_track_written_stretch_by_stretch_is_the_track_written_whole(run, tmp_path):
+    """A mix longer than several stretches, written as a TrackStream (never held whole), gives the WAV and
+    the report's audio that the whole track gives."""
+    recording, _, _, _ = run
+    rng = np.random.default_rng(5)
+    rate = 8000
+    speech = rng.uniform(-0.9, 0.9, int(2.7 * MIX_CHUNK)).astype(np.float32)
+    sources = [Source(speech, rate, 0.0137, 1.0 + 60e-6, None, None, "speech"),
+               Source(speech[::3].copy(), rate, 40.0, 1.0, 200.0, lambda t: 1.5, "loud")]
+    whole, stream = mix(sources, rate), mix_stream(sources, rate)
+    assert stream.length == whole.length and stream.duration == whole.duration and stream.labels == whole.labels
+    assert np.array_equal(np.concatenate(list(stream.stretches())), whole.samples)
+    assert np.max(np.abs(whole.samples)) == 1.0  # clipped where the two overlap
+    write_wav(tmp_path / "whole.wav", whole)
+    write_wav(tmp_path / "stream.wav", stream)
+    assert (tmp_path / "whole.wav").read_bytes() == (tmp_path / "stream.wav").read_bytes()
+    for name, track in (("whole", whole), ("stream", stream)):
+        write_report(tmp_path / f"{name}.html", recording=recording, track=track)
+    a, _ = soundfile.read(tmp_path / "whole_files" / "audio.ogg", dtype="float32")
+    b, _ = soundfile.read(tmp_path / "stream_files" / "audio.ogg", dtype="float32")
+    assert len(a) == whole.length and np.array_equal(a, b)
 
 
 def test_frames_sent_are_at_most_30_per_second():

@@ -216,6 +216,34 @@ def test_phoneme_marks_and_the_cache(tmp_path):
     assert b.marks[0].time == b.words[2].start
 
 
+def test_the_cached_audio_is_read_back_as_it_was_said(tmp_path, monkeypatch):
+    """The 16-bit samples of a cache file come back as the float32 samples that were cached (read a block at
+    a time); a file cut short is not used: the text is synthesised again."""
+    from dataclasses import replace
+
+    from agentsim.scenarios.storytelling import voice as voice_module
+    from agentsim.speech.builtin import BuiltinBackend
+
+    class Sounding(BuiltinBackend):
+        def synthesize(self, speech):
+            utterance = super().synthesize(speech)
+            n = int(utterance.duration * utterance.sample_rate)
+            samples = np.random.default_rng(1).integers(-32768, 32768, n).astype(np.float32) / np.float32(32768.0)
+            return replace(utterance, audio=samples)
+
+    monkeypatch.setattr(voice_module, "READ_BLOCK", 1000)  # several blocks
+    speech = SpeechText("Tell me a story.")
+    a = CachedBackend(Sounding(), cache_dir=tmp_path).synthesize(speech)
+    assert len(a.audio) > 5000
+    second = CachedBackend(Sounding(), cache_dir=tmp_path)
+    b = second.synthesize(speech)
+    assert second.hits == 1 and b.audio.dtype == np.float32 and np.array_equal(a.audio, b.audio)
+    (audio_file,) = tmp_path.glob("*.npy")
+    audio_file.write_bytes(audio_file.read_bytes()[:-100])
+    third = CachedBackend(Sounding(), cache_dir=tmp_path)
+    assert np.array_equal(third.synthesize(speech).audio, a.audio) and (third.hits, third.misses) == (0, 1)
+
+
 # ----------------------------------------------------------------------------------------------------
 # Telling.
 

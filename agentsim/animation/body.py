@@ -31,6 +31,8 @@ TRANSLATION_AXES = (("tx", "Xposition"), ("ty", "Yposition"), ("tz", "Zposition"
 
 FREE = (-180.0, 180.0)
 FIXED = (0.0, 0.0)
+#: Rows of a pose array whose joint positions :meth:`Body.positions` computes at a time.
+FK_ROWS = 16384
 
 
 @dataclass
@@ -335,9 +337,16 @@ class Body:
         return rot, pos + rot @ self.offsets[i]
 
     def positions(self, pose: np.ndarray, joints: Sequence[str]) -> np.ndarray:
-        """World positions (n, len(joints), 3) of some joints."""
-        fk = self.forward_kinematics(pose, joints)
-        return np.stack([fk[j][1] for j in joints], axis=1)
+        """World positions (n, len(joints), 3) of some joints (computed :data:`FK_ROWS` rows at a time, so
+        that a long pose array needs no rotations of all its rows at once)."""
+        pose = np.atleast_2d(np.asarray(pose, dtype=float))
+        joints = list(joints)
+        out = np.empty((len(pose), len(joints), 3))
+        for a in range(0, len(pose), FK_ROWS):
+            fk = self.forward_kinematics(pose[a:a + FK_ROWS], joints)
+            for k, j in enumerate(joints):
+                out[a:a + FK_ROWS, k] = fk[j][1]
+        return out
 
     # ------------------------------------------------------------------ arms
     def arm_lengths(self, side: str) -> tuple[float, float]:

@@ -10,7 +10,7 @@ were played and stop where they were stopped; other sources (an ensemble the con
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -55,6 +55,15 @@ class Track:
     def time_of(self, index: int) -> float:
         return index / self.rate
 
+    @property
+    def length(self) -> int:
+        """Number of samples."""
+        return len(self.samples)
+
+    def stretches(self) -> Iterator[np.ndarray]:
+        """The samples in one stretch (as :meth:`TrackStream.stretches` gives them in several)."""
+        yield self.samples
+
 
 def speech_sources(recording) -> list[Source]:
     """The speeches of a recording that made sound, as sources."""
@@ -82,9 +91,44 @@ def file_sources(recording) -> list[Source]:
     return sources
 
 
-def mix(sources: Iterable[Source], rate: int | None = None, duration: float | None = None) -> Track:
-    """Mix ``sources`` into one track at ``rate`` (default: the highest of the sources', or 22050 Hz),
-    long enough for the last of them (or ``duration`` s). Samples are summed and clipped to [-1, 1]."""
+@dataclass
+class TrackStream:
+    """A track made a stretch at a time (:func:`mix_stream`): what :func:`mix` gives, without holding the
+    whole of it. ``length`` samples at ``rate``; :meth:`stretches` makes them anew on every call."""
+
+    placed: list
+    length: int
+    rate: int
+    labels: list[str] = field(default_factory=list)
+
+    @property
+    def duration(self) -> float:
+        return self.length / self.rate
+
+    def stretches(self) -> Iterator[np.ndarray]:
+        """The samples (float32) in order, :data:`MIX_CHUNK` at a time (the last stretch shorter)."""
+        n, rate = self.length, self.rate
+        for a in range(0, n, MIX_CHUNK):
+            b = min(a + MIX_CHUNK, n)
+            acc = np.zeros(b - a, np.float64)
+            for source, first, last, gain_grid in self.placed:
+                lo, hi = max(a, first), min(b, last)
+                if hi > lo:
+                    acc[lo - a:hi - a] += _placed(source, rate, lo, hi, gain_grid)
+            yield np.clip(acc, -1.0, 1.0, out=acc).astype(np.float32)
+
+    def read(self) -> Track:
+        """The whole track in memory."""
+        out = np.empty(self.length, np.float32)
+        a = 0
+        for stretch in self.stretches():
+            out[a:a + len(stretch)] = stretch
+            a += len(stretch)
+        return Track(out, int(self.rate), list(self.labels))
+
+
+def mix_stream(sources: Iterable[Source], rate: int | None = None, duration: float | None = None) -> TrackStream:
+    """The track :func:`mix` makes, as a :class:`TrackStream` to be written a stretch at a time."""
     sources = list(sources)
     if rate is None:
         rate = max((s.rate for s in sources), default=22050)
@@ -101,19 +145,15 @@ def mix(sources: Iterable[Source], rate: int | None = None, duration: float | No
             grid = np.arange(first, last)[::256] / rate
             gain_grid = (grid, [source.gain(x) for x in grid])
         placed.append((source, first, last, gain_grid))
-    # The track is made a stretch at a time, each sample the sum of the sources in their order as it was
-    # over the whole length, without arrays of the whole length but the track itself.
-    out = np.empty(n, np.float32)
-    for a in range(0, n, MIX_CHUNK):
-        b = min(a + MIX_CHUNK, n)
-        acc = np.zeros(b - a, np.float64)
-        for source, first, last, gain_grid in placed:
-            lo, hi = max(a, first), min(b, last)
-            if hi > lo:
-                acc[lo - a:hi - a] += _placed(source, rate, lo, hi, gain_grid)
-        out[a:b] = np.clip(acc, -1.0, 1.0, out=acc)
-    labels = [s.label for s in sources if s.label]
-    return Track(out, int(rate), labels)
+    # Each stretch of the track is the sum of the sources in their order as it was over the whole length,
+    # without arrays of the whole length.
+    return TrackStream(placed, n, int(rate), [s.label for s in sources if s.label])
+
+
+def mix(sources: Iterable[Source], rate: int | None = None, duration: float | None = None) -> Track:
+    """Mix ``sources`` into one track at ``rate`` (default: the highest of the sources', or 22050 Hz),
+    long enough for the last of them (or ``duration`` s). Samples are summed and clipped to [-1, 1]."""
+    return mix_stream(sources, rate, duration).read()
 
 
 #: Samples of a source placed at a time by :func:`mix`.
@@ -148,3 +188,9 @@ def run_track(recording, extra: Iterable[Source] = (), rate: int | None = None,
               duration: float | None = None) -> Track:
     """Everything the run's listener heard: its speech, its sound files and ``extra`` sources."""
     return mix([*speech_sources(recording), *file_sources(recording), *extra], rate, duration)
+
+
+def run_track_stream(recording, extra: Iterable[Source] = (), rate: int | None = None,
+                     duration: float | None = None) -> TrackStream:
+    """What :func:`run_track` gives, as a :class:`TrackStream` (a long run written without holding its track)."""
+    return mix_stream([*speech_sources(recording), *file_sources(recording), *extra], rate, duration)

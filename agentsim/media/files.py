@@ -97,14 +97,17 @@ def write_text(path: str | Path, text: str) -> Path:
 
 
 def write_wav(path: str | Path, track: Track) -> Path:
-    """Write a track as 16-bit PCM WAV; its comment (INFO chunk) says the time axis."""
+    """Write a track (a :class:`~agentsim.media.audio.Track`, or a
+    :class:`~agentsim.media.audio.TrackStream` stretch by stretch) as 16-bit PCM WAV; its comment (INFO
+    chunk) says the time axis."""
     import soundfile
 
     path = Path(path)
     with written(path) as tmp, soundfile.SoundFile(str(tmp), "w", track.rate, 1, "PCM_16", format="WAV") as f:
         f.comment = f"agentsim: {AXIS}"
         f.software = "agentsim"
-        f.write(track.samples)
+        for stretch in track.stretches():
+            f.write(stretch)
     return path
 
 

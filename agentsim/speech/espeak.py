@@ -61,6 +61,7 @@ import bisect
 import ctypes
 import difflib
 import functools
+import itertools
 import re
 import threading
 from dataclasses import dataclass, field
@@ -261,26 +262,44 @@ class _Engine:
 
     def transcribe(self, text: str, voice: str, rate: int) -> list[tuple[str, str]]:
         """IPA phonemes of plain ``text`` with their stress: ``(symbol, "ˈ" | "ˌ" | "")``, pauses left out."""
+        return [phoneme for _, phonemes in self.transcribe_clauses(text, voice, rate) for phoneme in phonemes]
+
+    def transcribe_clauses(self, text: str, voice: str, rate: int) -> list[tuple[int, list[tuple[str, str]]]]:
+        """:meth:`transcribe` clause by clause, as espeak-ng reads ``text``: for each clause the character
+        offset in ``text`` where it ends (before the written word in which espeak-ng stopped reading) and
+        its phonemes."""
         mode = _PHONEMES_IPA | (ord(_PHONEME_SEPARATOR) << 8)
-        buffer = ctypes.create_string_buffer(text.encode("utf-8"))
-        pointer = ctypes.c_void_p(ctypes.addressof(buffer))
+        encoded = text.encode("utf-8")
+        buffer = ctypes.create_string_buffer(encoded)
+        base = ctypes.addressof(buffer)
+        pointer = ctypes.c_void_p(base)
         clauses = []
         with self.lock:
             self.select(voice, rate)
             while pointer.value:
                 before = pointer.value
                 result = self._lib.espeak_TextToPhonemes(ctypes.byref(pointer), _CHARS_UTF8, mode)
+                end = len(encoded) if not pointer.value else min(max(pointer.value - base, 0), len(encoded))
                 if result:
-                    clauses.append(result.decode("utf-8", "replace"))
+                    clauses.append((end, result.decode("utf-8", "replace")))
                 if pointer.value == before:
                     break
-        phonemes = []
-        for item in re.split(r"[\s" + re.escape(_PHONEME_SEPARATOR) + "]+", " ".join(clauses)):
-            symbol = item.replace(_PRIMARY_STRESS, "").replace(_SECONDARY_STRESS, "")
-            if symbol:  # pauses have empty names
-                stress = next((mark for mark in (_PRIMARY_STRESS, _SECONDARY_STRESS) if mark in item), "")
-                phonemes.append((_event_name(symbol), stress))
-        return phonemes
+        # byte offsets to character offsets: the characters that start before each byte offset
+        starts = list(itertools.accumulate((len(c.encode("utf-8")) for c in text), initial=0))
+        out = []
+        for end, clause in clauses:
+            phonemes = []
+            for item in re.split(r"[\s" + re.escape(_PHONEME_SEPARATOR) + "]+", clause):
+                symbol = item.replace(_PRIMARY_STRESS, "").replace(_SECONDARY_STRESS, "")
+                if symbol:  # pauses have empty names
+                    stress = next((mark for mark in (_PRIMARY_STRESS, _SECONDARY_STRESS) if mark in item), "")
+                    phonemes.append((_event_name(symbol), stress))
+            at = bisect.bisect_left(starts, end)
+            # espeak-ng reads on into the next clause's first word ("there, m|y"): the clause ends before it
+            while 0 < at < len(text) and not text[at - 1].isspace() and not text[at].isspace():
+                at -= 1
+            out.append((at, phonemes))
+        return out
 
 
 def _event_name(symbol: str) -> str:
@@ -659,6 +678,23 @@ def _word_spans(text: str, tokens: list[_Token], groups: list[_Group], transcrib
     return spans
 
 
+def _mark_stress_by_clause(groups: list[_Group], tokens: list[_Token],
+                           clauses: list[tuple[int, list[tuple[str, str]]]]) -> None:
+    """:func:`_mark_stress` clause by clause: the phonemes of the words that start in a clause of the
+    transcription (``(end, phonemes)`` as :meth:`_Engine.transcribe_clauses` gives them) aligned with its
+    phonemes, so that a long text costs in proportion to its length."""
+    if not clauses:
+        return
+    ends = [end for end, _ in clauses]
+    spoken: list[list[_PhonemeDraft]] = [[] for _ in clauses]
+    for group in groups:
+        if group.phonemes:
+            start = tokens[group.token].core_start if group.token < len(tokens) else ends[-1]
+            spoken[min(bisect.bisect_right(ends, start), len(clauses) - 1)].extend(group.phonemes)
+    for phonemes, (_, transcription) in zip(spoken, clauses):
+        _mark_stress(phonemes, transcription)
+
+
 def _mark_stress(phonemes: list[_PhonemeDraft], transcription: list[tuple[str, str]]) -> None:
     """Set ``stressed`` on phonemes aligned with a primary-stressed phoneme of the transcription."""
     matcher = difflib.SequenceMatcher(None, [p.symbol for p in phonemes],
@@ -766,8 +802,7 @@ class EspeakBackend:
         with engine.lock:
             pcm, events = engine.synth(ssml, self.voice, words_per_minute)
             groups = _read_events(text, origin, tokens, events, len(pcm))
-            _mark_stress([p for group in groups for p in group.phonemes],
-                         engine.transcribe(text, self.voice, words_per_minute))
+            _mark_stress_by_clause(groups, tokens, engine.transcribe_clauses(text, self.voice, words_per_minute))
             spans = _word_spans(text, tokens, groups, functools.lru_cache(maxsize=None)(self._symbols))
         rate = self.sample_rate
         duration = len(pcm) / rate

@@ -71,20 +71,32 @@ def point_names(body) -> tuple[list[str], list[int]]:
 
 def point_positions(stream, frames: np.ndarray | None = None) -> np.ndarray:
     """World positions (frames, points, 3) in metres of :func:`point_names` at the stream's ``frames``
-    (indices; all frames by default)."""
-    return body_points(stream.body, stream.values if frames is None else stream.values[frames])
+    (indices; all frames by default), a stretch of frames at a time."""
+    from agentsim.animation.body import FK_ROWS
+
+    if frames is None:
+        return body_points(stream.body, stream.values)
+    frames = np.asarray(frames)
+    parts = [body_points(stream.body, stream.values[frames[a:a + FK_ROWS]]) for a in range(0, len(frames), FK_ROWS)]
+    return np.concatenate(parts) if parts else body_points(stream.body, stream.values[frames])
 
 
 def body_points(body, values: np.ndarray) -> np.ndarray:
     """World positions (frames, points, 3) in metres of :func:`point_names` for poses ``values`` (frames x
-    DOFs, as in a PoseStream)."""
-    fk = body.forward_kinematics(values)
-    out = [fk[j.name][1] for j in body.joints]
-    for name in END_SITES:
-        if name in body.joint and body.joint[name].end_site is not None:
+    DOFs, as in a PoseStream), computed :data:`~agentsim.animation.body.FK_ROWS` frames at a time."""
+    from agentsim.animation.body import FK_ROWS
+
+    values = np.atleast_2d(np.asarray(values, dtype=float))
+    ends = [name for name in END_SITES if name in body.joint and body.joint[name].end_site is not None]
+    result = np.empty((len(values), len(body.joints) + len(ends), 3))
+    for a in range(0, len(values), FK_ROWS):
+        fk = body.forward_kinematics(values[a:a + FK_ROWS])
+        out = [fk[j.name][1] for j in body.joints]
+        for name in ends:
             rot, pos = fk[name]
             out.append(pos + rot @ np.asarray(body.joint[name].end_site, dtype=float))
-    return np.stack(out, axis=1)
+        result[a:a + FK_ROWS] = np.stack(out, axis=1)
+    return result
 
 
 def report_frames(stream, max_fps: float = MAX_FPS, keep: Iterable[float] = ()) -> np.ndarray:

@@ -44,22 +44,32 @@ AUDIO_BLOCK = 65536
 
 def write_audio(folder: Path, track) -> str:
     """Write ``track`` into ``folder`` as ``audio.ogg`` (Ogg Vorbis), or ``audio.wav`` if libsndfile cannot
-    write Vorbis; returns the file's name."""
+    write Vorbis; returns the file's name. ``track`` is a :class:`~agentsim.media.audio.Track` or a
+    :class:`~agentsim.media.audio.TrackStream` (encoded stretch by stretch, never held whole)."""
     import soundfile
 
-    samples = np.clip(np.asarray(track.samples, dtype=np.float32), -1.0, 1.0)
+    def blocks():
+        # in blocks: libsndfile 1.2 crashes when one write hands its Vorbis encoder more than about 2^20
+        # samples; a stretch of a TrackStream is a whole number of blocks, so the blocks are the same
+        for stretch in track.stretches():
+            samples = np.clip(np.asarray(stretch, dtype=np.float32), -1.0, 1.0)
+            for start in range(0, len(samples), AUDIO_BLOCK):
+                yield samples[start:start + AUDIO_BLOCK]
+
     try:
         if not soundfile.check_format("OGG", "VORBIS"):
             raise ValueError("this libsndfile writes no Ogg Vorbis")
-        # in blocks: libsndfile 1.2 crashes when one write hands its Vorbis encoder more than about 2^20 samples
         with soundfile.SoundFile(folder / "audio.ogg", "w", int(track.rate), 1, format="OGG",
                                  subtype="VORBIS") as out:
-            for start in range(0, len(samples), AUDIO_BLOCK):
-                out.write(samples[start:start + AUDIO_BLOCK])
+            for block in blocks():
+                out.write(block)
         return "audio.ogg"
     except (RuntimeError, ValueError, TypeError):  # libsndfile without Vorbis
         (folder / "audio.ogg").unlink(missing_ok=True)
-        soundfile.write(folder / "audio.wav", samples, int(track.rate), format="WAV", subtype="PCM_16")
+        with soundfile.SoundFile(folder / "audio.wav", "w", int(track.rate), 1, format="WAV",
+                                 subtype="PCM_16") as out:
+            for block in blocks():
+                out.write(block)
         return "audio.wav"
 
 
@@ -77,7 +87,9 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     stream : PoseStream, optional
         Its poses (:func:`~agentsim.animation.output.evaluate_poses`); None: the run has no motion.
     track : Track, optional
-        Its sound (:func:`~agentsim.media.audio.run_track`); None (or an empty track): the run has no sound.
+        Its sound (:func:`~agentsim.media.audio.run_track`, or a
+        :class:`~agentsim.media.audio.TrackStream` from :func:`~agentsim.media.audio.run_track_stream`);
+        None (or an empty track): the run has no sound.
     gestures : sequence of GestureRow
         The per-gesture table (:func:`~agentsim.media.tables.gesture_rows`).
     title : str
@@ -99,7 +111,7 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     folder.mkdir(parents=True, exist_ok=True)
     for name in OWN_FILES:
         (folder / name).unlink(missing_ok=True)
-    if track is not None and len(track.samples) == 0:
+    if track is not None and track.length == 0:
         track = None
     if stream is not None and stream.n_frames == 0:
         stream = None

@@ -215,7 +215,7 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     stage. ``plots``: draw the timeline and sync-error pictures too."""
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.core.feedback import to_json
-    from agentsim.media.audio import run_track
+    from agentsim.media.audio import run_track_stream
     from agentsim.media.files import write_text, write_wav
     from agentsim.media.report import write_report
     from agentsim.media.tables import gesture_rows, write_csv
@@ -238,7 +238,8 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     telling.extra["motion_strokes"] = motion_strokes(telling, stream)
     t = stage("motion check", t)
     utterance = telling.utterance
-    track = run_track(telling.recording) if utterance.audio is not None else None
+    # the track is made a stretch at a time, for the WAV and again for the report: never held whole
+    track = run_track_stream(telling.recording) if utterance.audio is not None else None
     if track is not None:  # where the listener heard it: late by the playback latency, drifting
         write_wav(out / "narration.wav", track)
     t = stage("wav", t)

@@ -248,8 +248,11 @@ class CachedBackend:
         self.cache_dir.mkdir(parents=True, exist_ok=True)
         has_audio = utt.audio is not None
         if has_audio:
-            pcm = np.round(np.asarray(utt.audio, dtype=np.float64) * 32768.0)
-            pcm = np.clip(pcm, -32768, 32767).astype(np.int16)
+            audio = np.asarray(utt.audio)
+            pcm = np.empty(len(audio), np.int16)
+            for a in range(0, len(audio), READ_BLOCK):  # a block at a time: no float64 copy of a long narration
+                block = np.round(np.asarray(audio[a:a + READ_BLOCK], dtype=np.float64) * 32768.0)
+                pcm[a:a + READ_BLOCK] = np.clip(block, -32768, 32767)
             tmp = audio_path.with_suffix(f".{os.getpid()}.tmp.npy")  # processes that write at once: one each
             np.save(tmp, pcm)
             tmp.replace(audio_path)
@@ -269,8 +272,7 @@ class CachedBackend:
                 return None
             audio = None
             if meta["audio"]:
-                audio = np.load(audio_path).astype(np.float32)
-                audio /= np.float32(32768.0)  # in place: a long narration is not held twice
+                audio = _read_pcm(audio_path)
         except (OSError, ValueError, KeyError):
             return None
         return Utterance(text=text, duration=float(meta["duration"]),
@@ -278,3 +280,25 @@ class CachedBackend:
                          phonemes=[Phoneme(**p) for p in meta["phonemes"]], marks=[],
                          sentences=[float(s) for s in meta["sentences"]], sample_rate=int(meta["sample_rate"]),
                          audio=audio, backend=meta.get("backend_name", ""))
+
+
+#: 16-bit samples read from (and written to) a cache file at a time.
+READ_BLOCK = 1 << 20
+
+
+def _read_pcm(path: Path) -> np.ndarray:
+    """The 16-bit samples of a cache file as float32 in [-1, 1), read a block at a time into the one array
+    (a long narration's 16-bit samples are not held beside it)."""
+    with open(path, "rb") as f:
+        version = np.lib.format.read_magic(f)
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, fortran, dtype = read_header(f)
+        if dtype != np.dtype("<i2") or len(shape) != 1 or fortran:
+            raise ValueError(f"{path}: not 16-bit mono samples")
+        audio = np.empty(shape[0], np.float32)
+        for a in range(0, shape[0], READ_BLOCK):
+            block = np.fromfile(f, dtype="<i2", count=min(READ_BLOCK, shape[0] - a))
+            if len(block) < min(READ_BLOCK, shape[0] - a):
+                raise ValueError(f"{path}: cut short")
+            np.divide(block, np.float32(32768.0), out=audio[a:a + len(block)], dtype=np.float32)
+    return audio
