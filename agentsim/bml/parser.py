@@ -37,9 +37,9 @@ MAX_NUMBER = 32
 #: Most behaviours one block may hold, and most sync points one behaviour may have; beyond them the rest of
 #: the block is ignored, with a warning.
 MAX_BEHAVIOURS = 10_000
-MAX_SYNCS = 10_000
-#: Most words one speech may have (10,000 words take more than an hour to say); a longer one is ignored.
-MAX_WORDS = 10_000
+MAX_SYNCS = 100_000
+#: Most words one speech may have (100,000 words take some ten hours to say); a longer one is ignored.
+MAX_WORDS = 100_000
 
 ALL_SYNC_NAMES = {s for t in BEHAVIOUR_TYPES.values() for s in t.syncs}
 #: The BML 1.0 core behaviour elements (the extension ones live in their own namespaces).
@@ -406,7 +406,7 @@ class _Reader:
             return False
         words = len(beh.text.split())
         if words > MAX_WORDS:
-            self.warn("PARSING_FAILURE", f"speech {beh.id} has {words} words (at most {MAX_WORDS}, over an hour of "
+            self.warn("PARSING_FAILURE", f"speech {beh.id} has {words} words (at most {MAX_WORDS}, some ten hours of "
                       "speech); behaviour ignored", node, [beh.id])
             return False
         return True
