@@ -9,6 +9,7 @@ the frame rate); frame indices may be absolute: ``start`` is the index of the fi
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -41,33 +42,27 @@ class CombPhase(NamedTuple):
     mean_score: float
 
 
-_TEETH: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # tooth numbers and weights by number of teeth
-_GRIDS: dict[int, np.ndarray] = {}  # frame indices 0 .. size - 1 by size
-
-
 def _teeth(onset_strength: np.ndarray, lag: float, start: int) -> tuple[int, np.ndarray, np.ndarray]:
     """Index of the last frame, tooth numbers ``0 .. n_beats - 1`` and their weights."""
     end = start + onset_strength.size - 1
-    n_beats = max(int((end - start) / lag), 1)
-    found = _TEETH.get(n_beats)
-    if found is None:
-        if len(_TEETH) > 256:
-            _TEETH.clear()
-        j = np.arange(n_beats)
-        w = COMB_DECAY**j
-        j.flags.writeable = w.flags.writeable = False
-        found = _TEETH[n_beats] = (j, w)
-    return end, found[0], found[1]
+    j, w = _tooth_weights(max(int((end - start) / lag), 1))
+    return end, j, w
 
 
+@functools.lru_cache(maxsize=256)
+def _tooth_weights(n_beats: int) -> tuple[np.ndarray, np.ndarray]:
+    """Tooth numbers ``0 .. n_beats - 1`` and their weights (read-only: they are shared)."""
+    j = np.arange(n_beats)
+    w = COMB_DECAY**j
+    j.flags.writeable = w.flags.writeable = False
+    return j, w
+
+
+@functools.lru_cache(maxsize=256)
 def _grid(size: int) -> np.ndarray:
-    """``np.arange(size)``, made once per size."""
-    found = _GRIDS.get(size)
-    if found is None:
-        if len(_GRIDS) > 256:
-            _GRIDS.clear()
-        found = _GRIDS[size] = np.arange(size)
-        found.flags.writeable = False
+    """``np.arange(size)`` (read-only: it is shared)."""
+    found = np.arange(size)
+    found.flags.writeable = False
     return found
 
 
