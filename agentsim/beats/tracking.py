@@ -299,14 +299,11 @@ class CausalBeatTracker:
         until = -math.inf
         for a in range(0, x.size, size):
             block = x[a : a + size]
-            if envelope.n_samples + block.size < self._due_sample:  # as process() does it
-                envelope.append(block)
-                now = envelope.n_samples / sample_rate
-                if now <= until:
-                    continue  # the same predictions as after the block before
-            else:
-                self.process(block)
-                now = envelope.n_samples / sample_rate
+            quiet = envelope.n_samples + block.size < self._due_sample  # nothing falls due within it
+            self.process(block)
+            now = envelope.n_samples / sample_rate
+            if quiet and now <= until:
+                continue  # the same predictions as after the block before
             beats, until = follower.predict_until(now, horizon_beats)
             beats = beats.tolist()
             if beats != last:
