@@ -287,18 +287,13 @@ READ_BLOCK = 1 << 20
 
 
 def _read_pcm(path: Path) -> np.ndarray:
-    """The 16-bit samples of a cache file as float32 in [-1, 1), read a block at a time into the one array
-    (a long narration's 16-bit samples are not held beside it)."""
-    with open(path, "rb") as f:
-        version = np.lib.format.read_magic(f)
-        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, fortran, dtype = read_header(f)
-        if dtype != np.dtype("<i2") or len(shape) != 1 or fortran:
-            raise ValueError(f"{path}: not 16-bit mono samples")
-        audio = np.empty(shape[0], np.float32)
-        for a in range(0, shape[0], READ_BLOCK):
-            block = np.fromfile(f, dtype="<i2", count=min(READ_BLOCK, shape[0] - a))
-            if len(block) < min(READ_BLOCK, shape[0] - a):
-                raise ValueError(f"{path}: cut short")
-            np.divide(block, np.float32(32768.0), out=audio[a:a + len(block)], dtype=np.float32)
+    """The 16-bit samples of a cache file as float32 in [-1, 1), converted a block at a time from the file
+    mapped into memory (a long narration's 16-bit samples are not held beside it); ValueError if the file
+    holds no 16-bit mono samples or is cut short."""
+    pcm = np.load(path, mmap_mode="r")
+    if pcm.dtype != np.dtype("<i2") or pcm.ndim != 1:
+        raise ValueError(f"{path}: not 16-bit mono samples")
+    audio = np.empty(pcm.shape[0], np.float32)
+    for a in range(0, pcm.shape[0], READ_BLOCK):
+        np.divide(pcm[a:a + READ_BLOCK], np.float32(32768.0), out=audio[a:a + READ_BLOCK], dtype=np.float32)
     return audio
