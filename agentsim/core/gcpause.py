@@ -13,8 +13,9 @@ When there are many (more than :data:`FEW`), they are moved to the oldest genera
 (``gc.freeze`` then ``gc.unfreeze``, which only relink lists): they are looked at by full collections
 only. So that garbage among them (a block released later, with its cycles) cannot pile up, a full
 collection is made here once the objects moved since the last one outnumber :data:`GROWTH` times those
-alive after it (or made in the pause that called for it, if they were more). Nothing is moved while objects are frozen by the program itself (``gc.freeze``, as the
-live service does once it has warmed up): unfreezing would put those back among the collected.
+alive after it (or made in the pause that called for it, if they were more). Nothing is moved while
+objects are frozen by the program itself (``gc.freeze``, as the live service does once it has warmed
+up): unfreezing would put those back among the collected.
 """
 
 from __future__ import annotations

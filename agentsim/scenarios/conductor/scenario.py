@@ -121,10 +121,7 @@ def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int
     with ThreadPoolExecutor(max_workers=2) as pool:
         checked = pool.submit(sound_check, config)
         pool.submit(beat_onset_offset, config.audio.sample_rate, _soundfont(config))
-        try:
-            return _simulate(config, name, seed, started, renderer=_renderer(config), reference=Later(checked))
-        finally:
-            checked.cancel()
+        return _simulate(config, name, seed, started, renderer=_renderer(config), reference=Later(checked))
 
 
 class Later(Mapping):
