@@ -356,7 +356,8 @@ def test_two_thousand_mutated_documents_neither_stop_the_realizer_nor_lose_feedb
 
 # ---------------------------------------------------------------------- outputs that cannot half-exist
 def test_a_file_is_written_whole_or_not_at_all(tmp_path):
-    from agentsim.media.files import write_text, written
+    from agentsim.core.written import written
+    from agentsim.media.files import write_text
 
     target = tmp_path / "feedback.jsonl"
     write_text(target, "old\n")
@@ -367,6 +368,37 @@ def test_a_file_is_written_whole_or_not_at_all(tmp_path):
     assert target.read_text() == "old\n" and sorted(p.name for p in tmp_path.iterdir()) == ["feedback.jsonl"]
     write_text(target, "new\n")
     assert target.read_text() == "new\n" and len(list(tmp_path.iterdir())) == 1
+
+
+def test_the_bvh_and_csv_writers_leave_the_old_file_when_writing_fails(tmp_path, monkeypatch):
+    import numpy as np
+
+    from agentsim.animation import evaluate_poses, write_bvh
+    from agentsim.media.tables import write_csv
+
+    realizer = Realizer()
+    realizer.submit(doc('<head id="h" lexeme="NOD"/>'))
+    realizer.run()
+    stream = evaluate_poses(realizer.recording(), fps=30)
+    bvh, table = tmp_path / "run.bvh", tmp_path / "rows.csv"
+    bvh.write_text("old\n")
+    table.write_text("old\n")
+
+    def full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savetxt", full)
+    with pytest.raises(OSError, match="No space left"):
+        write_bvh(bvh, stream)
+
+    class Row(dict):
+        def get(self, *args):
+            raise OSError(28, "No space left on device")
+
+    with pytest.raises(OSError, match="No space left"):
+        write_csv(table, [Row(a=1)], columns=["a"])
+    assert bvh.read_text() == "old\n" and table.read_text() == "old\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rows.csv", "run.bvh"]
 
 
 def test_a_full_disk_for_the_feedback_is_one_clear_line(tmp_path):

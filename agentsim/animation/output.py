@@ -20,6 +20,7 @@ from agentsim.animation.behaviours import build_drivers
 from agentsim.animation.body import Body
 from agentsim.animation.manager import DriverManager
 from agentsim.animation.time_source import TimeSource
+from agentsim.core.written import written
 
 #: Joints whose world positions a PoseStream carries for every frame.
 TRACKED_JOINTS = ("HumanoidRoot", "vt10", "skullbase", "l_eyeball", "r_eyeball", "l_shoulder", "r_shoulder",
@@ -189,7 +190,8 @@ def write_bvh(path: str | Path, stream: PoseStream, precision: int = 5) -> Path:
     body = stream.body
     if list(stream.channels) != list(body.dof_names):
         raise ValueError("the stream's channels do not match its body")
-    with open(path, "w") as f:  # straight to the file: a long stream's text is not held in memory
+    # straight to the file (a long stream's text is not held in memory), under a temporary name until whole
+    with written(path) as tmp, open(tmp, "w") as f:
         f.write(bvh_hierarchy(body))
         f.write("MOTION\n")
         f.write(f"Frames: {stream.n_frames}\n")

@@ -101,7 +101,7 @@ def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sour
     if not any((args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report)):
         return  # nothing asked for: nothing to load
     from agentsim.media.audio import run_track
-    from agentsim.media.files import write_npz, write_textgrid, write_wav, written
+    from agentsim.media.files import write_npz, write_textgrid, write_wav
     from agentsim.media.tables import gesture_rows, write_csv
 
     recording = realizer.recording()
@@ -117,15 +117,13 @@ def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sour
     if args.bvh:
         from agentsim.animation import write_bvh
 
-        with written(args.bvh) as tmp:
-            write_bvh(tmp, stream)
+        write_bvh(args.bvh, stream)
     if args.poses:
         write_npz(args.poses, stream)
     if args.textgrid:
         write_textgrid(args.textgrid, recording, gestures)
     if args.csv:
-        with written(Path(args.csv) / "gestures.csv") as tmp:
-            write_csv(tmp, gestures)
+        write_csv(Path(args.csv) / "gestures.csv", gestures)
     if args.report:
         from agentsim.media.report import write_report
 

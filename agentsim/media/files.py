@@ -5,13 +5,13 @@ syntax for comments (a reader we test refuses one), so the BVH says nothing; its
 
 from __future__ import annotations
 
-import contextlib
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable
 
 
 from agentsim.core.errors import UsageError
+from agentsim.core.written import written
 from agentsim.media import AXIS
 if TYPE_CHECKING:  # checking where to write needs no audio
     from agentsim.media.audio import Track
@@ -67,26 +67,6 @@ def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[st
         problem = _cannot_write_in(path)
         if problem:
             raise UsageError(f"cannot write in the output folder {path}: {problem}")
-
-
-@contextlib.contextmanager
-def written(path: str | Path):
-    """Write a file so that it cannot half-exist: the body writes to a temporary name beside ``path`` (with
-    the same suffix), renamed to ``path`` once it is whole; if the writing fails (a full disk), the temporary
-    file is removed and ``path`` is left as it was.
-
-    >>> with written("out.txt") as tmp:  # doctest: +SKIP
-    ...     tmp.write_text("whole")
-    """
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.partial-{os.getpid()}{path.suffix}")
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
 
 
 def write_text(path: str | Path, text: str) -> Path:

@@ -16,6 +16,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable
 
+from agentsim.core.written import written
+
 #: The order in which a behaviour's sync points are tried for its peg: its stroke first.
 PEG_ORDER = ("stroke", "strokeStart", "attackPeak", "ready", "strokeEnd", "relax", "start", "end")
 #: Behaviour types that are never pegged behaviours of their own (they are what others are pegged to, or
@@ -111,7 +113,7 @@ def write_csv(path: str | Path, rows: list, columns: list[str] | None = None) ->
     dicts = [asdict(r) if not isinstance(r, dict) else r for r in rows]
     if columns is None:
         columns = list(dicts[0]) if dicts else [f.name for f in GestureRow.__dataclass_fields__.values()]
-    with open(path, "w", newline="") as f:
+    with written(path) as tmp, open(tmp, "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(columns)
         for d in dicts:
