@@ -26,7 +26,9 @@ from urllib.parse import quote
 
 import numpy as np
 
+from agentsim.core.written import written
 from agentsim.media import AXIS
+from agentsim.media.files import write_text
 from agentsim.media.report.data import (FACE, pose_payload, js_assignment, point_names, run_duration,
                                         stroke_times, timeline_payload)
 
@@ -59,15 +61,15 @@ def write_audio(folder: Path, track) -> str:
     try:
         if not soundfile.check_format("OGG", "VORBIS"):
             raise ValueError("this libsndfile writes no Ogg Vorbis")
-        with soundfile.SoundFile(folder / "audio.ogg", "w", int(track.rate), 1, format="OGG",
-                                 subtype="VORBIS") as out:
+        with written(folder / "audio.ogg") as tmp, soundfile.SoundFile(tmp, "w", int(track.rate), 1, format="OGG",
+                                                                      subtype="VORBIS") as out:
             for block in blocks():
                 out.write(block)
         return "audio.ogg"
     except (RuntimeError, ValueError, TypeError):  # libsndfile without Vorbis
         (folder / "audio.ogg").unlink(missing_ok=True)
-        with soundfile.SoundFile(folder / "audio.wav", "w", int(track.rate), 1, format="WAV",
-                                 subtype="PCM_16") as out:
+        with written(folder / "audio.wav") as tmp, soundfile.SoundFile(tmp, "w", int(track.rate), 1, format="WAV",
+                                                                      subtype="PCM_16") as out:
             for block in blocks():
                 out.write(block)
         return "audio.wav"
@@ -131,10 +133,10 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         data = _page_data(recording, stream, track, gestures, title, notes, folder)
         if audio is not None:
             data["audio"] = {"src": audio.result(), "duration": track.duration, "rate": int(track.rate)}
-    (folder / "data.js").write_text(js_assignment(
+    write_text(folder / "data.js", js_assignment(
         "REPORT_DATA", data, f"agentsim run report: timeline and tables of {title!r}, see "
-        "agentsim.media.report.data"), encoding="utf-8")
-    path.write_text(page_html(folder.name, title, notes, data), encoding="utf-8")
+        "agentsim.media.report.data"))
+    write_text(path, page_html(folder.name, title, notes, data))
     return path
 
 
@@ -146,9 +148,9 @@ def _page_data(recording, stream, track, gestures, title, notes, folder: Path) -
     if stream is not None:
         names, parents = point_names(stream.body)
         poses = pose_payload(stream, keep=stroke_times(recording, gestures))
-        (folder / "poses.js").write_text(js_assignment(
+        write_text(folder / "poses.js", js_assignment(
             "REPORT_POSES", poses, f"agentsim run report: joint positions of {title!r}, see "
-            "agentsim.media.report.data"), encoding="utf-8")
+            "agentsim.media.report.data"))
         data["motion"] = {
             "fps": float(stream.fps), "frames": int(stream.n_frames), "sent": poses["count"],
             "start": float(stream.times[0]), "end": float(stream.times[-1]),
