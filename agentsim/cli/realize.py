@@ -96,9 +96,15 @@ def add_outputs(parser: argparse.ArgumentParser) -> None:
                                                              "a folder OUT_files beside it)")
 
 
+def run_outputs(args: argparse.Namespace) -> list[str]:
+    """The files (and the ``--csv`` folder, with a slash) that ``args`` asks :func:`write_run_outputs` for."""
+    return [f"{name}/" if name == args.csv else name
+            for name in (args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report) if name]
+
+
 def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sources=(), beat_times=None) -> None:
     """Write the files ``args`` asks for from a finished run, on its time axis."""
-    if not any((args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report)):
+    if not run_outputs(args):
         return  # nothing asked for: nothing to load
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_npz, write_textgrid, write_wav
@@ -192,8 +198,7 @@ def realize_files(args: argparse.Namespace) -> int:
         realizer.submit_at(at[i], documents[i][1], source=str(resolve(documents[i][0])))
     realizer.run(until=args.until)
     write_run_outputs(args, realizer, title=", ".join(Path(f).name for f in args.files))
-    written = [f"{name}/" if name == args.csv else name
-               for name in (args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report) if name]
+    written = run_outputs(args)
     if written:
         print(f"wrote {', '.join(written)}", file=sys.stderr)
     return 0
