@@ -235,7 +235,10 @@ class CausalBeatTracker:
         The samples are buffered; onset strength, tempo and beat updates are computed when the next
         tempo estimate or beat observation falls due, so small blocks cost little.
         """
-        x = mono_samples(block)
+        self._hear(mono_samples(block))
+
+    def _hear(self, x: np.ndarray) -> None:
+        """:meth:`process` of samples already mono float32 and finite."""
         envelope = self.envelope
         if envelope.n_samples + x.size < self._due_sample:
             envelope.append(x)  # nothing falls due within this block
@@ -297,10 +300,21 @@ class CausalBeatTracker:
         updates: list[dict] = []
         last = None
         until = -math.inf
-        for a in range(0, x.size, size):
+        a, total = 0, x.size
+        while a < total:
+            # the blocks from here within which nothing falls due and after which the predictions still
+            # hold are only heard: their samples go to the envelope as one stretch
+            due, heard = self._due_sample, envelope.n_samples
+            b = a
+            while b + size < total and heard + (b - a) + size < due and (heard + (b - a) + size) / sample_rate <= until:
+                b += size
+            if b > a:
+                envelope.append(x[a:b])
+                a = b
             block = x[a : a + size]
             quiet = envelope.n_samples + block.size < self._due_sample  # nothing falls due within it
-            self.process(block)
+            self._hear(block)
+            a += size
             now = envelope.n_samples / sample_rate
             if quiet and now <= until:
                 continue  # the same predictions as after the block before
