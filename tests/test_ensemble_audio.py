@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -198,6 +199,30 @@ def test_block_renderer_matches_whole_render():
         assert r.time == pytest.approx(6.0)
     np.testing.assert_array_equal(np.concatenate(blocks), whole)
 
+
+
+def test_rendering_ahead_gives_the_same_samples_and_counts_a_broken_promise():
+    sc = build_score(make_tempo_map(125, "4/4", rubato=0.02, seed=1), 3, seed=1)
+    events = sorted(score_events(sc, offset=0.3), key=lambda e: e.time)
+    whole = render_events(events, 6.0, 22050)
+    rng = np.random.default_rng(0)
+    blocks, lead = [], 0.4
+    with FluidSynthRenderer(22050) as r:
+        pending = list(events)
+        t = 0.0
+        while t < 6.0:
+            t = min(6.0, t + float(rng.uniform(0.002, 0.05)))
+            while pending and pending[0].time < t + lead:
+                r.schedule(pending.pop(0))
+            blocks.append(r.render_until(t))
+            # every event before t + lead is queued: a thread may render up to there while we go on
+            r.render_ahead(t + lead if not pending else min(t + lead, pending[0].time))
+        assert r.time == pytest.approx(6.0) and r.broken_promises == 0
+        assert any(th.name.startswith("fluidsynth") for th in threading.enumerate())  # it rendered ahead
+        r.render_ahead(7.0)
+        r.note(6.5, 0, 60, 100, 0.2)  # both events are within what was promised quiet: counted
+        assert r.broken_promises == 2
+    np.testing.assert_array_equal(np.concatenate(blocks), whole)
 
 def test_event_sample_is_block_aligned():
     with FluidSynthRenderer(44100) as r:

@@ -24,6 +24,7 @@ __all__ = [
     "DEFAULT_SOUNDFONT",
     "INSTALL_HINT",
     "FLUID_BLOCK",
+    "AHEAD_SECONDS",
     "check_soundfont",
     "FluidSynthRenderer",
     "render_events",
@@ -38,6 +39,10 @@ INSTALL_HINT = "apt-get install fluidsynth fluid-soundfont-gm"
 
 FLUID_BLOCK = 64
 """FluidSynth's internal block length in samples; MIDI events take effect on its boundaries."""
+
+
+AHEAD_SECONDS = 1.0
+"""How far beyond what it handed out :meth:`FluidSynthRenderer.render_ahead` renders at most (seconds)."""
 
 
 def check_soundfont(soundfont: "str | os.PathLike") -> str:
@@ -99,6 +104,12 @@ class FluidSynthRenderer:
     samples and envelopes start quietly (see :func:`~agentsim.music.onsets.measure_onset_offsets`).
     Events scheduled in the past are applied at once (on the next boundary).
 
+    A caller that knows no event will be scheduled before some time says so with :meth:`render_ahead`:
+    a thread of the renderer's own then renders up to there while the caller goes on (FluidSynth does not
+    hold Python's lock), and :meth:`render_until` hands out what it rendered. The samples are the same as
+    rendering when asked, as long as the promise is kept (:attr:`broken_promises` counts events scheduled
+    before a time promised: they sound at once, later than they would have).
+
     Parameters
     ----------
     sample_rate : int
@@ -132,31 +143,43 @@ class FluidSynthRenderer:
         path = check_soundfont(soundfont)
         fluidsynth = _import_fluidsynth()
         self.sample_rate = int(sample_rate)
-        self._synth = fluidsynth.Synth(gain=float(gain), samplerate=float(sample_rate))
+        with _IMPORT_LOCK:  # FluidSynth sets up its default modulators, shared by all synthesizers, unguarded
+            self._synth = fluidsynth.Synth(gain=float(gain), samplerate=float(sample_rate))
         self._write_s16 = fluidsynth.fluid_synth_write_s16
         self._synth.setting("synth.reverb.active", int(bool(reverb)))
         self._synth.setting("synth.chorus.active", int(bool(chorus)))
         # a sample is read from the soundfont when a preset that plays it is chosen, not all 140 MB up front
         self._synth.setting("synth.dynamic-sample-loading", 1)
+        self._queue: list[tuple[int, int, int, SynthEvent]] = []
+        self._counter = itertools.count()
+        self._pos = 0  # samples synthesised so far, always a multiple of FLUID_BLOCK at event boundaries
+        self._handed = 0  # samples handed out by render_until
+        # rendering ahead: one thread synthesises up to the time promised, into _ahead (mono float32
+        # beyond what was handed out); the queue and _ahead are shared with it under _lock; the synthesizer
+        # and _pos belong to whichever thread renders, the caller's only while no job is pending
+        self._lock = threading.Lock()
+        self._ahead: list[np.ndarray] = []
+        self._ready = 0  # samples synthesised by finished jobs (or by the caller)
+        self._promised = 0  # sample before which no new event will be scheduled
+        self._jobs: list = []
+        self._worker = None
+        self.broken_promises = 0
         self._sfid = self._synth.sfload(path)
         if self._sfid < 0:
             raise Unavailable(f"FluidSynth could not load the soundfont {path!r}; reinstall it with `{INSTALL_HINT}`")
         self._synth.program_select(DRUM_CHANNEL, self._sfid, 128, 0)
         for ch, prog in (programs or {}).items():
             self.set_program(ch, prog)
-        self._queue: list[tuple[int, int, int, SynthEvent]] = []
-        self._counter = itertools.count()
-        self._pos = 0  # samples rendered so far, always a multiple of FLUID_BLOCK at event boundaries
 
     @property
     def time(self) -> float:
-        """Seconds of audio rendered so far."""
-        return self._pos / self.sample_rate
+        """Seconds of audio handed out so far."""
+        return self._handed / self.sample_rate
 
     @property
     def samples_rendered(self) -> int:
-        """Number of samples rendered so far."""
-        return self._pos
+        """Number of samples handed out so far (by :meth:`render_until`)."""
+        return self._handed
 
     def event_sample(self, time: float) -> int:
         """Sample index at which an event at ``time`` seconds takes effect (nearest 64-sample boundary)."""
@@ -164,6 +187,7 @@ class FluidSynthRenderer:
 
     def set_program(self, channel: int, program: int) -> None:
         """Select a General MIDI program on a melodic channel now."""
+        self._drain()  # the synthesizer is the rendering thread's until its jobs are done
         if channel == DRUM_CHANNEL:
             self._synth.program_select(DRUM_CHANNEL, self._sfid, 128, int(program))
         else:
@@ -173,8 +197,12 @@ class FluidSynthRenderer:
         """Queue one event or several; they sound when rendering passes their time."""
         if isinstance(events, SynthEvent):
             events = (events,)
-        for ev in events:
-            heapq.heappush(self._queue, (self.event_sample(ev.time), EVENT_ORDER[ev.kind], next(self._counter), ev))
+        with self._lock:
+            for ev in events:
+                at = self.event_sample(ev.time)
+                if at < self._promised:
+                    self.broken_promises += 1
+                heapq.heappush(self._queue, (at, EVENT_ORDER[ev.kind], next(self._counter), ev))
 
     def note(self, time: float, channel: int, key: int, velocity: int, duration: float) -> None:
         """Queue a note: a note-on at ``time`` and a note-off ``duration`` seconds later."""
@@ -203,6 +231,57 @@ class FluidSynthRenderer:
             out.append(samples)
             self._pos += n
 
+    def _synthesise(self, end: int) -> None:
+        """Synthesise from ``_pos`` to sample ``end``, applying the events due on the way, into ``_ahead``."""
+        chunks: list[np.ndarray] = []
+        queue = self._queue
+        while True:
+            with self._lock:
+                if not queue or queue[0][0] > end:
+                    break
+                at, _, _, event = heapq.heappop(queue)
+            # Render up to the event's boundary (event samples are multiples of FLUID_BLOCK, so
+            # FluidSynth's block position is aligned there). A late event is applied at once and
+            # takes effect on FluidSynth's next block boundary.
+            self._render(at - self._pos, chunks)
+            self._apply(event)
+        self._render(end - self._pos, chunks)
+        if chunks:
+            stereo = np.concatenate(chunks).astype(np.float32).reshape(-1, 2)
+            mono = (stereo.sum(axis=1) * (0.5 / 32768.0)).astype(np.float32)
+            with self._lock:
+                self._ahead.append(mono)
+                self._ready = self._pos
+
+    def _drain(self) -> None:
+        """Wait for the rendering thread's jobs (raising what one raised)."""
+        jobs, self._jobs = self._jobs, []
+        for job in jobs:
+            job.result()
+
+    def render_ahead(self, until: float) -> None:
+        """Promise that no event will be scheduled before ``until`` seconds, and render up to there on a
+        thread of the renderer's own (in stretches of at least 2,048 samples, at most :data:`AHEAD_SECONDS`
+        beyond what was handed out) while the caller goes on."""
+        if self._synth is None:
+            return
+        until = min(until, self.time + AHEAD_SECONDS)
+        target = int(until * self.sample_rate) // FLUID_BLOCK * FLUID_BLOCK
+        if target <= self._promised:
+            return
+        with self._lock:
+            self._promised = target
+        start = max(self._pos if not self._jobs else self._jobs[-1].target, self._handed)
+        if target - start < 2048:
+            return
+        if self._worker is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._worker = ThreadPoolExecutor(1, thread_name_prefix="fluidsynth")
+        job = self._worker.submit(self._synthesise, target)
+        job.target = target
+        self._jobs.append(job)
+
     def render_until(self, t: float) -> np.ndarray:
         """Render from the current position up to ``t`` seconds.
 
@@ -217,23 +296,30 @@ class FluidSynthRenderer:
             Float32 mono samples in [-1, 1], ``round(t * sample_rate) - samples_rendered`` of them.
         """
         end = int(round(t * self.sample_rate))
-        chunks: list[np.ndarray] = []
-        while self._queue and self._queue[0][0] <= end:
-            at = self._queue[0][0]
-            # Render up to the event's boundary (event samples are multiples of FLUID_BLOCK, so
-            # FluidSynth's block position is aligned there). A late event is applied at once and
-            # takes effect on FluidSynth's next block boundary.
-            self._render(at - self._pos, chunks)
-            self._apply(heapq.heappop(self._queue)[3])
-        self._render(end - self._pos, chunks)
-        if not chunks:
+        if end <= self._handed:
             return np.zeros(0, np.float32)
-        stereo = np.concatenate(chunks).astype(np.float32).reshape(-1, 2)
-        return (stereo.sum(axis=1) * (0.5 / 32768.0)).astype(np.float32)
-
+        with self._lock:
+            ready = self._ready
+        if ready < end:
+            self._drain()
+            if self._pos < end:
+                self._synthesise(end)
+        with self._lock:
+            ahead = self._ahead
+            have = np.concatenate(ahead) if len(ahead) > 1 else ahead[0]
+            n = end - self._handed
+            self._ahead = [have[n:]] if have.size > n else []
+        self._handed = end
+        return have[:n]
     def close(self) -> None:
         """Free the synthesizer."""
         if getattr(self, "_synth", None) is not None:
+            try:
+                self._drain()
+            finally:
+                if self._worker is not None:
+                    self._worker.shutdown()
+                    self._worker = None
             self._synth.delete()
             self._synth = None
 

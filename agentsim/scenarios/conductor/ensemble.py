@@ -13,6 +13,7 @@ the piece starts, so that the same seed gives every strategy the same noise beat
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -25,6 +26,9 @@ from agentsim.scenarios.conductor.config import ModelParams, MusicianConfig, Pie
 
 #: Conducting gestures are named ``b<beat>``; other gestures the musicians react to by their ids.
 BEAT_ID = re.compile(r"^b(\d+)$")
+
+DECISION_LEAD = 0.02
+"""A musician's next note sounds at least this long (seconds) after it decides when to play it."""
 
 
 class Timekeeper:
@@ -193,7 +197,18 @@ class Ensemble:
             keeper = Timekeeper(cfg.model, start_period, comfortable * (1.0 + spread), ens.start_time, e, m)
             self.musicians.append(Musician(cfg, keeper, v, notes[cfg.part]))
         self.finished = env.event()
-        self._processes = [env.process(self._play(m)) for m in self.musicians]
+        # when each musician decides next (None: not yet known); notes it gives the renderer then sound
+        # no earlier than DECISION_LEAD after it
+        self._decides: list[float | None] = [None] * len(self.musicians)
+        self._processes = [env.process(self._play(i, m)) for i, m in enumerate(self.musicians)]
+
+    def quiet_until(self) -> float:
+        """The time before which no note not yet given to the renderer will sound (all that can be
+        promised to :meth:`~agentsim.music.rendering.FluidSynthRenderer.render_ahead`): the next decision of
+        any musician plus :data:`DECISION_LEAD`, less a millisecond for notes that start on their beat."""
+        if any(d is None for d in self._decides):
+            return self.env.now
+        return max(min(self._decides) + DECISION_LEAD - 1e-3, self.env.now)
 
     # ------------------------------------------------------------------ what the musicians see
     def see(self, feedback: dict) -> None:
@@ -236,7 +251,7 @@ class Ensemble:
             self.renderer.note(onset + note.offset * period, cfg.channel if cfg.program >= 0 else DRUM_CHANNEL,
                                note.key, velocity, note.duration * period)
 
-    def _play(self, musician: Musician):
+    def _play(self, index: int, musician: Musician):
         env = self.env
         keeper = musician.keeper
         p = keeper.p
@@ -244,6 +259,7 @@ class Ensemble:
         self._schedule(musician, 1, keeper.onsets[0], keeper.period)
         for beat in range(1, n_beats):
             decide = keeper.onsets[beat - 1] + p.decide_fraction * keeper.period
+            self._decides[index] = max(decide, env.now)
             if decide > env.now:
                 yield env.timeout(decide - env.now)
             if self.stopped():
@@ -252,8 +268,9 @@ class Ensemble:
             ictus = self.seen_ictus(beat, musician)
             partners = [m.onsets[beat - 1] for m in self.musicians
                         if m is not musician and len(m.onsets) >= beat and m.onsets[beat - 1] <= env.now]
-            onset = keeper.next_onset(ictus, partners, earliest=env.now + 0.02)
+            onset = keeper.next_onset(ictus, partners, earliest=env.now + DECISION_LEAD)
             self._schedule(musician, beat + 1, onset, keeper.period)
+        self._decides[index] = math.inf  # no more notes
         last = keeper.onsets[-1] + keeper.period
         if last > env.now:
             yield env.timeout(last - env.now)

@@ -166,6 +166,7 @@ def _simulate(config: ScenarioConfig, name: str, seed: int, started: float, rend
             if t > env.now:
                 yield env.timeout(t - env.now)
             ears.push(renderer.render_until(t))
+            renderer.render_ahead(ensemble.quiet_until())  # while the tracker and the realizer work
             if end is None and ensemble.finished.triggered:
                 end = env.now + TAIL_SECONDS
             if end is not None and t >= end:
