@@ -86,8 +86,9 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         The HTML file to write; its files go into ``<stem>_files/`` beside it.
     recording : Recording
         The run (or anything with a ``recording()`` method, such as a realizer after ``run()``).
-    stream : PoseStream, optional
-        Its poses (:func:`~agentsim.animation.output.evaluate_poses`); None: the run has no motion.
+    stream : PoseStream or callable, optional
+        Its poses (:func:`~agentsim.animation.output.evaluate_poses`), or a function without arguments that
+        makes them (called while the sound is encoded); None: the run has no motion.
     track : Track, optional
         Its sound (:func:`~agentsim.media.audio.run_track`, or a
         :class:`~agentsim.media.audio.TrackStream` from :func:`~agentsim.media.audio.run_track_stream`);
@@ -115,8 +116,6 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         (folder / name).unlink(missing_ok=True)
     if track is not None and track.length == 0:
         track = None
-    if stream is not None and stream.n_frames == 0:
-        stream = None
     gestures = list(gestures)
     title = title or path.stem
     notes = [str(n) for n in notes]
@@ -130,6 +129,10 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     # timeline and the poses are made
     with concurrent.futures.ThreadPoolExecutor(1) as encoder:
         audio = encoder.submit(write_audio, folder, track) if track is not None else None
+        if callable(stream):
+            stream = stream()
+        if stream is not None and stream.n_frames == 0:
+            stream = None
         data = _page_data(recording, stream, track, gestures, title, notes, folder)
         if audio is not None:
             data["audio"] = {"src": audio.result(), "duration": track.duration, "rate": int(track.rate)}

@@ -410,13 +410,19 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the feedback's)
     track = run_track(recording, [ensemble_source(run)])
     write_wav(out / "ensemble.wav", track)
-    stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
-    write_bvh(out / "conductor.bvh", stream)
     write_csv(out / "beats.csv", beat_rows(run))
     gestures = gesture_rows(recording, beat_sounded(run))
     write_csv(out / "gestures.csv", gestures)
-    write_report(out / "report.html", recording=recording, stream=stream, track=track, gestures=gestures,
+    poses = []
+
+    def evaluated():  # the poses are evaluated while the report's sound is encoded
+        poses.append(evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed))
+        return poses[0]
+
+    write_report(out / "report.html", recording=recording, stream=evaluated, track=track, gestures=gestures,
                  title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})")
+    stream = poses[0]
+    write_bvh(out / "conductor.bvh", stream)
     if not plots:
         return out
     run_tempo_figure(run, metrics).savefig(out / "tempo.png")
