@@ -246,6 +246,7 @@ class Body:
         self.offsets = np.array([j.offset for j in self.joints], dtype=float)
         self.parent_index = [self.joint_index[j.parent] if j.parent else -1 for j in self.joints]
         root = self.joints[0]
+        self._fk_columns: dict[tuple, np.ndarray] = {}  # rotation columns of the joints forward kinematics needs
         self.translation_columns = tuple(self.dof_index[f"{root.name}.{s}"] for s, _ in TRANSLATION_AXES)
         self._rest = self._make_rest()
 
@@ -314,8 +315,16 @@ class Body:
         rot: dict[int, np.ndarray] = {}
         pos: dict[int, np.ndarray] = {}
         tx, ty, tz = self.translation_columns
-        for i in needed:  # parents come before children in BVH order
-            local = self.local_rotations(pose, i)
+        # every joint's local rotation at once (the same numbers as joint by joint)
+        needed = tuple(needed)
+        columns = self._fk_columns.get(needed)
+        if columns is None:
+            columns = self._fk_columns[needed] = np.array(
+                [self.rotation_columns[self.joints[i].name] for i in needed], dtype=np.intp)
+        angles = pose[:, columns]
+        locals_ = euler_matrix(angles[..., 0], angles[..., 1], angles[..., 2])
+        for k, i in enumerate(needed):  # parents come before children in BVH order
+            local = locals_[:, k]
             parent = self.parent_index[i]
             if parent < 0:
                 rot[i] = local
