@@ -105,7 +105,9 @@ class BlockSolver:
         self.failed = False
         self.ties = _Ties()
         self.block_node = self.ties.add((self.block_peg, 0.0))
-        self.nodes: dict[tuple, int] = {}
+        self.nodes: dict[tuple, int] = {}  # tie nodes of anticipators' and other blocks' sync points
+        # the tie nodes of this block's sync points: behaviour id -> sync id -> node
+        self.local_nodes: dict[str, dict[str, int]] = {}
         self.dropped: dict[str, tuple[str, str]] = {}  # behaviour id -> (warning type, reason)
         self.group_peg: dict[int, OffsetPeg] = {}
         self.anchors: list[OffsetPeg] = []
@@ -167,10 +169,12 @@ class BlockSolver:
         return found
 
     def local_node(self, behaviour_id: str, sync_id: str) -> int:
-        key = ("sync", behaviour_id, sync_id)
-        node = self.nodes.get(key)
+        nodes = self.local_nodes.get(behaviour_id)
+        if nodes is None:
+            nodes = self.local_nodes[behaviour_id] = {}
+        node = nodes.get(sync_id)
         if node is None:
-            node = self.nodes[key] = self.ties.add()
+            node = nodes[sync_id] = self.ties.add()
         return node
 
     # ----------------------------------------------------------------- ties
@@ -233,11 +237,15 @@ class BlockSolver:
             return []
         members: dict[int, list[int]] = {}
         behaviours = self.block.behaviours
+        find = self.ties.find
         for index, beh in enumerate(behaviours):
+            nodes = self.local_nodes.get(beh.id)
+            if not nodes:
+                continue
             for sync_id in beh.sync_ids:
-                node = self.nodes.get(("sync", beh.id, sync_id))
+                node = nodes.get(sync_id)
                 if node is not None:
-                    members.setdefault(self.ties.find(node)[0], []).append(index)
+                    members.setdefault(find(node)[0], []).append(index)
         # Among behaviours tied to known times, rigid ones (speech) go first: the others can stretch.
         priority = [(0 if self.engines[b.type].planner.rigid else 1, i) if b.type in self.engines else (1, i)
                     for i, b in enumerate(behaviours)]
@@ -288,15 +296,17 @@ class BlockSolver:
         base = self.block_peg.time
         known: dict[str, float] = {}
         groups: dict[str, tuple[int, float]] = {}
-        for sync_id in beh.sync_ids:
-            node = self.nodes.get(("sync", beh.id, sync_id))
-            if node is None:
-                continue
-            root, d = self.ties.find(node)
-            groups[sync_id] = (root, d)
-            peg = self.group_peg.get(root)
-            if peg is not None:
-                known[sync_id] = peg.time + d - base
+        nodes = self.local_nodes.get(beh.id)
+        if nodes:
+            find, group_peg = self.ties.find, self.group_peg
+            for sync_id in beh.sync_ids:
+                node = nodes.get(sync_id)
+                if node is None:
+                    continue
+                root, d = groups[sync_id] = find(node)
+                peg = group_peg.get(root)
+                if peg is not None:
+                    known[sync_id] = peg.time + d - base
         try:
             preferred = planner.preferred(beh)
             times = planner.resolve(beh, known, preferred=preferred)
@@ -365,6 +375,8 @@ class BlockSolver:
 
     def self_ties(self, beh: Behaviour, groups, known, times) -> dict[str, float]:
         """Times implied by constraints between sync points of the same behaviour (``end="b:start+1"``)."""
+        if len(groups) - len(known) < 2:
+            return {}  # no two sync points whose time is not known yet: none can imply the other's
         by_root: dict[int, list[str]] = {}
         for sync_id, (root, _) in groups.items():
             if sync_id not in known:
