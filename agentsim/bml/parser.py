@@ -416,6 +416,7 @@ class _Reader:
     def constraint(self, node: Node, required: bool) -> None:
         owner = node.attrs.get("id", "")
         constraints = self.block.constraints
+        known = self.refs  # (looked up here at once: a block's constraints repeat their references)
         for child in node.elements():
             kind = child.local
             if kind not in ("synchronize", "before", "after"):
@@ -429,11 +430,13 @@ class _Reader:
                 if text is None:
                     self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
                     continue
-                try:
-                    ref = self.ref(text, sync)
-                except BMLError as exc:
-                    self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
-                    continue
+                ref = known.get(text)
+                if ref is None:
+                    try:
+                        ref = self.ref(text, sync)
+                    except BMLError as exc:
+                        self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
+                        continue
                 refs.append(ref)
             anchor = None
             if "ref" in child.attrs:

@@ -139,6 +139,9 @@ class BlockSolver:
     # ----------------------------------------------------------------- references
     def node(self, ref: SyncRef) -> tuple[int, float]:
         """The tie node a reference stands for, and its offset. Raises ScheduleError if it is dangling."""
+        found = self._local_refs.get(id(ref))  # (one to this block's own sync points, met before)
+        if found is not None:
+            return found
         if ref.kind == "absolute":
             return self.block_node, ref.offset
         if ref.kind == "anticipator":
@@ -157,9 +160,6 @@ class BlockSolver:
                     raise ScheduleError(f"no sync point {ref.target()} in a planned block")
                 self.nodes[key] = self.ties.add(found)
             return self.nodes[key], ref.offset
-        found = self._local_refs.get(id(ref))
-        if found is not None:
-            return found
         beh = self.block.behaviour(ref.behaviour)
         if beh is None:
             raise ScheduleError(f"no behaviour {ref.behaviour!r} in block {self.block.id}")
