@@ -196,19 +196,24 @@ class BlockSolver:
                 if reason:
                     self.drop(beh.id, f"{sync_id}={ref.text!r}: {reason}")
         inequalities = []
+        local_refs = self._local_refs  # (what node() looks up first, looked up here without the call)
+        union = self.ties.union
         for constraint in self.block.constraints:
             resolved = []
             for ref in constraint.refs:
-                try:
-                    node, offset = self.node(ref)
-                except ScheduleError as exc:
-                    self.constraint_issue(constraint, f"reference {ref.text!r} ignored: {exc}")
-                    continue
-                resolved.append((node, offset, ref))
+                found = local_refs.get(id(ref))
+                if found is None:
+                    try:
+                        found = self.node(ref)
+                    except ScheduleError as exc:
+                        self.constraint_issue(constraint, f"reference {ref.text!r} ignored: {exc}")
+                        continue
+                resolved.append((found[0], found[1], ref))
             if constraint.kind == "synchronize":
-                for node, offset, ref in resolved[1:]:
+                if resolved:
                     n0, o0, first = resolved[0]
-                    reason = self.ties.union(n0, node, offset - o0)
+                for node, offset, ref in resolved[1:]:
+                    reason = union(n0, node, offset - o0)
                     if reason:
                         blame = ref if ref.kind == "sync" else first
                         self.constraint_issue(constraint, f"cannot synchronise {ref.text!r}: {reason}", blame)
