@@ -516,9 +516,11 @@ class BlockSolver:
         fixed_clusters: set[int] = set()
         shifted = False
         info = []
+        anchors_of: dict[int, set[int]] = {}  # by id() of the timed behaviour (nothing moves meanwhile)
         for timed in self.timed.values():
             anchors, fixed = self.anchors_of(timed)
             info.append((timed, anchors, fixed))
+            anchors_of[id(timed)] = anchors
             anchors = list(anchors)
             for other in anchors[1:]:
                 parent[find(other)] = find(anchors[0])
@@ -528,8 +530,7 @@ class BlockSolver:
         for a, b in links:
             if a is None or b is None:
                 continue
-            aa, _ = self.anchors_of(a)
-            bb, _ = self.anchors_of(b)
+            aa, bb = anchors_of[id(a)], anchors_of[id(b)]
             if aa and bb:
                 parent[find(next(iter(bb)))] = find(next(iter(aa)))
         earliest: dict[int, float] = {}
