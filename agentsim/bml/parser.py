@@ -98,6 +98,8 @@ _PLAIN_REF = re.compile(r"([A-Za-z_]\w*):([A-Za-z_]\w*)(?::([A-Za-z_]\w*))?(?:([
 
 
 _LONG_NUMBER = re.compile(rf"\d{{{MAX_NUMBER + 1},}}")
+# (a reference made from its seven fields at once, as a tuple is: SyncRef is one, and a block reads thousands)
+_new_ref = tuple.__new__
 
 
 @functools.lru_cache(maxsize=4096)
@@ -108,7 +110,7 @@ def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
     if plain is not None:
         first, second, third, sign, number = plain.groups()
         if third is None and number is None:  # the commonest form, ``g1:stroke``, made at once
-            return SyncRef("sync", 0.0, None, first, second, None, raw)
+            return _new_ref(SyncRef, ("sync", 0.0, None, first, second, None, raw))
         parts = [first, second] if third is None else [first, second, third]
     else:
         if _ABSOLUTE.match(raw):
@@ -128,7 +130,7 @@ def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
     if len(parts) == 3 and parts[0] == "anticipators":
         return SyncRef("anticipator", offset=offset, anticipator=parts[1], sync=parts[2], text=raw)
     block = parts[0] if len(parts) == 3 else None
-    return SyncRef("sync", offset, block, parts[-2], parts[-1], None, raw)
+    return _new_ref(SyncRef, ("sync", offset, block, parts[-2], parts[-1], None, raw))
 
 
 def _check_magnitude(value: float, raw: str) -> None:
@@ -414,6 +416,7 @@ class _Reader:
     def constraint(self, node: Node, required: bool) -> None:
         owner = node.attrs.get("id", "")
         constraints = self.block.constraints
+        known = self.refs  # (looked up here at once: a block's constraints repeat their references)
         for child in node.elements():
             kind = child.local
             if kind not in ("synchronize", "before", "after"):
@@ -427,11 +430,13 @@ class _Reader:
                 if text is None:
                     self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
                     continue
-                try:
-                    ref = self.ref(text, sync)
-                except BMLError as exc:
-                    self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
-                    continue
+                ref = known.get(text)
+                if ref is None:
+                    try:
+                        ref = self.ref(text, sync)
+                    except BMLError as exc:
+                        self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
+                        continue
                 refs.append(ref)
             anchor = None
             if "ref" in child.attrs:

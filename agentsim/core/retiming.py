@@ -200,8 +200,12 @@ class Retiming:
                 for i, t in zip(indices, times):
                     last[i] = t
             run.note_end(timed, last[-1])
-            entries.append({"id": timed.id, "type": timed.behaviour.type, "globalStart": timed.start,
-                            "globalEnd": last[-1], "syncs": {timed.sync_ids[i]: t for i, t in zip(indices, times)}})
+            if known is None and len(times) == len(timed.sync_ids):  # all of them, just computed
+                start, syncs = times[0], dict(zip(timed.sync_ids, times))
+            else:
+                start, syncs = timed.start, {timed.sync_ids[i]: t for i, t in zip(indices, times)}
+            entries.append({"id": timed.id, "type": timed.behaviour.type, "globalStart": start,
+                            "globalEnd": last[-1], "syncs": syncs})
         for timed in run.gone:
             entries.append({"id": timed.id, "type": timed.behaviour.type, "status": "removed"})
         run.gone.clear()

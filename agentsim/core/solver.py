@@ -105,7 +105,9 @@ class BlockSolver:
         self.failed = False
         self.ties = _Ties()
         self.block_node = self.ties.add((self.block_peg, 0.0))
-        self.nodes: dict[tuple, int] = {}
+        self.nodes: dict[tuple, int] = {}  # tie nodes of anticipators' and other blocks' sync points
+        # the tie nodes of this block's sync points: behaviour id -> sync id -> node
+        self.local_nodes: dict[str, dict[str, int]] = {}
         self.dropped: dict[str, tuple[str, str]] = {}  # behaviour id -> (warning type, reason)
         self.group_peg: dict[int, OffsetPeg] = {}
         self.anchors: list[OffsetPeg] = []
@@ -137,6 +139,9 @@ class BlockSolver:
     # ----------------------------------------------------------------- references
     def node(self, ref: SyncRef) -> tuple[int, float]:
         """The tie node a reference stands for, and its offset. Raises ScheduleError if it is dangling."""
+        found = self._local_refs.get(id(ref))  # (one to this block's own sync points, met before)
+        if found is not None:
+            return found
         if ref.kind == "absolute":
             return self.block_node, ref.offset
         if ref.kind == "anticipator":
@@ -155,9 +160,6 @@ class BlockSolver:
                     raise ScheduleError(f"no sync point {ref.target()} in a planned block")
                 self.nodes[key] = self.ties.add(found)
             return self.nodes[key], ref.offset
-        found = self._local_refs.get(id(ref))
-        if found is not None:
-            return found
         beh = self.block.behaviour(ref.behaviour)
         if beh is None:
             raise ScheduleError(f"no behaviour {ref.behaviour!r} in block {self.block.id}")
@@ -167,10 +169,12 @@ class BlockSolver:
         return found
 
     def local_node(self, behaviour_id: str, sync_id: str) -> int:
-        key = ("sync", behaviour_id, sync_id)
-        node = self.nodes.get(key)
+        nodes = self.local_nodes.get(behaviour_id)
+        if nodes is None:
+            nodes = self.local_nodes[behaviour_id] = {}
+        node = nodes.get(sync_id)
         if node is None:
-            node = self.nodes[key] = self.ties.add()
+            node = nodes[sync_id] = self.ties.add()
         return node
 
     # ----------------------------------------------------------------- ties
@@ -192,19 +196,24 @@ class BlockSolver:
                 if reason:
                     self.drop(beh.id, f"{sync_id}={ref.text!r}: {reason}")
         inequalities = []
+        local_refs = self._local_refs  # (what node() looks up first, looked up here without the call)
+        union = self.ties.union
         for constraint in self.block.constraints:
             resolved = []
             for ref in constraint.refs:
-                try:
-                    node, offset = self.node(ref)
-                except ScheduleError as exc:
-                    self.constraint_issue(constraint, f"reference {ref.text!r} ignored: {exc}")
-                    continue
-                resolved.append((node, offset, ref))
+                found = local_refs.get(id(ref))
+                if found is None:
+                    try:
+                        found = self.node(ref)
+                    except ScheduleError as exc:
+                        self.constraint_issue(constraint, f"reference {ref.text!r} ignored: {exc}")
+                        continue
+                resolved.append((found[0], found[1], ref))
             if constraint.kind == "synchronize":
-                for node, offset, ref in resolved[1:]:
+                if resolved:
                     n0, o0, first = resolved[0]
-                    reason = self.ties.union(n0, node, offset - o0)
+                for node, offset, ref in resolved[1:]:
+                    reason = union(n0, node, offset - o0)
                     if reason:
                         blame = ref if ref.kind == "sync" else first
                         self.constraint_issue(constraint, f"cannot synchronise {ref.text!r}: {reason}", blame)
@@ -233,11 +242,15 @@ class BlockSolver:
             return []
         members: dict[int, list[int]] = {}
         behaviours = self.block.behaviours
+        find = self.ties.find
         for index, beh in enumerate(behaviours):
+            nodes = self.local_nodes.get(beh.id)
+            if not nodes:
+                continue
             for sync_id in beh.sync_ids:
-                node = self.nodes.get(("sync", beh.id, sync_id))
+                node = nodes.get(sync_id)
                 if node is not None:
-                    members.setdefault(self.ties.find(node)[0], []).append(index)
+                    members.setdefault(find(node)[0], []).append(index)
         # Among behaviours tied to known times, rigid ones (speech) go first: the others can stretch.
         priority = [(0 if self.engines[b.type].planner.rigid else 1, i) if b.type in self.engines else (1, i)
                     for i, b in enumerate(behaviours)]
@@ -288,15 +301,17 @@ class BlockSolver:
         base = self.block_peg.time
         known: dict[str, float] = {}
         groups: dict[str, tuple[int, float]] = {}
-        for sync_id in beh.sync_ids:
-            node = self.nodes.get(("sync", beh.id, sync_id))
-            if node is None:
-                continue
-            root, d = self.ties.find(node)
-            groups[sync_id] = (root, d)
-            peg = self.group_peg.get(root)
-            if peg is not None:
-                known[sync_id] = peg.time + d - base
+        nodes = self.local_nodes.get(beh.id)
+        if nodes:
+            find, group_peg = self.ties.find, self.group_peg
+            for sync_id in beh.sync_ids:
+                node = nodes.get(sync_id)
+                if node is None:
+                    continue
+                root, d = groups[sync_id] = find(node)
+                peg = group_peg.get(root)
+                if peg is not None:
+                    known[sync_id] = peg.time + d - base
         try:
             preferred = planner.preferred(beh)
             times = planner.resolve(beh, known, preferred=preferred)
@@ -365,6 +380,8 @@ class BlockSolver:
 
     def self_ties(self, beh: Behaviour, groups, known, times) -> dict[str, float]:
         """Times implied by constraints between sync points of the same behaviour (``end="b:start+1"``)."""
+        if len(groups) - len(known) < 2:
+            return {}  # no two sync points whose time is not known yet: none can imply the other's
         by_root: dict[int, list[str]] = {}
         for sync_id, (root, _) in groups.items():
             if sync_id not in known:
@@ -499,9 +516,11 @@ class BlockSolver:
         fixed_clusters: set[int] = set()
         shifted = False
         info = []
+        anchors_of: dict[int, set[int]] = {}  # by id() of the timed behaviour (nothing moves meanwhile)
         for timed in self.timed.values():
             anchors, fixed = self.anchors_of(timed)
             info.append((timed, anchors, fixed))
+            anchors_of[id(timed)] = anchors
             anchors = list(anchors)
             for other in anchors[1:]:
                 parent[find(other)] = find(anchors[0])
@@ -511,8 +530,7 @@ class BlockSolver:
         for a, b in links:
             if a is None or b is None:
                 continue
-            aa, _ = self.anchors_of(a)
-            bb, _ = self.anchors_of(b)
+            aa, bb = anchors_of[id(a)], anchors_of[id(b)]
             if aa and bb:
                 parent[find(next(iter(bb)))] = find(next(iter(aa)))
         earliest: dict[int, float] = {}

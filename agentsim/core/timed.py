@@ -126,7 +126,14 @@ class TimedBehaviour:
 
     def times(self) -> list[float | None]:
         """Global times of all sync points (one pass: tied keys, then warping between them)."""
-        times = [self._anchor(i) for i in range(len(self.keys))]
+        # (what _anchor gives for each key, without a call per key: the scheduler asks this of every
+        # behaviour of a block several times over)
+        times: list[float | None] = []
+        for passed, key in zip(self.passed, self.keys):
+            if passed is None and key is not None:
+                peg_time = key.peg.time
+                passed = None if peg_time is None else peg_time + key.offset
+            times.append(passed)
         pref = self.preferred
         lo = None
         for hi, t_hi in enumerate(times):

@@ -115,6 +115,7 @@ class BuiltinBackend:
         sentences: list[float] = []
         sentence_starts = True
         k = 0  # the next pause
+        vowel_time, consonant_time, stress_factor = self.vowel, self.consonant, self.stress_factor
         for match in matches:
             while k < len(pauses) and pauses[k][0] <= match.start():
                 t += pauses[k][1]
@@ -128,10 +129,11 @@ class BuiltinBackend:
             content, units = _word_units(token)
             emphasised_done = False
             word_scale = scale / speed[index]
+            emphasised = emphasis[index]
             for symbol, vowel, stressed in units:
-                duration = (self.vowel if vowel else self.consonant) * (self.stress_factor if stressed else 1.0)
-                if emphasis[index] != 1.0 and vowel and not emphasised_done and (stressed or not content):
-                    duration *= emphasis[index]
+                duration = (vowel_time if vowel else consonant_time) * (stress_factor if stressed else 1.0)
+                if emphasised != 1.0 and vowel and not emphasised_done and (stressed or not content):
+                    duration *= emphasised
                     emphasised_done = True
                 phonemes.append(Phoneme(symbol, t, t + duration * word_scale, index, stressed))
                 t += duration * word_scale
