@@ -29,8 +29,8 @@ import numpy as np
 from agentsim.core.written import written
 from agentsim.media import AXIS
 from agentsim.media.files import write_text
-from agentsim.media.report.data import (FACE, pose_payload, js_assignment, point_names, run_duration,
-                                        stroke_times, timeline_payload)
+from agentsim.media.report.data import (FACE, js_assignment, point_names, run_duration, stroke_times,
+                                        timeline_payload, write_poses)
 
 HERE = Path(__file__).resolve().parent
 #: The vendored three.js bundle and its licence (``scripts/vendor_three.sh`` makes them).
@@ -147,10 +147,8 @@ def _page_data(recording, stream, track, gestures, title, notes, folder: Path) -
     data.update(title=title, notes=notes, axis=AXIS, audio=None, motion=None)
     if stream is not None:
         names, parents = point_names(stream.body)
-        poses = pose_payload(stream, keep=stroke_times(recording, gestures))
-        write_text(folder / "poses.js", js_assignment(
-            "REPORT_POSES", poses, f"agentsim run report: joint positions of {title!r}, see "
-            "agentsim.media.report.data"))
+        poses = write_poses(folder / "poses.js", stream, f"agentsim run report: joint positions of {title!r}, see "
+                            "agentsim.media.report.data", keep=stroke_times(recording, gestures))
         data["motion"] = {
             "fps": float(stream.fps), "frames": int(stream.n_frames), "sent": poses["count"],
             "start": float(stream.times[0]), "end": float(stream.times[-1]),

@@ -36,6 +36,7 @@ import argparse
 import json
 import math
 import sys
+import tempfile
 import time
 from collections import OrderedDict
 from pathlib import Path
@@ -213,6 +214,15 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
                   seed: int = 0, plots: bool = True) -> "OrderedDict[str, float]":
     """Write a telling's files (all but ``metrics.json``) to ``out``; returns the wall seconds of each
     stage. ``plots``: draw the timeline and sync-error pictures too."""
+    out.mkdir(parents=True, exist_ok=True)
+    # the poses are evaluated into files of a scratch folder (removed at the end) and read back a window
+    # of frames at a time by everything that uses them: a long story's poses are never held whole
+    with tempfile.TemporaryDirectory(dir=out, prefix=".poses-") as scratch:
+        return _write_outputs(telling, out, Path(scratch), fps, window, seed, plots)
+
+
+def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, window: float, seed: int,
+                   plots: bool) -> "OrderedDict[str, float]":
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.core.feedback import to_json
     from agentsim.media.audio import run_track_stream
@@ -231,7 +241,7 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
     write_text(out / "story.bml", telling.bml)
     write_text(out / "feedback.jsonl", "".join(to_json(item) + "\n" for item in telling.recording.feedback))
     t = stage("feedback", t)
-    stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene)
+    stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene, folder=scratch)
     t = stage("poses", t)
     write_bvh(out / "story.bvh", stream)
     t = stage("bvh", t)
