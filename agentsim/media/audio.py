@@ -73,7 +73,10 @@ def speech_sources(recording) -> list[Source]:
         if audio is None or len(audio) == 0:
             continue
         gain = heard.gain if heard.volume else None
-        sources.append(Source(np.asarray(audio, np.float32), int(heard.utterance.sample_rate), float(heard.t0),
+        # float32 samples left as they are: an array, or samples read from a file as they are needed
+        # (:class:`~agentsim.speech.samples.PcmFile`), which np.asarray would read whole
+        samples = audio if getattr(audio, "dtype", None) == np.float32 else np.asarray(audio, np.float32)
+        sources.append(Source(samples, int(heard.utterance.sample_rate), float(heard.t0),
                               1.0 + heard.drift_ppm * 1e-6, heard.stopped, gain,
                               f"{heard.block}:{heard.behaviour}"))
     return sources
