@@ -290,3 +290,20 @@ def test_the_vendored_files_are_package_data():
     for name in ("vendor/three.min.js", "vendor/LICENSE-three.txt", "assets/report.js", "assets/report.css"):
         assert (here / name).exists(), name
         assert any(Path(name).match(p) for p in patterns), name
+
+
+def test_poses_written_a_stretch_at_a_time_are_the_payload_written_whole(run, tmp_path, monkeypatch):
+    """poses.js written a stretch of frames at a time (here 7 frames a stretch) is the text of the whole
+    payload, and its stream evaluated into files gives the same text."""
+    import agentsim.animation.body as body_module
+
+    recording, stream, _, gestures = run
+    keep = report_data.stroke_times(recording, gestures)
+    whole = report_data.js_assignment("REPORT_POSES", report_data.pose_payload(stream, keep=keep), "poses")
+    monkeypatch.setattr(body_module, "FK_ROWS", 7)
+    payload = report_data.write_poses(tmp_path / "poses.js", stream, "poses", keep=keep)
+    assert (tmp_path / "poses.js").read_text(encoding="utf-8") == whole
+    assert "xyz" not in payload and payload["count"] > 7 * 3
+    stored = evaluate_poses(recording, fps=60, folder=tmp_path / "frames")
+    report_data.write_poses(tmp_path / "stored.js", stored, "poses", keep=keep)
+    assert (tmp_path / "stored.js").read_text(encoding="utf-8") == whole

@@ -196,6 +196,35 @@ def _load_library(name: str = LIBRARY_NAME) -> ctypes.CDLL:
     return lib
 
 
+class _PcmBuffer:
+    """The 16-bit samples of one synthesis, appended a chunk at a time into one array that doubles as it
+    fills: no list of chunks and no joined copy beside it (a long text's chunks would stay behind in the
+    allocator's heap), and the untouched end of the array is never in memory."""
+
+    def __init__(self) -> None:
+        self.array = None
+        self.filled = 0
+
+    def append(self, wav, count: int) -> None:
+        """Copy ``count`` samples from the C buffer ``wav``."""
+        import numpy as np
+
+        size = 0 if self.array is None else len(self.array)
+        if self.filled + count > size:
+            grown = np.empty(max(2 * size, self.filled + count, 1 << 16), dtype=np.int16)
+            if self.filled:
+                grown[:self.filled] = self.array[:self.filled]
+            self.array = grown
+        ctypes.memmove(self.array.ctypes.data + 2 * self.filled, wav, 2 * count)
+        self.filled += count
+
+    def samples(self):
+        """The samples appended so far (int16)."""
+        import numpy as np
+
+        return self.array[:self.filled] if self.array is not None else np.zeros(0, dtype=np.int16)
+
+
 class _Engine:
     """The process-wide espeak-ng instance: initialised once, used under :attr:`lock`."""
 
@@ -210,7 +239,7 @@ class _Engine:
                 f"install it with: {INSTALL_HINT}"
             )
         self.sample_rate = sample_rate
-        self._chunks: list[bytes] = []
+        self._chunks = _PcmBuffer()
         self._events: list[_RawEvent] = []
         self._callback_error: BaseException | None = None
         self._callback = _SynthCallback(self._on_synth)  # kept referenced for the library's use
@@ -220,8 +249,7 @@ class _Engine:
         """Collect one audio chunk and its events; returns 1 (abort) on an error."""
         try:
             if wav and num_samples > 0:
-                data = ctypes.string_at(wav, num_samples * ctypes.sizeof(ctypes.c_short))
-                self._chunks.append(data)
+                self._chunks.append(wav, num_samples)
             if events:
                 i = 0
                 while events[i].type != _EVENT_LIST_TERMINATED:
@@ -242,23 +270,20 @@ class _Engine:
 
     def synth(self, ssml: str, voice: str, rate: int) -> tuple[np.ndarray, list[_RawEvent]]:
         """Synthesise SSML; return the int16 audio and the events in the order espeak reported them."""
-        import numpy as np
 
         with self.lock:
             self.select(voice, rate)
-            self._chunks, self._events, self._callback_error = [], [], None
+            self._chunks, self._events, self._callback_error = _PcmBuffer(), [], None
             data = ssml.encode("utf-8")
             status = self._lib.espeak_Synth(data, len(data) + 1, 0, _POS_CHARACTER, 0,
                                             _SSML | _CHARS_UTF8, None, None)
             chunks, events, error = self._chunks, self._events, self._callback_error
-            self._chunks, self._events, self._callback_error = [], [], None
+            self._chunks, self._events, self._callback_error = _PcmBuffer(), [], None
         if error is not None:
             raise RuntimeError("espeak-ng synthesis callback failed") from error
         if status != _EE_OK:
             raise RuntimeError(f"espeak_Synth failed with status {status}")
-        audio = (np.concatenate([np.frombuffer(c, dtype=np.int16) for c in chunks]) if chunks
-                 else np.zeros(0, dtype=np.int16))
-        return audio, events
+        return chunks.samples(), events
 
     def transcribe(self, text: str, voice: str, rate: int) -> list[tuple[str, str]]:
         """IPA phonemes of plain ``text`` with their stress: ``(symbol, "ˈ" | "ˌ" | "")``, pauses left out."""
@@ -792,6 +817,12 @@ class EspeakBackend:
             if len(self._spoken) > REMEMBERED:
                 self._spoken.popitem(last=False)
         return utterance
+
+    def forget(self, speech: SpeechText) -> None:
+        """Stop remembering what ``speech`` was (whoever asked keeps it, in a form of its own: the speech
+        cache reads its samples from its file); asked for again, it is synthesised again."""
+        with self._remembered:
+            self._spoken.pop(speech, None)
 
     def _synthesize(self, speech: SpeechText) -> Utterance:
         text = speech.text

@@ -225,6 +225,7 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
                    plots: bool) -> "OrderedDict[str, float]":
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.core.feedback import to_json
+    from agentsim.core.written import written
     from agentsim.media.audio import run_track_stream
     from agentsim.media.files import write_text, write_wav
     from agentsim.media.report import write_report
@@ -239,7 +240,8 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
 
     t = time.perf_counter()
     write_text(out / "story.bml", telling.bml)
-    write_text(out / "feedback.jsonl", "".join(to_json(item) + "\n" for item in telling.recording.feedback))
+    with written(out / "feedback.jsonl") as tmp, open(tmp, "w", encoding="utf-8") as f:  # line by line
+        f.writelines(to_json(item) + "\n" for item in telling.recording.feedback)
     t = stage("feedback", t)
     stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene, folder=scratch)
     t = stage("poses", t)

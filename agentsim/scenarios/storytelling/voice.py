@@ -228,6 +228,9 @@ class CachedBackend:
             self.synthesised.add(key)
             if self.enabled:
                 utt = self._save(key, utt)
+                forget = getattr(self.backend, "forget", None)
+                if forget is not None and isinstance(utt.audio, PcmFile):  # its samples in memory: let go
+                    forget(SpeechText(text))
         self._memory[key] = utt
         return utt
 
