@@ -168,10 +168,12 @@ def _placed(source: Source, rate: int, first: int, last: int, gain_grid) -> np.n
     t = np.arange(first, last) / rate
     if source.speed == 1.0 and source.rate == rate and abs(source.start * rate - round(source.start * rate)) < 1e-6:
         offset = int(round(source.start * rate))
-        index = np.arange(first, last) - offset
-        ok = (index >= 0) & (index < len(source.samples))
+        # the source's samples first - offset .. last - offset - 1, those it has: one stretch (a slice, which
+        # samples read from a file give without reading more)
+        lo, hi = max(first - offset, 0), min(last - offset, len(source.samples))
         values = np.zeros(last - first)
-        values[ok] = source.samples[index[ok]]
+        if hi > lo:
+            values[lo + offset - first:hi + offset - first] = source.samples[lo:hi]
     else:
         # where in the source each output sample falls (in source samples)
         position = (t - source.start) / source.speed * source.rate
