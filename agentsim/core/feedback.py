@@ -84,9 +84,13 @@ def _clean(value: Any) -> Any:
     return value
 
 
+#: The encoder of :func:`to_json` (what ``json.dumps(..., separators=(", ", ": "))`` makes anew each call).
+_ENCODER = json.JSONEncoder(separators=(", ", ": "))
+
+
 def to_json(feedback: Feedback) -> str:
     """One line of JSON for a feedback, its times to the nanosecond (:data:`DECIMALS`)."""
-    return json.dumps(_clean(feedback), separators=(", ", ": "))
+    return _ENCODER.encode(_clean(feedback))
 
 
 class FeedbackLog:
