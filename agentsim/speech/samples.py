@@ -7,6 +7,7 @@ whoever mixes it reads the stretch it needs. ``np.asarray`` on it reads it whole
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -54,11 +55,10 @@ class PcmFile:
         """Samples ``first .. last - 1`` (clipped to the file) as float32."""
         first, last = max(0, int(first)), min(self.length, int(last))
         count = max(0, last - first)
-        self._file.seek(self.offset + 2 * first)
-        pcm = np.fromfile(self._file, dtype="<i2", count=count)
-        if len(pcm) != count:
+        data = os.pread(self._file.fileno(), 2 * count, self.offset + 2 * first)  # no shared file position
+        if len(data) != 2 * count:
             raise ValueError(f"{self.path}: cut short")
-        return pcm_to_float(pcm)
+        return pcm_to_float(np.frombuffer(data, dtype="<i2"))
 
     def close(self) -> None:
         """Close the file (the samples can no longer be read)."""

@@ -75,7 +75,33 @@ def write_audio(folder: Path, track) -> str:
         return "audio.wav"
 
 
-def write_report(path, *, recording, stream=None, track=None, gestures=(), title: str = "", notes=()) -> Path:
+def report_paths(path) -> tuple[Path, Path]:
+    """The HTML file a report at ``path`` is written to (``.html`` added if it has no such suffix) and the
+    folder of its files beside it."""
+    path = Path(path)
+    if path.suffix.lower() not in (".html", ".htm"):
+        path = path.with_name(path.name + ".html")
+    return path, path.with_name(f"{path.stem}_files")
+
+
+def start_audio(path, track, executor: concurrent.futures.Executor) -> concurrent.futures.Future:
+    """Begin writing the sound of the report at ``path`` (:func:`write_audio` into its folder) on
+    ``executor``, so that it is encoded while the run's other files are made; hand the future to
+    :func:`write_report` (``audio=``), which waits for it instead of encoding the track itself. A track
+    without samples writes nothing (the future gives None)."""
+    _, folder = report_paths(path)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("audio.ogg", "audio.wav"):
+        (folder / name).unlink(missing_ok=True)
+    if track is None or track.length == 0:
+        done: concurrent.futures.Future = concurrent.futures.Future()
+        done.set_result(None)
+        return done
+    return executor.submit(write_audio, folder, track)
+
+
+def write_report(path, *, recording, stream=None, track=None, gestures=(), title: str = "", notes=(),
+                 audio: concurrent.futures.Future | None = None) -> Path:
     """Write an HTML report of a run that a researcher watches and hears: its audio, a 3D skeleton driven by
     the poses, a timeline of behaviours, words and feedback with a cursor that follows the audio, and the
     per-gesture error table.
@@ -98,6 +124,9 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         The page's title (default: the HTML file's stem).
     notes : iterable of str
         Lines shown under the title (what was run, with which settings).
+    audio : Future, optional
+        The track's sound already being written (:func:`start_audio` with the same ``path`` and
+        ``track``): waited for instead of encoding the track here.
 
     Returns
     -------
@@ -106,13 +135,11 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     """
     if hasattr(recording, "recording") and callable(recording.recording):
         recording = recording.recording()
-    path = Path(path)
-    if path.suffix.lower() not in (".html", ".htm"):
-        path = path.with_name(path.name + ".html")
-    folder = path.with_name(f"{path.stem}_files")
+    path, folder = report_paths(path)
     folder.mkdir(parents=True, exist_ok=True)
     for name in OWN_FILES:
-        (folder / name).unlink(missing_ok=True)
+        if audio is None or name not in ("audio.ogg", "audio.wav"):  # a sound being written is kept
+            (folder / name).unlink(missing_ok=True)
     if track is not None and track.length == 0:
         track = None
     if stream is not None and stream.n_frames == 0:
@@ -129,10 +156,12 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     # the sound is encoded on a thread of its own (libsndfile does not hold the interpreter) while the
     # timeline and the poses are made
     with concurrent.futures.ThreadPoolExecutor(1) as encoder:
-        audio = encoder.submit(write_audio, folder, track) if track is not None else None
+        if audio is None and track is not None:
+            audio = encoder.submit(write_audio, folder, track)
         data = _page_data(recording, stream, track, gestures, title, notes, folder)
-        if audio is not None:
-            data["audio"] = {"src": audio.result(), "duration": track.duration, "rate": int(track.rate)}
+        src = audio.result() if audio is not None else None
+        if src is not None and track is not None:
+            data["audio"] = {"src": src, "duration": track.duration, "rate": int(track.rate)}
     write_text(folder / "data.js", js_assignment(
         "REPORT_DATA", data, f"agentsim run report: timeline and tables of {title!r}, see "
         "agentsim.media.report.data"))

@@ -33,6 +33,7 @@ synthesis of the speech, which is cached on disk (``--cache``) and reported sepa
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import json
 import math
 import sys
@@ -229,6 +230,7 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
     from agentsim.media.audio import run_track_stream
     from agentsim.media.files import write_text, write_wav
     from agentsim.media.report import write_report
+    from agentsim.media.report.page import start_audio
     from agentsim.media.tables import gesture_rows, write_csv
     from agentsim.scenarios.storytelling.praat import export_textgrid
 
@@ -239,31 +241,37 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
         return time.perf_counter()
 
     t = time.perf_counter()
-    write_text(out / "story.bml", telling.bml)
-    with written(out / "feedback.jsonl") as tmp, open(tmp, "w", encoding="utf-8") as f:  # line by line
-        f.writelines(to_json(item) + "\n" for item in telling.recording.feedback)
-    t = stage("feedback", t)
-    stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene, folder=scratch)
-    t = stage("poses", t)
-    write_bvh(out / "story.bvh", stream)
-    t = stage("bvh", t)
-    telling.extra["motion_strokes"] = motion_strokes(telling, stream)
-    t = stage("motion check", t)
     utterance = telling.utterance
-    # the track is made a stretch at a time, for the WAV and again for the report: never held whole
+    # the track is made a stretch at a time, for the WAV and again for the report: never held whole; both
+    # sound files are written on a thread of their own (mixing and encoding mostly run outside the
+    # interpreter) while the poses and the rest are made, and waited for where they were written before
     track = run_track_stream(telling.recording) if utterance.audio is not None else None
-    if track is not None:  # where the listener heard it: late by the playback latency, drifting
-        write_wav(out / "narration.wav", track)
-    t = stage("wav", t)
-    speech = telling.speech
-    _, planned, _ = syllable_times(telling.story, utterance)
-    export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, telling.passed, telling.ids,
-                    to_axis=speech.true_time, axis=AXIS)
-    gestures = gesture_rows(telling.recording)
-    write_csv(out / "gestures.csv", gestures)
-    t = stage("textgrid", t)
-    write_report(out / "report.html", recording=telling.recording, stream=stream, track=track, gestures=gestures,
-                 title=f"{telling.story.title} (strategy {telling.strategy})")
+    with concurrent.futures.ThreadPoolExecutor(1) as sound:
+        # where the listener heard it: late by the playback latency, drifting
+        wav = sound.submit(write_wav, out / "narration.wav", track) if track is not None else None
+        ogg = start_audio(out / "report.html", track, sound)
+        write_text(out / "story.bml", telling.bml)
+        with written(out / "feedback.jsonl") as tmp, open(tmp, "w", encoding="utf-8") as f:  # line by line
+            f.writelines(to_json(item) + "\n" for item in telling.recording.feedback)
+        t = stage("feedback", t)
+        stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene, folder=scratch)
+        t = stage("poses", t)
+        write_bvh(out / "story.bvh", stream)
+        t = stage("bvh", t)
+        telling.extra["motion_strokes"] = motion_strokes(telling, stream)
+        t = stage("motion check", t)
+        if wav is not None:
+            wav.result()
+        t = stage("wav", t)  # what was left of writing it
+        speech = telling.speech
+        _, planned, _ = syllable_times(telling.story, utterance)
+        export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, telling.passed, telling.ids,
+                        to_axis=speech.true_time, axis=AXIS)
+        gestures = gesture_rows(telling.recording)
+        write_csv(out / "gestures.csv", gestures)
+        t = stage("textgrid", t)
+        write_report(out / "report.html", recording=telling.recording, stream=stream, track=track,
+                     gestures=gestures, title=f"{telling.story.title} (strategy {telling.strategy})", audio=ogg)
     t = stage("report", t)
     if plots:
         plot_window(telling, out / "timeline.png", stream, window)
