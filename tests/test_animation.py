@@ -286,3 +286,60 @@ def test_the_same_seed_gives_the_same_poses(long_realizer):
     assert np.array_equal(a.values, b.values)
     assert np.array_equal(a.positions, b.positions)
     assert not np.array_equal(a.values, c.values)
+
+
+def test_poses_evaluated_into_files_a_window_at_a_time_are_the_poses_evaluated_in_memory(long_realizer, tmp_path,
+                                                                                         monkeypatch):
+    """Evaluated into files with a window of 50 frames (many hand-overs, and segments longer than the
+    window), the poses, their writers and positions, the BVH and the measured strokes are those of the
+    stream evaluated in memory; the windows, rows and frames read back are the arrays'."""
+    import agentsim.animation.output as output
+
+    whole = evaluate_poses(long_realizer, fps=60, seed=3, duration=20)
+    monkeypatch.setattr(output, "FK_ROWS", 50)
+    stored = evaluate_poses(long_realizer, fps=60, seed=3, duration=20, folder=tmp_path / "poses")
+    assert stored.files is not None and sorted(p.name for p in (tmp_path / "poses").iterdir()) == [
+        "positions.npy", "values.npy", "writers.npy"]
+
+    def named(stream, writers):  # driver uids count on from manager to manager: compare their names
+        return np.vectorize(lambda uid: stream.driver_names.get(int(uid), ""))(writers)
+
+    for name in ("values", "writers", "positions"):
+        same = (lambda a, b: np.array_equal(named(stored, a), named(whole, b))) if name == "writers" else \
+            np.array_equal
+        assert same(getattr(stored, name), getattr(whole, name)), name
+        blocks = list(stored.windows(name, rows=333))
+        assert [a for a, _ in blocks] == list(range(0, whole.n_frames, 333))
+        assert same(np.concatenate([b for _, b in blocks]), getattr(whole, name))
+        assert same(stored.rows(name, 100, 250), getattr(whole, name)[100:250])
+    frames = np.array([3, 4, 90, 700, whole.n_frames - 1])
+    assert np.array_equal(stored.take("values", frames), whole.values[frames])
+    assert np.array_equal(stored.position("r_wrist", frames), whole.position("r_wrist", frames))
+    assert np.array_equal(stored.tracked("r_wrist"), whole.position("r_wrist"))
+    assert np.array_equal(stored.tracked("r_elbow"), whole.position("r_elbow"))
+    assert np.array_equal(stored.tracked("l_knee"), whole.position("l_knee"))  # not tracked: from the angles
+    assert [np.array_equal(a, b) for a, b in zip(head_orientation(stored), head_orientation(whole))] == [True] * 3
+    assert repr([m.as_dict() for m in measure_strokes(stored)]) == repr([m.as_dict() for m in measure_strokes(whole)])
+    write_bvh(tmp_path / "a.bvh", whole)
+    write_bvh(tmp_path / "b.bvh", stored)
+    assert (tmp_path / "a.bvh").read_bytes() == (tmp_path / "b.bvh").read_bytes()
+
+
+def test_a_manager_hands_its_frames_to_a_sink_in_order_and_keeps_none(long_realizer):
+    """With a sink, the frames come in order, in windows of at least the window's size (but the last), and
+    are the frames evaluate returns without one; nothing is returned."""
+    from agentsim.animation.behaviours import build_drivers
+
+    def manager():
+        m = DriverManager(seed=5)
+        build_drivers(m, list(long_realizer.recording().behaviours), None)
+        return m
+
+    times = np.arange(600) / 60.0
+    values, writers = manager().evaluate(times)
+    got = []
+    assert manager().evaluate(times, sink=lambda a, v, w: got.append((a, v.copy(), w.copy())), window=64) is None
+    assert [a for a, _, _ in got] == list(np.cumsum([0] + [len(v) for _, v, _ in got[:-1]]))
+    assert all(len(v) >= 64 for _, v, _ in got[:-1]) and len(got) > 3
+    assert np.array_equal(np.concatenate([v for _, v, _ in got]), values)
+    assert np.array_equal(np.concatenate([w for _, _, w in got]) >= 0, writers >= 0)

@@ -359,3 +359,18 @@ def test_stress_marked_clause_by_clause_is_that_of_the_whole_text(backend, monke
     marks = [(p.symbol, p.stressed) for p in by_clause.phonemes]
     assert marks == [(p.symbol, p.stressed) for p in at_once.phonemes]
     assert sum(stressed for _, stressed in marks) > 40
+
+
+def test_a_speech_forgotten_is_synthesised_again(backend):
+    """The backend remembers what it said (the same utterance again) until told to forget it; said again,
+    its samples (collected chunk by chunk from the library) last as long, within what espeak-ng varies
+    from one synthesis to the next in a process."""
+    speech = SpeechText("A lighthouse keeper remembered the storm, long ago, and the ships it sank.")
+    first = backend.synthesize(speech)
+    assert backend.synthesize(speech) is first
+    backend.forget(speech)
+    again = backend.synthesize(speech)
+    assert again is not first and again.audio.dtype == np.float32 and len(again.audio) > 22050
+    assert abs(len(again.audio) - len(first.audio)) < 0.01 * len(first.audio)
+    assert again.duration == len(again.audio) / again.sample_rate
+    backend.forget(SpeechText("never said"))  # nothing to forget: no error

@@ -290,3 +290,45 @@ def test_the_vendored_files_are_package_data():
     for name in ("vendor/three.min.js", "vendor/LICENSE-three.txt", "assets/report.js", "assets/report.css"):
         assert (here / name).exists(), name
         assert any(Path(name).match(p) for p in patterns), name
+
+
+def test_poses_written_a_stretch_at_a_time_are_the_payload_written_whole(run, tmp_path, monkeypatch):
+    """poses.js written a stretch of frames at a time (here 7 frames a stretch) is the text of the whole
+    payload, and its stream evaluated into files gives the same text."""
+    import agentsim.animation.body as body_module
+
+    recording, stream, _, gestures = run
+    keep = report_data.stroke_times(recording, gestures)
+    whole = report_data.js_assignment("REPORT_POSES", report_data.pose_payload(stream, keep=keep), "poses")
+    monkeypatch.setattr(body_module, "FK_ROWS", 7)
+    payload = report_data.write_poses(tmp_path / "poses.js", stream, "poses", keep=keep)
+    assert (tmp_path / "poses.js").read_text(encoding="utf-8") == whole
+    assert "xyz" not in payload and payload["count"] > 7 * 3
+    stored = evaluate_poses(recording, fps=60, folder=tmp_path / "frames")
+    report_data.write_poses(tmp_path / "stored.js", stored, "poses", keep=keep)
+    assert (tmp_path / "stored.js").read_text(encoding="utf-8") == whole
+
+
+def test_a_report_whose_sound_was_started_before_is_the_report_written_at_once(run, tmp_path):
+    """The sound begun beforehand (start_audio, on an executor of the caller's) gives the same page, data and
+    sound as the report that encodes its track itself; an old sound in the folder is replaced."""
+    import concurrent.futures
+
+    from agentsim.media.report.page import start_audio
+
+    recording, stream, track, gestures = run
+    write_report(tmp_path / "a.html", recording=recording, stream=stream, track=track, gestures=gestures, title="t")
+    (tmp_path / "b_files").mkdir()
+    (tmp_path / "b_files" / "audio.wav").write_bytes(b"old")
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        audio = start_audio(tmp_path / "b", track, pool)
+        write_report(tmp_path / "b", recording=recording, stream=stream, track=track, gestures=gestures, title="t",
+                     audio=audio)
+    a, b = tmp_path / "a_files", tmp_path / "b_files"
+    assert sorted(p.name for p in a.iterdir()) == sorted(p.name for p in b.iterdir())
+    assert (a / "data.js").read_text() == (b / "data.js").read_text()
+    assert (a / "poses.js").read_text().replace("'t'", "") == (b / "poses.js").read_text().replace("'t'", "")
+    sound = next(p.name for p in a.iterdir() if p.name.startswith("audio."))
+    assert np.array_equal(soundfile.read(a / sound)[0], soundfile.read(b / sound)[0])
+    assert (tmp_path / "a.html").read_text().replace("a_files", "") == (tmp_path / "b.html").read_text().replace(
+        "b_files", "")

@@ -223,6 +223,7 @@ def test_the_cached_audio_is_read_back_as_it_was_said(tmp_path, monkeypatch):
 
     from agentsim.scenarios.storytelling import voice as voice_module
     from agentsim.speech.builtin import BuiltinBackend
+    from agentsim.speech.samples import PcmFile
 
     class Sounding(BuiltinBackend):
         def synthesize(self, speech):
@@ -238,10 +239,16 @@ def test_the_cached_audio_is_read_back_as_it_was_said(tmp_path, monkeypatch):
     second = CachedBackend(Sounding(), cache_dir=tmp_path)
     b = second.synthesize(speech)
     assert second.hits == 1 and b.audio.dtype == np.float32 and np.array_equal(a.audio, b.audio)
+    # once cached, the samples are read from the file as they are needed, a stretch at a time
+    said = np.asarray(a.audio)
+    assert isinstance(b.audio, PcmFile) and isinstance(a.audio, PcmFile)
+    assert np.array_equal(said, Sounding().synthesize(speech).audio)
+    assert np.array_equal(b.audio[1234:5678], said[1234:5678]) and b.audio[-1] == said[-1]
+    assert np.array_equal(b.audio[np.arange(4000, 4100)], said[4000:4100])
     (audio_file,) = tmp_path.glob("*.npy")
     audio_file.write_bytes(audio_file.read_bytes()[:-100])
     third = CachedBackend(Sounding(), cache_dir=tmp_path)
-    assert np.array_equal(third.synthesize(speech).audio, a.audio) and (third.hits, third.misses) == (0, 1)
+    assert np.array_equal(third.synthesize(speech).audio, said) and (third.hits, third.misses) == (0, 1)
 
 
 # ----------------------------------------------------------------------------------------------------

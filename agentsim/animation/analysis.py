@@ -49,12 +49,16 @@ class StrokeMeasure:
 
 
 def head_orientation(stream: PoseStream) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """World head (pitch down, yaw left, roll) in degrees per frame, from the skull's axes."""
-    rot = stream.body.forward_kinematics(stream.values, ["skullbase"])["skullbase"][0]
-    fwd, up = rot[:, :, 2], rot[:, :, 1]
-    pitch = -np.degrees(np.arcsin(np.clip(fwd[:, 1], -1, 1)))
-    yaw = np.degrees(np.arctan2(fwd[:, 0], fwd[:, 2]))
-    roll = np.degrees(np.arctan2(-up[:, 0], up[:, 1]))
+    """World head (pitch down, yaw left, roll) in degrees per frame, from the skull's axes (a window of
+    frames at a time)."""
+    pitch, yaw, roll = (np.empty(stream.n_frames) for _ in range(3))
+    for a, values in stream.windows():
+        rot = stream.body.forward_kinematics(values, ["skullbase"])["skullbase"][0]
+        fwd, up = rot[:, :, 2], rot[:, :, 1]
+        b = a + len(values)
+        pitch[a:b] = -np.degrees(np.arcsin(np.clip(fwd[:, 1], -1, 1)))
+        yaw[a:b] = np.degrees(np.arctan2(fwd[:, 0], fwd[:, 2]))
+        roll[a:b] = np.degrees(np.arctan2(-up[:, 0], up[:, 1]))
     return pitch, yaw, roll
 
 
@@ -135,6 +139,7 @@ def measure_strokes(stream: PoseStream, sync_times: dict[str, float] | None = No
     out: list[StrokeMeasure] = []
     times = stream.times
     head = None
+    wrist_height: dict[str, np.ndarray] = {}  # per side, read once (the stream may live in files)
     by_name = {name: uid for uid, name in stream.driver_names.items()}
 
     def intact(driver: str, dof: str, t0: float, t1: float) -> bool:
@@ -143,7 +148,7 @@ def measure_strokes(stream: PoseStream, sync_times: dict[str, float] | None = No
         idx = _window(times, t0, t1)
         idx = idx[times[idx] < t1 - 1e-9]  # at strokeEnd a head movement may already hand back
         col = stream.channels.index(dof)
-        return bool(np.all(stream.writers[idx, col] == by_name[driver]))
+        return bool(np.all(stream.take("writers", idx)[:, col] == by_name[driver]))
 
     for u in stream.units:
         kind = u["type"]
@@ -157,7 +162,9 @@ def measure_strokes(stream: PoseStream, sync_times: dict[str, float] | None = No
         lex = (u.get("lexeme") or "").upper()
         if kind == "gesture":
             for side, driver in zip(u["sides"], u["drivers"]):
-                y = stream.position(f"{side}_wrist")[:, 1]
+                if side not in wrist_height:
+                    wrist_height[side] = stream.tracked(f"{side}_wrist")[:, 1]
+                y = wrist_height[side]
                 t, refined = lowest(times, y, t0, t1)
                 out.append(StrokeMeasure(u["block"], u["id"], kind, lex, side, fb, t, refined,
                                          intact(driver, f"{side}_shoulder.pitch", t0, t1)))

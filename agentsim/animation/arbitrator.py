@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -42,6 +42,9 @@ class Arbitrator:
         self.values = np.empty((0, n))
         self.writers = np.empty((0, n), dtype=np.int32)
         self._lo = self._hi = 0
+        self.base = 0
+        self._sink = None
+        self._window = self._n_frames = 0
         self._segment = 0
         self._stamp = np.full(n, -1, dtype=np.int64)
         self.writes = 0
@@ -119,13 +122,55 @@ class Arbitrator:
             driver.on_dof_regain(again, self.now, self.current[again], handover)
 
     # ------------------------------------------------------------------ the pose
-    def begin(self, n_frames: int) -> None:
+    def begin(self, n_frames: int, sink: Callable[[int, np.ndarray, np.ndarray], None] | None = None,
+              window: int = 16384) -> None:
+        """Make room for ``n_frames`` frames. With ``sink``, only a window of them is held: the frames before
+        a segment are final once it begins (drivers write and read the frames of their segment only), so when
+        ``window`` frames or more are final they go to ``sink(first, values, writers)`` and are dropped;
+        :meth:`flush` hands over the rest. :attr:`values` and :attr:`writers` then hold frames from
+        :attr:`base` on."""
         n = self.body.n_dofs
-        self.values = np.empty((n_frames, n))
-        self.writers = np.full((n_frames, n), -1, dtype=np.int32)
+        self._sink = sink
+        self._window = int(window)
+        self._n_frames = int(n_frames)
+        self.base = 0
+        rows = n_frames if sink is None else min(n_frames, 2 * self._window)
+        self.values = np.empty((rows, n))
+        self.writers = np.full((rows, n), -1, dtype=np.int32)
+
+    def _make_room(self, lo: int, hi: int) -> None:
+        """Hand the final frames before ``lo`` to the sink (when a window of them is ready) and make the
+        buffer reach frame ``hi``."""
+        if self._sink is None:
+            return
+        if lo - self.base >= self._window:
+            self._hand_over(lo - self.base)
+        need = hi - self.base
+        if need > len(self.values):
+            n = self.body.n_dofs
+            rows = max(need, 2 * len(self.values))
+            values = np.empty((rows, n))
+            writers = np.full((rows, n), -1, dtype=np.int32)
+            kept = lo - self.base
+            values[:kept] = self.values[:kept]
+            writers[:kept] = self.writers[:kept]
+            self.values, self.writers = values, writers
+
+    def _hand_over(self, rows: int) -> None:
+        self._sink(self.base, self.values[:rows], self.writers[:rows])
+        self.base += rows
+        self.writers[:rows] = -1  # the buffer is reused: its rows are the next frames
+
+    def flush(self) -> None:
+        """With a sink: hand it the frames not yet handed over (at the end of the sweep)."""
+        if self._sink is not None and self._n_frames > self.base:
+            self._hand_over(self._n_frames - self.base)
 
     def tick_segment(self, lo: int, hi: int, times: np.ndarray, drivers: Iterable[Driver]) -> None:
         """Tick every driver holding DOFs over frames ``lo:hi`` (one segment), stage by stage."""
+        seg = times[lo:hi]
+        self._make_room(lo, hi)
+        lo, hi = lo - self.base, hi - self.base  # rows of the buffer from here on
         self._lo, self._hi = lo, hi
         self._segment += 1
         self.values[lo:hi] = self.current
@@ -133,7 +178,6 @@ class Arbitrator:
         owners = [d for d in {o for o in self.owner if o is not None} if hi > lo or d.wants_intervals]
         stage = self.body.stage
         owners.sort(key=lambda d: (min(stage[i] for i in d.owned), d.uid))
-        seg = times[lo:hi]
         for d in owners:
             d.tick(seg)
         if hi > lo:

@@ -8,6 +8,7 @@ distribution).
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -163,13 +164,15 @@ class EyeFixation(Driver):
                          ["l_eyeball.pitch", "l_eyeball.yaw", "r_eyeball.pitch", "r_eyeball.yaw"])
         self.rng = rng
         self.targets: list[tuple[float, np.ndarray]] = [(-math.inf, np.asarray(target, dtype=float))]
+        self._target_arrays: tuple[np.ndarray, np.ndarray] | None = None  # starts and points, for target_at
         self.saccade_times = np.empty(0)
         self.saccade_offsets = np.zeros((1, 2))
         self.saccade_duration = 0.04
 
     def set_target(self, at: float, target) -> None:
-        self.targets.append((at, np.asarray(target, dtype=float)))
-        self.targets.sort(key=lambda x: x[0])
+        # in time order, after targets set for the same time (as a stable sort would put it)
+        bisect.insort_right(self.targets, (at, np.asarray(target, dtype=float)), key=lambda x: x[0])
+        self._target_arrays = None
 
     def prepare(self, t_begin: float, t_end: float) -> None:
         times = []
@@ -183,8 +186,11 @@ class EyeFixation(Driver):
         self.saccade_offsets = np.vstack([[0.0, 0.0], self.rng.normal(0.0, 1.2, (len(times), 2))])
 
     def target_at(self, t: np.ndarray) -> np.ndarray:
-        starts = np.array([x[0] for x in self.targets])
-        pts = np.stack([x[1] for x in self.targets])
+        arrays = self._target_arrays
+        if arrays is None or len(arrays[0]) != len(self.targets):  # made again once targets change
+            arrays = self._target_arrays = (np.array([x[0] for x in self.targets]),
+                                            np.stack([x[1] for x in self.targets]))
+        starts, pts = arrays
         return pts[np.searchsorted(starts, t, side="right") - 1]
 
     def micro(self, t: np.ndarray) -> np.ndarray:

@@ -9,6 +9,7 @@ the next.
 from __future__ import annotations
 
 import bisect
+import collections
 
 import math
 from dataclasses import dataclass, field
@@ -275,6 +276,7 @@ def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> Non
     # Coarticulation: a gesture taking over a hand whose previous gesture is past its stroke starts at
     # once (dropping that one's retraction); one arriving during the previous stroke waits for its end.
     last: dict[str, tuple] = {}
+    hands = collections.Counter(id(item) for _, item in planned)  # how many hands each item was given
     for s, item in sorted(planned, key=lambda x: (x[1][1].start, x[1][0].order)):
         record, keys, info, common = item
         b = record.behaviour
@@ -286,8 +288,8 @@ def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> Non
                 acquire = max(keys.start, prev_end)
                 info.note = (info.note + " coarticulated").strip()
         last[s] = item
-        name = f"{record.block}:{record.id}" + (f" ({'left' if s == 'l' else 'right'})" if len(
-            [p for p in planned if p[1] is item]) > 1 else "")
+        name = f"{record.block}:{record.id}" + (f" ({'left' if s == 'l' else 'right'})" if hands[id(item)] > 1
+                                                else "")
         if b.type == "pointing":
             target = _bml_target(scene, b)
             info.target = [float(x) for x in target]

@@ -91,11 +91,14 @@ class DriverManager:
         heapq.heappush(self._events, (float(t), next(self._event_order), action))
 
     # ------------------------------------------------------------------ evaluation
-    def evaluate(self, times: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    def evaluate(self, times: Sequence[float], sink: Callable[[int, np.ndarray, np.ndarray], None] | None = None,
+                 window: int = 16384) -> tuple[np.ndarray, np.ndarray] | None:
         """Evaluate the pose at each of ``times`` (increasing, seconds).
 
         Returns the pose array (frames x DOFs) and, for every value, the uid of the driver that wrote it
-        (-1 where nobody held the DOF and it kept its last value).
+        (-1 where nobody held the DOF and it kept its last value). With ``sink``, the frames are handed to
+        ``sink(first, values, writers)`` in order, about ``window`` frames at a time (the arrays are reused
+        afterwards: copy or write them out), none are held and None is returned.
         """
         if self._evaluated:
             raise RuntimeError("a DriverManager evaluates one run of frames; make a new one to evaluate again")
@@ -109,7 +112,7 @@ class DriverManager:
         for d in self.drivers:
             d.prepare(t_begin, t_end)
         arb = self.arbitrator
-        arb.begin(n)
+        arb.begin(n, sink, window)
         events = self._events
         i = 0
         t_prev = -math.inf
@@ -131,6 +134,9 @@ class DriverManager:
             finish = getattr(d, "finish", None)
             if finish is not None:
                 finish()
+        if sink is not None:
+            arb.flush()
+            return None
         return arb.values, arb.writers
 
     def driver_names(self) -> dict[int, str]:

@@ -13,11 +13,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
 from agentsim.animation.behaviours import build_drivers
-from agentsim.animation.body import Body
+from agentsim.animation.body import FK_ROWS, Body
 from agentsim.animation.manager import DriverManager
 from agentsim.animation.time_source import TimeSource
 from agentsim.core.written import written
@@ -25,6 +26,49 @@ from agentsim.core.written import written
 #: Joints whose world positions a PoseStream carries for every frame.
 TRACKED_JOINTS = ("HumanoidRoot", "vt10", "skullbase", "l_eyeball", "r_eyeball", "l_shoulder", "r_shoulder",
                   "l_elbow", "r_elbow", "l_wrist", "r_wrist", "l_fingers", "r_fingers")
+
+
+class FrameFile:
+    """A ``.npy`` file of per-frame rows (``shape`` = frames x ...), written in order a block of frames at a
+    time and read back a stretch of frames at a time by plain reads (a mapping of the whole file would
+    count every page read against the process's memory until it is unmapped)."""
+
+    def __init__(self, path: str | Path, shape: tuple[int, ...], dtype) -> None:
+        self.path = Path(path)
+        self.shape = tuple(int(x) for x in shape)
+        self.dtype = np.dtype(dtype)
+        self.row_size = int(np.prod(self.shape[1:], dtype=np.int64))
+        self._file = open(self.path, "wb")
+        np.lib.format.write_array_header_1_0(self._file, {"descr": np.lib.format.dtype_to_descr(self.dtype),
+                                                          "fortran_order": False, "shape": self.shape})
+        self.offset = self._file.tell()
+        self.written = 0
+
+    def append(self, block: np.ndarray) -> None:
+        """Write the next frames (rows of ``shape[1:]``)."""
+        block = np.ascontiguousarray(block, dtype=self.dtype)
+        if block.shape[1:] != self.shape[1:] or self.written + len(block) > self.shape[0]:
+            raise ValueError(f"{self.path}: a block of shape {block.shape} does not fit {self.shape}")
+        self._file.write(block.tobytes())
+        self.written += len(block)
+
+    def close(self, check: bool = True) -> None:
+        """Finish writing; ValueError if not every frame was written (unless ``check`` is false)."""
+        self._file.close()
+        if check and self.written != self.shape[0]:
+            raise ValueError(f"{self.path}: {self.written} of {self.shape[0]} frames written")
+
+    def read(self, first: int, last: int) -> np.ndarray:
+        """Frames ``first .. last - 1``."""
+        first, last = max(0, int(first)), min(self.shape[0], int(last))
+        count = max(0, last - first)
+        data = np.fromfile(self.path, dtype=self.dtype, count=count * self.row_size,
+                           offset=self.offset + first * self.row_size * self.dtype.itemsize)
+        return data.reshape((count,) + self.shape[1:])
+
+    def mapped(self) -> np.ndarray:
+        """The whole array, the file mapped read-only into memory."""
+        return np.load(self.path, mmap_mode="r")
 
 
 @dataclass
@@ -49,6 +93,47 @@ class PoseStream:
     units: list[dict] = field(default_factory=list)
     seed: int | None = None
     manager: DriverManager | None = field(default=None, repr=False)
+    #: where ``values``, ``writers`` and ``positions`` live when they were evaluated into files
+    #: (:func:`evaluate_poses` with ``folder``; the arrays are then the files mapped into memory)
+    files: dict[str, FrameFile] | None = field(default=None, repr=False)
+
+    def rows(self, name: str, first: int, last: int) -> np.ndarray:
+        """Frames ``first .. last - 1`` of ``values``, ``writers`` or ``positions`` (``name``), read from
+        the file when the stream lives in files."""
+        if self.files is not None:
+            return self.files[name].read(first, last)
+        return getattr(self, name)[max(0, first):last]
+
+    def windows(self, name: str = "values", rows: int = FK_ROWS) -> Iterator[tuple[int, np.ndarray]]:
+        """``(first frame, frames)`` of ``values``, ``writers`` or ``positions`` in order, ``rows`` frames at
+        a time (a long stream is never held whole when it lives in files)."""
+        for a in range(0, self.n_frames, rows):
+            yield a, self.rows(name, a, a + rows)
+
+    def take(self, name: str, frames: np.ndarray) -> np.ndarray:
+        """The frames (increasing indices) ``frames`` of ``values``, ``writers`` or ``positions``."""
+        frames = np.asarray(frames, dtype=np.intp)
+        if self.files is None:
+            return getattr(self, name)[frames]
+        if len(frames) == 0:
+            return self.files[name].read(0, 0)
+        first = int(frames[0])
+        return self.files[name].read(first, int(frames[-1]) + 1)[frames - first]
+
+    def tracked(self, joint: str) -> np.ndarray:
+        """World positions (frames, 3) of a joint over every frame, as :meth:`position` gives them but a copy
+        made a window of frames at a time (from the files when the stream lives in files)."""
+        if self.files is None:
+            return np.array(self.position(joint))
+        out = np.empty((self.n_frames, 3))
+        if joint in self.joints:
+            k = self.joints.index(joint)
+            for a, block in self.windows("positions"):
+                out[a:a + len(block)] = block[:, k]
+        else:
+            for a, block in self.windows():
+                out[a:a + len(block)] = self.body.forward_kinematics(block, [joint])[joint][1]
+        return out
 
     @property
     def n_frames(self) -> int:
@@ -66,9 +151,10 @@ class PoseStream:
         """World positions (frames, 3) of a tracked joint (or of any joint, computed on demand), of every
         frame or of the frames (indices) given."""
         if joint in self.joints:
-            column = self.positions[:, self.joints.index(joint)]
-            return column if frames is None else column[frames]
-        values = self.values if frames is None else self.values[frames]
+            if frames is None:
+                return self.positions[:, self.joints.index(joint)]
+            return self.take("positions", frames)[:, self.joints.index(joint)]
+        values = self.values if frames is None else self.take("values", frames)
         return self.body.forward_kinematics(values, [joint])[joint][1]
 
     def forward(self, joint: str) -> np.ndarray:
@@ -98,7 +184,7 @@ def records_of(source) -> list:
 def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | None = None, start: float = 0.0,
                    scene: dict | None = None, animator_time: TimeSource | None = None,
                    manager: DriverManager | None = None, body: Body | None = None,
-                   times=None) -> PoseStream:
+                   times=None, folder: str | Path | None = None) -> PoseStream:
     """Evaluate the body's pose at ``fps`` frames per second for everything a realizer played.
 
     Parameters
@@ -124,6 +210,11 @@ def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | N
         The frame times to evaluate (increasing, seconds) instead of the grid that ``start``, ``duration``
         and ``fps`` make; ``fps`` is then only recorded in the stream. The frames a live viewer is due,
         with a few frames before them where the pose matters to what comes next, say.
+    folder : str or Path, optional
+        Evaluate into files there (``values.npy``, ``writers.npy``, ``positions.npy``), a window of frames at
+        a time, instead of into memory: a long run's poses are never held whole. The stream's arrays are then
+        the files mapped into memory, and :meth:`PoseStream.windows`, :meth:`~PoseStream.rows` and
+        :meth:`~PoseStream.take` read them a stretch at a time. The numbers are the same either way.
     """
     if fps <= 0:
         raise ValueError("fps must be positive")
@@ -140,13 +231,37 @@ def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | N
             duration = max([1.0] + [e - start + 1.0 for e in ends if math.isfinite(e)])
         n = int(math.floor(duration * fps + 1e-9)) + 1
         times = start + np.arange(n) / fps
-    values, writers = manager.evaluate(times)
     joints = [j for j in TRACKED_JOINTS if j in manager.body.joint]
-    positions = manager.body.positions(values, joints)
+    files = None
+    if folder is None:
+        values, writers = manager.evaluate(times)
+        positions = manager.body.positions(values, joints)
+    else:
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        n, dofs = len(times), manager.body.n_dofs
+        files = {"values": FrameFile(folder / "values.npy", (n, dofs), np.float64),
+                 "writers": FrameFile(folder / "writers.npy", (n, dofs), np.int32),
+                 "positions": FrameFile(folder / "positions.npy", (n, len(joints), 3), np.float64)}
+
+        def sink(first: int, block: np.ndarray, wrote: np.ndarray) -> None:
+            files["values"].append(block)
+            files["writers"].append(wrote)
+            files["positions"].append(manager.body.positions(block, joints))
+
+        try:
+            manager.evaluate(times, sink=sink, window=FK_ROWS)
+        except BaseException:
+            for f in files.values():
+                f.close(check=False)
+            raise
+        for f in files.values():
+            f.close()
+        values, writers, positions = (files[k].mapped() for k in ("values", "writers", "positions"))
     return PoseStream(times=times, channels=list(manager.body.dof_names), values=values, joints=joints,
                       positions=positions, fps=float(fps), body=manager.body, writers=writers,
                       driver_names=manager.driver_names(), units=[u.as_dict() for u in infos], seed=seed,
-                      manager=manager)
+                      manager=manager, files=files)
 
 
 # --------------------------------------------------------------------------------------------- BVH
@@ -196,7 +311,8 @@ def write_bvh(path: str | Path, stream: PoseStream, precision: int = 5) -> Path:
         f.write("MOTION\n")
         f.write(f"Frames: {stream.n_frames}\n")
         f.write(f"Frame Time: {1.0 / stream.fps:.8f}\n")
-        np.savetxt(f, stream.values, fmt=f"%.{precision}f", delimiter=" ")
+        for _, block in stream.windows():  # a window of frames at a time (the same text)
+            np.savetxt(f, block, fmt=f"%.{precision}f", delimiter=" ")
     return path
 
 

@@ -67,19 +67,30 @@ def prediction(block_id: str, global_time: float, character_id: str, block_start
 DECIMALS = 9
 
 
+#: Types a feedback's values have that JSON writes as they are (looked up by exact type: a subclass of
+#: float, numpy's float64, is rounded as a float is).
+_AS_IS = frozenset((str, int, bool, type(None)))
+
+
 def _clean(value: Any) -> Any:
+    if type(value) in _AS_IS:  # most values: no call further down for them
+        return value
     if isinstance(value, float):
         return round(value, DECIMALS) if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
+        return {k: v if type(v) in _AS_IS else _clean(v) for k, v in value.items()}
     if isinstance(value, list):
-        return [_clean(v) for v in value]
+        return [v if type(v) in _AS_IS else _clean(v) for v in value]
     return value
+
+
+#: The encoder of :func:`to_json` (what ``json.dumps(..., separators=(", ", ": "))`` makes anew each call).
+_ENCODER = json.JSONEncoder(separators=(", ", ": "))
 
 
 def to_json(feedback: Feedback) -> str:
     """One line of JSON for a feedback, its times to the nanosecond (:data:`DECIMALS`)."""
-    return json.dumps(_clean(feedback), separators=(", ", ": "))
+    return _ENCODER.encode(_clean(feedback))
 
 
 class FeedbackLog:

@@ -116,6 +116,7 @@ class BlockSolver:
         # what each reference to this block's own sync points stands for, by the reference's id (the
         # references live as long as the block; a block refers to one sync point many times)
         self._local_refs: dict[int, tuple[int, float]] = {}
+        self._sync_sets: dict[str, tuple[object, frozenset[str]]] = {}
 
     # ----------------------------------------------------------------- problems
     def drop(self, behaviour_id: str, reason: str, kind: str = "IMPOSSIBLE_TO_SCHEDULE") -> None:
@@ -163,10 +164,18 @@ class BlockSolver:
         beh = self.block.behaviour(ref.behaviour)
         if beh is None:
             raise ScheduleError(f"no behaviour {ref.behaviour!r} in block {self.block.id}")
-        if ref.sync not in beh.sync_ids:
+        if ref.sync not in self._sync_set(beh):
             raise ScheduleError(f"behaviour {ref.behaviour!r} has no sync point {ref.sync!r}")
         found = self._local_refs[id(ref)] = (self.local_node(beh.id, ref.sync), ref.offset)
         return found
+
+    def _sync_set(self, beh) -> frozenset[str]:
+        """The sync ids of ``beh`` as a set (a speech has thousands: references to them are looked up in
+        constant time), made again if they change."""
+        held = self._sync_sets.get(beh.id)
+        if held is None or held[0] is not beh or len(held[1]) != len(beh.sync_ids):
+            held = self._sync_sets[beh.id] = (beh, frozenset(beh.sync_ids))
+        return held[1]
 
     def local_node(self, behaviour_id: str, sync_id: str) -> int:
         nodes = self.local_nodes.get(behaviour_id)

@@ -73,7 +73,10 @@ def speech_sources(recording) -> list[Source]:
         if audio is None or len(audio) == 0:
             continue
         gain = heard.gain if heard.volume else None
-        sources.append(Source(np.asarray(audio, np.float32), int(heard.utterance.sample_rate), float(heard.t0),
+        # float32 samples left as they are: an array, or samples read from a file as they are needed
+        # (:class:`~agentsim.speech.samples.PcmFile`), which np.asarray would read whole
+        samples = audio if getattr(audio, "dtype", None) == np.float32 else np.asarray(audio, np.float32)
+        sources.append(Source(samples, int(heard.utterance.sample_rate), float(heard.t0),
                               1.0 + heard.drift_ppm * 1e-6, heard.stopped, gain,
                               f"{heard.block}:{heard.behaviour}"))
     return sources
@@ -165,10 +168,12 @@ def _placed(source: Source, rate: int, first: int, last: int, gain_grid) -> np.n
     t = np.arange(first, last) / rate
     if source.speed == 1.0 and source.rate == rate and abs(source.start * rate - round(source.start * rate)) < 1e-6:
         offset = int(round(source.start * rate))
-        index = np.arange(first, last) - offset
-        ok = (index >= 0) & (index < len(source.samples))
+        # the source's samples first - offset .. last - offset - 1, those it has: one stretch (a slice, which
+        # samples read from a file give without reading more)
+        lo, hi = max(first - offset, 0), min(last - offset, len(source.samples))
         values = np.zeros(last - first)
-        values[ok] = source.samples[index[ok]]
+        if hi > lo:
+            values[lo + offset - first:hi + offset - first] = source.samples[lo:hi]
     else:
         # where in the source each output sample falls (in source samples)
         position = (t - source.start) / source.speed * source.rate

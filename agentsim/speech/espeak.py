@@ -62,16 +62,13 @@ import ctypes
 import difflib
 import functools
 import itertools
+import mmap
 import re
 import threading
 from dataclasses import dataclass, field
 from xml.sax.saxutils import escape
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # numpy is imported where audio is made: loading the backend does without it
-    import numpy as np
-
+# numpy is imported where audio is made: loading the backend does without it
 from agentsim.speech.backend import (BREAK_STRENGTHS, Mark, Phoneme, Prosody, SpeechText, Utterance, Word,
                                      check_prosody, nest_spans, parse_number, parse_time)
 from agentsim.core.errors import SpeechBackendUnavailable
@@ -196,6 +193,66 @@ def _load_library(name: str = LIBRARY_NAME) -> ctypes.CDLL:
     return lib
 
 
+class _PcmBuffer:
+    """The 16-bit samples of one synthesis, appended a chunk at a time into one array that doubles as it
+    fills: no list of chunks and no joined copy beside it (a long text's chunks would stay behind in the
+    allocator's heap). The array is an anonymous mapping: its untouched end is never in memory, and
+    :meth:`to_float` gives its pages back to the system as it converts them."""
+
+    #: Samples converted at a time by :meth:`to_float`.
+    BLOCK = 1 << 20
+
+    def __init__(self) -> None:
+        self._map: mmap.mmap | None = None
+        self.array = None
+        self.filled = 0
+
+    def append(self, wav, count: int) -> None:
+        """Copy ``count`` samples from the C buffer ``wav``."""
+        import numpy as np
+
+        size = 0 if self.array is None else len(self.array)
+        if self.filled + count > size:
+            size = max(2 * size, self.filled + count, 1 << 16)
+            grown_map = mmap.mmap(-1, 2 * size)
+            grown = np.frombuffer(grown_map, dtype=np.int16)
+            if self.filled:
+                grown[:self.filled] = self.array[:self.filled]
+            self.array, old = grown, self._map  # the old array let go first: then its mapping can close
+            self._map = grown_map
+            if old is not None:
+                old.close()
+        ctypes.memmove(self.array.ctypes.data + 2 * self.filled, wav, 2 * count)
+        self.filled += count
+
+    def samples(self):
+        """The samples appended so far (int16, a view of the buffer: valid until :meth:`to_float`)."""
+        import numpy as np
+
+        return self.array[:self.filled] if self.array is not None else np.zeros(0, dtype=np.int16)
+
+    def to_float(self):
+        """The samples as float32 in [-1, 1) (divided by 32768), the buffer's pages given back to the system
+        as they are converted (so the 16-bit samples and their float32 copy are not held whole at once);
+        the buffer is empty afterwards."""
+        import numpy as np
+
+        out = np.empty(self.filled, dtype=np.float32)
+        released = 0
+        for a in range(0, self.filled, self.BLOCK):
+            b = min(a + self.BLOCK, self.filled)
+            np.divide(self.array[a:b], np.float32(32768.0), out=out[a:b], dtype=np.float32)
+            done = (2 * b) // mmap.PAGESIZE * mmap.PAGESIZE
+            if done > released:
+                self._map.madvise(mmap.MADV_DONTNEED, released, done - released)
+                released = done
+        self.array, self.filled = None, 0
+        if self._map is not None:
+            self._map.close()
+            self._map = None
+        return out
+
+
 class _Engine:
     """The process-wide espeak-ng instance: initialised once, used under :attr:`lock`."""
 
@@ -210,7 +267,7 @@ class _Engine:
                 f"install it with: {INSTALL_HINT}"
             )
         self.sample_rate = sample_rate
-        self._chunks: list[bytes] = []
+        self._chunks = _PcmBuffer()
         self._events: list[_RawEvent] = []
         self._callback_error: BaseException | None = None
         self._callback = _SynthCallback(self._on_synth)  # kept referenced for the library's use
@@ -220,8 +277,7 @@ class _Engine:
         """Collect one audio chunk and its events; returns 1 (abort) on an error."""
         try:
             if wav and num_samples > 0:
-                data = ctypes.string_at(wav, num_samples * ctypes.sizeof(ctypes.c_short))
-                self._chunks.append(data)
+                self._chunks.append(wav, num_samples)
             if events:
                 i = 0
                 while events[i].type != _EVENT_LIST_TERMINATED:
@@ -240,25 +296,23 @@ class _Engine:
             if self._lib.espeak_SetParameter(_PARAMETER_RATE, rate, 0) != _EE_OK:
                 raise ValueError(f"espeak-ng refused the rate {rate}")
 
-    def synth(self, ssml: str, voice: str, rate: int) -> tuple[np.ndarray, list[_RawEvent]]:
-        """Synthesise SSML; return the int16 audio and the events in the order espeak reported them."""
-        import numpy as np
+    def synth(self, ssml: str, voice: str, rate: int) -> tuple[_PcmBuffer, list[_RawEvent]]:
+        """Synthesise SSML; return the int16 audio (in its buffer) and the events in the order espeak
+        reported them."""
 
         with self.lock:
             self.select(voice, rate)
-            self._chunks, self._events, self._callback_error = [], [], None
+            self._chunks, self._events, self._callback_error = _PcmBuffer(), [], None
             data = ssml.encode("utf-8")
             status = self._lib.espeak_Synth(data, len(data) + 1, 0, _POS_CHARACTER, 0,
                                             _SSML | _CHARS_UTF8, None, None)
             chunks, events, error = self._chunks, self._events, self._callback_error
-            self._chunks, self._events, self._callback_error = [], [], None
+            self._chunks, self._events, self._callback_error = _PcmBuffer(), [], None
         if error is not None:
             raise RuntimeError("espeak-ng synthesis callback failed") from error
         if status != _EE_OK:
             raise RuntimeError(f"espeak_Synth failed with status {status}")
-        audio = (np.concatenate([np.frombuffer(c, dtype=np.int16) for c in chunks]) if chunks
-                 else np.zeros(0, dtype=np.int16))
-        return audio, events
+        return chunks, events
 
     def transcribe(self, text: str, voice: str, rate: int) -> list[tuple[str, str]]:
         """IPA phonemes of plain ``text`` with their stress: ``(symbol, "ˈ" | "ˌ" | "")``, pauses left out."""
@@ -793,6 +847,12 @@ class EspeakBackend:
                 self._spoken.popitem(last=False)
         return utterance
 
+    def forget(self, speech: SpeechText) -> None:
+        """Stop remembering what ``speech`` was (whoever asked keeps it, in a form of its own: the speech
+        cache reads its samples from its file); asked for again, it is synthesised again."""
+        with self._remembered:
+            self._spoken.pop(speech, None)
+
     def _synthesize(self, speech: SpeechText) -> Utterance:
         text = speech.text
         ssml, origin = _to_ssml(text, speech.marks, speech.prosody)
@@ -800,7 +860,8 @@ class EspeakBackend:
         engine = self._engine
         words_per_minute = min(max(round(self.rate * speech.rate), _RATE_MINIMUM), _RATE_MAXIMUM)
         with engine.lock:
-            pcm, events = engine.synth(ssml, self.voice, words_per_minute)
+            buffer, events = engine.synth(ssml, self.voice, words_per_minute)
+            pcm = buffer.samples()
             groups = _read_events(text, origin, tokens, events, len(pcm))
             _mark_stress_by_clause(groups, tokens, engine.transcribe_clauses(text, self.voice, words_per_minute))
             spans = _word_spans(text, tokens, groups, functools.lru_cache(maxsize=None)(self._symbols))
@@ -830,10 +891,8 @@ class EspeakBackend:
                 onset = _first_sound_after(events, i)
                 sentences.append((event.sample if onset is None else onset) / rate)
 
-        import numpy as np
-
-        audio = pcm.astype(np.float32)
-        audio /= np.float32(32768.0)  # in place: a long text's audio is not held twice
+        del pcm  # a view of the buffer, which to_float empties
+        audio = buffer.to_float()  # the 16-bit samples given back as they are converted
         return Utterance(text=text, duration=duration, words=words, phonemes=phonemes, marks=marks,
                          sentences=sentences, sample_rate=rate, audio=audio, backend=self.name)
 

@@ -21,7 +21,8 @@ from __future__ import annotations
 import base64
 import json
 import math
-from typing import Iterable
+import tempfile
+from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -77,8 +78,9 @@ def point_positions(stream, frames: np.ndarray | None = None) -> np.ndarray:
     if frames is None:
         return body_points(stream.body, stream.values)
     frames = np.asarray(frames)
-    parts = [body_points(stream.body, stream.values[frames[a:a + FK_ROWS]]) for a in range(0, len(frames), FK_ROWS)]
-    return np.concatenate(parts) if parts else body_points(stream.body, stream.values[frames])
+    parts = [body_points(stream.body, stream.take("values", frames[a:a + FK_ROWS]))
+             for a in range(0, len(frames), FK_ROWS)]
+    return np.concatenate(parts) if parts else body_points(stream.body, stream.take("values", frames))
 
 
 def body_points(body, values: np.ndarray) -> np.ndarray:
@@ -117,21 +119,35 @@ def report_frames(stream, max_fps: float = MAX_FPS, keep: Iterable[float] = ()) 
     return np.array(sorted(chosen), np.uint32)
 
 
-def pose_payload(stream, max_fps: float = MAX_FPS, keep: Iterable[float] = ()) -> dict:
-    """``window.REPORT_POSES`` for a PoseStream: see the module's docstring. ``keep``: stroke times."""
+def _quantized_poses(stream, max_fps: float, keep: Iterable[float]) -> tuple[dict, Iterator[str]]:
+    """``window.REPORT_POSES`` without its ``xyz``, and ``xyz`` as pieces of base64 text to be joined, made
+    :data:`~agentsim.animation.body.FK_ROWS` frames at a time: the positions (in metres) go to a temporary
+    file while their extent is found, and come back from it to be quantized and encoded (a long run's
+    positions are never held whole). Each piece encodes a whole number of frames, a multiple of 3 bytes
+    (6 bytes a point), so the pieces join into the text of the whole."""
+    from agentsim.animation.body import FK_ROWS
+
     frames = report_frames(stream, max_fps, keep)
-    positions = point_positions(stream, frames) if len(frames) else np.zeros((0, 0, 3))
     names, _ = point_names(stream.body)
-    if positions.size:
-        lo, hi = positions.reshape(-1, 3).min(axis=0), positions.reshape(-1, 3).max(axis=0)
+    spill = tempfile.TemporaryFile()
+    lo = hi = None
+    shapes = []
+    for a in range(0, len(frames), FK_ROWS):
+        positions = body_points(stream.body, stream.take("values", frames[a:a + FK_ROWS]))
+        flat = positions.reshape(-1, 3)
+        if flat.size:
+            lo = flat.min(axis=0) if lo is None else np.minimum(lo, flat.min(axis=0))
+            hi = flat.max(axis=0) if hi is None else np.maximum(hi, flat.max(axis=0))
+        shapes.append(positions.shape)
+        spill.write(np.ascontiguousarray(positions).tobytes())
+    if lo is not None:
         origin = np.round((lo + hi) / 2.0, 3)
         span = float(np.max(hi - lo))
     else:
         origin, span = np.zeros(3), 0.0
     # 1 mm steps unless the run covers more than an Int16 of millimetres (65 m)
     scale = 0.001 if span < 65.0 else math.ceil(span / 65.0 * 1000.0) / 1000.0
-    q = np.clip(np.round((positions - origin) / scale), -32767, 32767).astype("<i2")
-    return {
+    payload = {
         "fps": float(stream.fps),
         "t0": float(stream.times[0]) if stream.n_frames else 0.0,
         "count": int(len(frames)),
@@ -139,8 +155,42 @@ def pose_payload(stream, max_fps: float = MAX_FPS, keep: Iterable[float] = ()) -
         "origin": [float(x) for x in origin],
         "scale": scale,
         "frames": base64.b64encode(frames.astype("<u4").tobytes()).decode("ascii"),
-        "xyz": base64.b64encode(q.tobytes()).decode("ascii"),
     }
+
+    def pieces() -> Iterator[str]:
+        with spill:
+            spill.seek(0)
+            for shape in shapes:
+                positions = np.fromfile(spill, dtype=np.float64, count=int(np.prod(shape))).reshape(shape)
+                q = np.clip(np.round((positions - origin) / scale), -32767, 32767).astype("<i2")
+                yield base64.b64encode(q.tobytes()).decode("ascii")
+
+    return payload, pieces()
+
+
+def pose_payload(stream, max_fps: float = MAX_FPS, keep: Iterable[float] = ()) -> dict:
+    """``window.REPORT_POSES`` for a PoseStream: see the module's docstring. ``keep``: stroke times."""
+    payload, pieces = _quantized_poses(stream, max_fps, keep)
+    payload["xyz"] = "".join(pieces)
+    return payload
+
+
+def write_poses(path, stream, comment: str = "", max_fps: float = MAX_FPS, keep: Iterable[float] = ()) -> dict:
+    """Write ``poses.js``: the text of ``js_assignment("REPORT_POSES", pose_payload(stream, max_fps, keep),
+    comment)``, its positions quantized, encoded and written a stretch of frames at a time (never the text of
+    a long run's positions whole). Returns the payload without ``xyz``."""
+    from agentsim.core.written import written
+
+    payload, pieces = _quantized_poses(stream, max_fps, keep)
+    marker = "\x00xyz\x00"  # JSON writes it escaped, as no base64 text could be
+    text = js_assignment("REPORT_POSES", {**payload, "xyz": marker}, comment)
+    head, tail = text.split(json.dumps(marker))
+    with written(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        f.write(head + '"')
+        for piece in pieces:
+            f.write(piece)
+        f.write('"' + tail)
+    return payload
 
 
 def decode_poses(payload: dict) -> tuple[np.ndarray, np.ndarray]:

@@ -29,8 +29,8 @@ import numpy as np
 from agentsim.core.written import written
 from agentsim.media import AXIS
 from agentsim.media.files import write_text
-from agentsim.media.report.data import (FACE, pose_payload, js_assignment, point_names, run_duration,
-                                        stroke_times, timeline_payload)
+from agentsim.media.report.data import (FACE, js_assignment, point_names, run_duration, stroke_times,
+                                        timeline_payload, write_poses)
 
 HERE = Path(__file__).resolve().parent
 #: The vendored three.js bundle and its licence (``scripts/vendor_three.sh`` makes them).
@@ -75,7 +75,33 @@ def write_audio(folder: Path, track) -> str:
         return "audio.wav"
 
 
-def write_report(path, *, recording, stream=None, track=None, gestures=(), title: str = "", notes=()) -> Path:
+def report_paths(path) -> tuple[Path, Path]:
+    """The HTML file a report at ``path`` is written to (``.html`` added if it has no such suffix) and the
+    folder of its files beside it."""
+    path = Path(path)
+    if path.suffix.lower() not in (".html", ".htm"):
+        path = path.with_name(path.name + ".html")
+    return path, path.with_name(f"{path.stem}_files")
+
+
+def start_audio(path, track, executor: concurrent.futures.Executor) -> concurrent.futures.Future:
+    """Begin writing the sound of the report at ``path`` (:func:`write_audio` into its folder) on
+    ``executor``, so that it is encoded while the run's other files are made; hand the future to
+    :func:`write_report` (``audio=``), which waits for it instead of encoding the track itself. A track
+    without samples writes nothing (the future gives None)."""
+    _, folder = report_paths(path)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("audio.ogg", "audio.wav"):
+        (folder / name).unlink(missing_ok=True)
+    if track is None or track.length == 0:
+        done: concurrent.futures.Future = concurrent.futures.Future()
+        done.set_result(None)
+        return done
+    return executor.submit(write_audio, folder, track)
+
+
+def write_report(path, *, recording, stream=None, track=None, gestures=(), title: str = "", notes=(),
+                 audio: concurrent.futures.Future | None = None) -> Path:
     """Write an HTML report of a run that a researcher watches and hears: its audio, a 3D skeleton driven by
     the poses, a timeline of behaviours, words and feedback with a cursor that follows the audio, and the
     per-gesture error table.
@@ -86,9 +112,8 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         The HTML file to write; its files go into ``<stem>_files/`` beside it.
     recording : Recording
         The run (or anything with a ``recording()`` method, such as a realizer after ``run()``).
-    stream : PoseStream or callable, optional
-        Its poses (:func:`~agentsim.animation.output.evaluate_poses`), or a function without arguments that
-        makes them (called while the sound is encoded); None: the run has no motion.
+    stream : PoseStream, optional
+        Its poses (:func:`~agentsim.animation.output.evaluate_poses`); None: the run has no motion.
     track : Track, optional
         Its sound (:func:`~agentsim.media.audio.run_track`, or a
         :class:`~agentsim.media.audio.TrackStream` from :func:`~agentsim.media.audio.run_track_stream`);
@@ -99,6 +124,9 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         The page's title (default: the HTML file's stem).
     notes : iterable of str
         Lines shown under the title (what was run, with which settings).
+    audio : Future, optional
+        The track's sound already being written (:func:`start_audio` with the same ``path`` and
+        ``track``): waited for instead of encoding the track here.
 
     Returns
     -------
@@ -107,15 +135,15 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     """
     if hasattr(recording, "recording") and callable(recording.recording):
         recording = recording.recording()
-    path = Path(path)
-    if path.suffix.lower() not in (".html", ".htm"):
-        path = path.with_name(path.name + ".html")
-    folder = path.with_name(f"{path.stem}_files")
+    path, folder = report_paths(path)
     folder.mkdir(parents=True, exist_ok=True)
     for name in OWN_FILES:
-        (folder / name).unlink(missing_ok=True)
+        if audio is None or name not in ("audio.ogg", "audio.wav"):  # a sound being written is kept
+            (folder / name).unlink(missing_ok=True)
     if track is not None and track.length == 0:
         track = None
+    if stream is not None and stream.n_frames == 0:
+        stream = None
     gestures = list(gestures)
     title = title or path.stem
     notes = [str(n) for n in notes]
@@ -128,14 +156,12 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     # the sound is encoded on a thread of its own (libsndfile does not hold the interpreter) while the
     # timeline and the poses are made
     with concurrent.futures.ThreadPoolExecutor(1) as encoder:
-        audio = encoder.submit(write_audio, folder, track) if track is not None else None
-        if callable(stream):
-            stream = stream()
-        if stream is not None and stream.n_frames == 0:
-            stream = None
+        if audio is None and track is not None:
+            audio = encoder.submit(write_audio, folder, track)
         data = _page_data(recording, stream, track, gestures, title, notes, folder)
-        if audio is not None:
-            data["audio"] = {"src": audio.result(), "duration": track.duration, "rate": int(track.rate)}
+        src = audio.result() if audio is not None else None
+        if src is not None and track is not None:
+            data["audio"] = {"src": src, "duration": track.duration, "rate": int(track.rate)}
     write_text(folder / "data.js", js_assignment(
         "REPORT_DATA", data, f"agentsim run report: timeline and tables of {title!r}, see "
         "agentsim.media.report.data"))
@@ -150,10 +176,8 @@ def _page_data(recording, stream, track, gestures, title, notes, folder: Path) -
     data.update(title=title, notes=notes, axis=AXIS, audio=None, motion=None)
     if stream is not None:
         names, parents = point_names(stream.body)
-        poses = pose_payload(stream, keep=stroke_times(recording, gestures))
-        write_text(folder / "poses.js", js_assignment(
-            "REPORT_POSES", poses, f"agentsim run report: joint positions of {title!r}, see "
-            "agentsim.media.report.data"))
+        poses = write_poses(folder / "poses.js", stream, f"agentsim run report: joint positions of {title!r}, see "
+                            "agentsim.media.report.data", keep=stroke_times(recording, gestures))
         data["motion"] = {
             "fps": float(stream.fps), "frames": int(stream.n_frames), "sent": poses["count"],
             "start": float(stream.times[0]), "end": float(stream.times[-1]),

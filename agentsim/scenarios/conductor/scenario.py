@@ -393,11 +393,14 @@ def run_tempo_figure(run: Run, metrics: dict):
 def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True) -> Path:
     """Write the run's files into the folder ``out`` (created if needed); ``pictures``: the timeline
     pictures too, ``plots``: any picture at all (``tempo.png`` and the timeline)."""
+    import concurrent.futures
+
     from agentsim.animation import evaluate_poses, plot_timelines, write_bvh
     from agentsim.core.feedback import to_json
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_text, write_wav
     from agentsim.media.report import write_report
+    from agentsim.media.report.page import start_audio
     from agentsim.media.tables import gesture_rows, write_csv
 
     out = Path(out)
@@ -409,20 +412,18 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     write_text(out / "feedback.jsonl", "".join(to_json(item) + "\n" for item in recording.feedback))
     # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the feedback's)
     track = run_track(recording, [ensemble_source(run)])
-    write_wav(out / "ensemble.wav", track)
-    write_csv(out / "beats.csv", beat_rows(run))
-    gestures = gesture_rows(recording, beat_sounded(run))
-    write_csv(out / "gestures.csv", gestures)
-    poses = []
-
-    def evaluated():  # the poses are evaluated while the report's sound is encoded
-        poses.append(evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed))
-        return poses[0]
-
-    write_report(out / "report.html", recording=recording, stream=evaluated, track=track, gestures=gestures,
-                 title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})")
-    stream = poses[0]
-    write_bvh(out / "conductor.bvh", stream)
+    # the report's sound is encoded on a thread of its own (libsndfile does not hold the interpreter) while
+    # the poses and the rest are made
+    with concurrent.futures.ThreadPoolExecutor(1) as sound:
+        ogg = start_audio(out / "report.html", track, sound)
+        write_wav(out / "ensemble.wav", track)
+        stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
+        write_bvh(out / "conductor.bvh", stream)
+        write_csv(out / "beats.csv", beat_rows(run))
+        gestures = gesture_rows(recording, beat_sounded(run))
+        write_csv(out / "gestures.csv", gestures)
+        write_report(out / "report.html", recording=recording, stream=stream, track=track, gestures=gestures,
+                     title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})", audio=ogg)
     if not plots:
         return out
     run_tempo_figure(run, metrics).savefig(out / "tempo.png")

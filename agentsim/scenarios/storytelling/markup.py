@@ -470,9 +470,13 @@ def compile_bml(story: Story, timeline: Utterance | None = None, anchor: str = "
     # A delayed mark is timed from the mark it names, wherever it stands; it stands in front of the first
     # annotated word whose own mark comes later, so that the speech's sync points are in time order.
     before: dict[int | None, list[str]] = {}
+    # the marks in time order: the first word later than a mark is never before that of an earlier mark
+    # (every word before it is no later than the earlier mark), so the search goes on from there
+    first = 0
     for name, t in sorted(delayed.items(), key=lambda item: (item[1], item[0])):
-        k = next((j for j in words if base_time[j] > t), None)
-        before.setdefault(k, []).append(name)
+        while first < len(words) and not base_time[words[first]] > t:
+            first += 1
+        before.setdefault(words[first] if first < len(words) else None, []).append(name)
     pieces, last = [], 0
     for k in words:
         a = story.words[k][0]

@@ -33,9 +33,11 @@ synthesis of the speech, which is cached on disk (``--cache``) and reported sepa
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import json
 import math
 import sys
+import tempfile
 import time
 from collections import OrderedDict
 from pathlib import Path
@@ -213,11 +215,22 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
                   seed: int = 0, plots: bool = True) -> "OrderedDict[str, float]":
     """Write a telling's files (all but ``metrics.json``) to ``out``; returns the wall seconds of each
     stage. ``plots``: draw the timeline and sync-error pictures too."""
+    out.mkdir(parents=True, exist_ok=True)
+    # the poses are evaluated into files of a scratch folder (removed at the end) and read back a window
+    # of frames at a time by everything that uses them: a long story's poses are never held whole
+    with tempfile.TemporaryDirectory(dir=out, prefix=".poses-") as scratch:
+        return _write_outputs(telling, out, Path(scratch), fps, window, seed, plots)
+
+
+def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, window: float, seed: int,
+                   plots: bool) -> "OrderedDict[str, float]":
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.core.feedback import to_json
+    from agentsim.core.written import written
     from agentsim.media.audio import run_track_stream
     from agentsim.media.files import write_text, write_wav
     from agentsim.media.report import write_report
+    from agentsim.media.report.page import start_audio
     from agentsim.media.tables import gesture_rows, write_csv
     from agentsim.scenarios.storytelling.praat import export_textgrid
 
@@ -228,30 +241,37 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
         return time.perf_counter()
 
     t = time.perf_counter()
-    write_text(out / "story.bml", telling.bml)
-    write_text(out / "feedback.jsonl", "".join(to_json(item) + "\n" for item in telling.recording.feedback))
-    t = stage("feedback", t)
-    stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene)
-    t = stage("poses", t)
-    write_bvh(out / "story.bvh", stream)
-    t = stage("bvh", t)
-    telling.extra["motion_strokes"] = motion_strokes(telling, stream)
-    t = stage("motion check", t)
     utterance = telling.utterance
-    # the track is made a stretch at a time, for the WAV and again for the report: never held whole
+    # the track is made a stretch at a time, for the WAV and again for the report: never held whole; both
+    # sound files are written on a thread of their own (mixing and encoding mostly run outside the
+    # interpreter) while the poses and the rest are made, and waited for where they were written before
     track = run_track_stream(telling.recording) if utterance.audio is not None else None
-    if track is not None:  # where the listener heard it: late by the playback latency, drifting
-        write_wav(out / "narration.wav", track)
-    t = stage("wav", t)
-    speech = telling.speech
-    _, planned, _ = syllable_times(telling.story, utterance)
-    export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, telling.passed, telling.ids,
-                    to_axis=speech.true_time, axis=AXIS)
-    gestures = gesture_rows(telling.recording)
-    write_csv(out / "gestures.csv", gestures)
-    t = stage("textgrid", t)
-    write_report(out / "report.html", recording=telling.recording, stream=stream, track=track, gestures=gestures,
-                 title=f"{telling.story.title} (strategy {telling.strategy})")
+    with concurrent.futures.ThreadPoolExecutor(1) as sound:
+        # where the listener heard it: late by the playback latency, drifting
+        wav = sound.submit(write_wav, out / "narration.wav", track) if track is not None else None
+        ogg = start_audio(out / "report.html", track, sound)
+        write_text(out / "story.bml", telling.bml)
+        with written(out / "feedback.jsonl") as tmp, open(tmp, "w", encoding="utf-8") as f:  # line by line
+            f.writelines(to_json(item) + "\n" for item in telling.recording.feedback)
+        t = stage("feedback", t)
+        stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene, folder=scratch)
+        t = stage("poses", t)
+        write_bvh(out / "story.bvh", stream)
+        t = stage("bvh", t)
+        telling.extra["motion_strokes"] = motion_strokes(telling, stream)
+        t = stage("motion check", t)
+        if wav is not None:
+            wav.result()
+        t = stage("wav", t)  # what was left of writing it
+        speech = telling.speech
+        _, planned, _ = syllable_times(telling.story, utterance)
+        export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, telling.passed, telling.ids,
+                        to_axis=speech.true_time, axis=AXIS)
+        gestures = gesture_rows(telling.recording)
+        write_csv(out / "gestures.csv", gestures)
+        t = stage("textgrid", t)
+        write_report(out / "report.html", recording=telling.recording, stream=stream, track=track,
+                     gestures=gestures, title=f"{telling.story.title} (strategy {telling.strategy})", audio=ogg)
     t = stage("report", t)
     if plots:
         plot_window(telling, out / "timeline.png", stream, window)

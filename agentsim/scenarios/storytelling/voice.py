@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from agentsim.speech.backend import Mark, Phoneme, SpeechText, Utterance, Word
+from agentsim.speech.samples import PcmFile
 
 __all__ = ["CachedBackend", "PhonemeMarks", "default_cache_dir", "word_after", "stressed_onset",
            "mark_event", "place_mark", "CACHE_FORMAT"]
@@ -226,7 +227,10 @@ class CachedBackend:
             self.misses += 1
             self.synthesised.add(key)
             if self.enabled:
-                self._save(key, utt)
+                utt = self._save(key, utt)
+                forget = getattr(self.backend, "forget", None)
+                if forget is not None and isinstance(utt.audio, PcmFile):  # its samples in memory: let go
+                    forget(SpeechText(text))
         self._memory[key] = utt
         return utt
 
@@ -243,18 +247,21 @@ class CachedBackend:
     def _paths(self, key: str) -> tuple[Path, Path]:
         return self.cache_dir / f"{key}.json", self.cache_dir / f"{key}.npy"
 
-    def _save(self, key: str, utt: Utterance) -> None:
+    def _save(self, key: str, utt: Utterance) -> Utterance:
+        """Write ``utt`` into the cache; returns it with its audio read from the cache file from now on
+        (not held in memory) when the file gives back exactly its samples."""
         meta_path, audio_path = self._paths(key)
         self.cache_dir.mkdir(parents=True, exist_ok=True)
         has_audio = utt.audio is not None
         if has_audio:
-            audio = np.asarray(utt.audio)
-            pcm = np.empty(len(audio), np.int16)
-            for a in range(0, len(audio), READ_BLOCK):  # a block at a time: no float64 copy of a long narration
-                block = np.round(np.asarray(audio[a:a + READ_BLOCK], dtype=np.float64) * 32768.0)
-                pcm[a:a + READ_BLOCK] = np.clip(block, -32768, 32767)
+            audio = utt.audio if isinstance(utt.audio, PcmFile) else np.asarray(utt.audio)
             tmp = audio_path.with_suffix(f".{os.getpid()}.tmp.npy")  # processes that write at once: one each
-            np.save(tmp, pcm)
+            with open(tmp, "wb") as f:  # the file np.save writes, a block at a time (no 16-bit copy held whole)
+                np.lib.format.write_array_header_1_0(f, {"descr": "<i2", "fortran_order": False,
+                                                         "shape": (len(audio),)})
+                for a in range(0, len(audio), READ_BLOCK):  # no float64 copy of a long narration either
+                    block = np.round(np.asarray(audio[a:a + READ_BLOCK], dtype=np.float64) * 32768.0)
+                    f.write(np.clip(block, -32768, 32767).astype("<i2").tobytes())
             tmp.replace(audio_path)
         meta = {"format": CACHE_FORMAT, "backend": _identity(self.backend), "text": utt.text,
                 "duration": utt.duration, "sample_rate": utt.sample_rate, "backend_name": utt.backend,
@@ -263,6 +270,17 @@ class CachedBackend:
         tmp = meta_path.with_suffix(f".{os.getpid()}.tmp.json")
         tmp.write_text(json.dumps(meta, ensure_ascii=False))
         tmp.replace(meta_path)
+        if has_audio:
+            try:
+                stored = PcmFile(audio_path)
+            except (OSError, ValueError):
+                return utt
+            if len(stored) == len(audio) and all(
+                    np.array_equal(stored.read(a, a + READ_BLOCK), audio[a:a + READ_BLOCK])
+                    for a in range(0, len(audio), READ_BLOCK)):
+                return replace(utt, audio=stored)
+            stored.close()
+        return utt
 
     def _load(self, key: str, text: str) -> Utterance | None:
         meta_path, audio_path = self._paths(key)
@@ -272,7 +290,7 @@ class CachedBackend:
                 return None
             audio = None
             if meta["audio"]:
-                audio = _read_pcm(audio_path)
+                audio = PcmFile(audio_path)  # read from the file as it is mixed, never held whole
         except (OSError, ValueError, KeyError):
             return None
         return Utterance(text=text, duration=float(meta["duration"]),
@@ -285,15 +303,3 @@ class CachedBackend:
 #: 16-bit samples read from (and written to) a cache file at a time.
 READ_BLOCK = 1 << 20
 
-
-def _read_pcm(path: Path) -> np.ndarray:
-    """The 16-bit samples of a cache file as float32 in [-1, 1), converted a block at a time from the file
-    mapped into memory (a long narration's 16-bit samples are not held beside it); ValueError if the file
-    holds no 16-bit mono samples or is cut short."""
-    pcm = np.load(path, mmap_mode="r")
-    if pcm.dtype != np.dtype("<i2") or pcm.ndim != 1:
-        raise ValueError(f"{path}: not 16-bit mono samples")
-    audio = np.empty(pcm.shape[0], np.float32)
-    for a in range(0, pcm.shape[0], READ_BLOCK):
-        np.divide(pcm[a:a + READ_BLOCK], np.float32(32768.0), out=audio[a:a + READ_BLOCK], dtype=np.float32)
-    return audio
