@@ -69,8 +69,11 @@ class BestTime(AnimatorTime):
     def reset(self, plan: SpeechPlan, t_request: float) -> None:
         self._due = None
         super().reset(plan, t_request)
-        self._p: list[float] = []
-        self._y: list[float] = []
+        # the evidence (p, y) of the window, kept in arrays (rows _first.._count of _py) rather than lists
+        # turned into arrays at every fit
+        self._py = np.empty((2, 1024))
+        self._first = 0
+        self._count = 0
         self._slope = 1.0
         self._slope_at = -math.inf
         self._intercept = self.t0_pred
@@ -88,12 +91,12 @@ class BestTime(AnimatorTime):
 
     def _fit_line(self) -> None:
         """Update the slope (at most once per second of speech) and the intercept."""
-        latest = self._p[-1]
-        if latest - self._p[0] > 1.5 * self.slope_window:  # forget what no window uses any more
-            keep_from = bisect.bisect_left(self._p, latest - self.slope_window)
-            del self._p[:keep_from], self._y[:keep_from]
-        p = np.asarray(self._p)
-        y = np.asarray(self._y)
+        py, first, count = self._py, self._first, self._count
+        latest = float(py[0, count - 1])
+        if latest - float(py[0, first]) > 1.5 * self.slope_window:  # forget what no window uses any more
+            first = self._first = bisect.bisect_left(py[0], latest - self.slope_window, first, count)
+        p = py[0, first:count]
+        y = py[1, first:count]
         if latest - p[0] >= self.min_slope_span and latest - self._slope_at >= 1.0:
             keep = p >= latest - self.slope_window
             _, slope = lower_envelope_line(p[keep], y[keep], float(np.mean(p[keep])))
@@ -126,10 +129,24 @@ class BestTime(AnimatorTime):
             a = self.path.at(now)
             self._due = (now, a)
         if self._warp is None:
-            self._p.append(p)
-            self._y.append(y)
+            self._remember(p, y)
         else:
             self._warp.observe(event, y, now)
+
+    def _remember(self, p: float, y: float) -> None:
+        """Append one point of evidence (the window's oldest points move to the front when the arrays fill)."""
+        if self._count == self._py.shape[1]:
+            kept = self._count - self._first
+            if kept * 2 > self._py.shape[1]:
+                grown = np.empty((2, 2 * self._py.shape[1]))
+                grown[:, :kept] = self._py[:, self._first:self._count]
+                self._py = grown
+            else:
+                self._py[:, :kept] = self._py[:, self._first:self._count].copy()
+            self._first, self._count = 0, kept
+        self._py[0, self._count] = p
+        self._py[1, self._count] = y
+        self._count += 1
 
     def _steer(self) -> None:
         """Steer t_A from where it was when the pending events arrived."""
