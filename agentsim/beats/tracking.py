@@ -304,10 +304,11 @@ class CausalBeatTracker:
         while a < total:
             # the blocks from here within which nothing falls due and after which the predictions still
             # hold are only heard: their samples go to the envelope as one stretch
-            due, heard = self._due_sample, envelope.n_samples
-            b = a
-            while b + size < total and heard + (b - a) + size < due and (heard + (b - a) + size) / sample_rate <= until:
+            due, b = self._due_sample, a
+            heard = envelope.n_samples + size  # once the block from b is heard
+            while b + size < total and heard < due and heard / sample_rate <= until:
                 b += size
+                heard += size
             if b > a:
                 envelope.append(x[a:b])
                 a = b

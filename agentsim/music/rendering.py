@@ -311,6 +311,7 @@ class FluidSynthRenderer:
             self._ahead = [have[n:]] if have.size > n else []
         self._handed = end
         return have[:n]
+
     def close(self) -> None:
         """Free the synthesizer."""
         if getattr(self, "_synth", None) is not None:

@@ -237,11 +237,13 @@ class _PcmBuffer:
         the buffer is empty afterwards."""
         import numpy as np
 
+        from agentsim.speech.samples import pcm_to_float
+
         out = np.empty(self.filled, dtype=np.float32)
         released = 0
         for a in range(0, self.filled, self.BLOCK):
             b = min(a + self.BLOCK, self.filled)
-            np.divide(self.array[a:b], np.float32(32768.0), out=out[a:b], dtype=np.float32)
+            pcm_to_float(self.array[a:b], out=out[a:b])
             done = (2 * b) // mmap.PAGESIZE * mmap.PAGESIZE
             if done > released:
                 self._map.madvise(mmap.MADV_DONTNEED, released, done - released)

@@ -38,8 +38,9 @@ VENDOR = HERE / "vendor"
 #: The page's own script and style.
 ASSETS = HERE / "assets"
 #: Files of the folder that :func:`write_report` writes or removes (a report written again over an older one).
-OWN_FILES = ("three.min.js", "LICENSE-three.txt", "report.js", "report.css", "data.js", "poses.js", "audio.ogg",
-             "audio.wav")
+#: The sound's files (one of them: :func:`write_audio`).
+AUDIO_FILES = ("audio.ogg", "audio.wav")
+OWN_FILES = ("three.min.js", "LICENSE-three.txt", "report.js", "report.css", "data.js", "poses.js") + AUDIO_FILES
 #: Samples handed to the audio encoder at a time.
 AUDIO_BLOCK = 65536
 
@@ -91,7 +92,7 @@ def start_audio(path, track, executor: concurrent.futures.Executor) -> concurren
     without samples writes nothing (the future gives None)."""
     _, folder = report_paths(path)
     folder.mkdir(parents=True, exist_ok=True)
-    for name in ("audio.ogg", "audio.wav"):
+    for name in AUDIO_FILES:
         (folder / name).unlink(missing_ok=True)
     if track is None or track.length == 0:
         done: concurrent.futures.Future = concurrent.futures.Future()
@@ -138,7 +139,7 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     path, folder = report_paths(path)
     folder.mkdir(parents=True, exist_ok=True)
     for name in OWN_FILES:
-        if audio is None or name not in ("audio.ogg", "audio.wav"):  # a sound being written is kept
+        if audio is None or name not in AUDIO_FILES:  # a sound being written is kept
             (folder / name).unlink(missing_ok=True)
     if track is not None and track.length == 0:
         track = None

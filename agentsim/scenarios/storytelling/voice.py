@@ -42,7 +42,10 @@ from pathlib import Path
 import numpy as np
 
 from agentsim.speech.backend import Mark, Phoneme, SpeechText, Utterance, Word
-from agentsim.speech.samples import PcmFile
+from agentsim.speech.samples import BLOCK, PcmFile
+
+#: 16-bit samples read from (and written to) a cache file at a time.
+READ_BLOCK = BLOCK
 
 __all__ = ["CachedBackend", "PhonemeMarks", "default_cache_dir", "word_after", "stressed_onset",
            "mark_event", "place_mark", "CACHE_FORMAT"]
@@ -298,8 +301,3 @@ class CachedBackend:
                          phonemes=[Phoneme(**p) for p in meta["phonemes"]], marks=[],
                          sentences=[float(s) for s in meta["sentences"]], sample_rate=int(meta["sample_rate"]),
                          audio=audio, backend=meta.get("backend_name", ""))
-
-
-#: 16-bit samples read from (and written to) a cache file at a time.
-READ_BLOCK = 1 << 20
-
