@@ -76,6 +76,16 @@ def write_text(path: str | Path, text: str) -> Path:
     return Path(path)
 
 
+def write_feedback(path: str | Path, feedback) -> Path:
+    """Write feedback as JSON lines (:func:`~agentsim.core.feedback.to_json`), a line at a time (a long run's
+    text is not held whole), whole or not at all (see :func:`written`)."""
+    from agentsim.core.feedback import to_json
+
+    with written(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        f.writelines(to_json(item) + "\n" for item in feedback)
+    return Path(path)
+
+
 def write_wav(path: str | Path, track: Track) -> Path:
     """Write a track (a :class:`~agentsim.media.audio.Track`, or a
     :class:`~agentsim.media.audio.TrackStream` stretch by stretch) as 16-bit PCM WAV; its comment (INFO

@@ -396,9 +396,8 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     import concurrent.futures
 
     from agentsim.animation import evaluate_poses, plot_timelines, write_bvh
-    from agentsim.core.feedback import to_json
     from agentsim.media.audio import run_track
-    from agentsim.media.files import write_text, write_wav
+    from agentsim.media.files import write_feedback, write_text, write_wav
     from agentsim.media.report import write_report
     from agentsim.media.report.page import start_audio
     from agentsim.media.tables import gesture_rows, write_csv
@@ -409,7 +408,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
 
     write_text(out / "metrics.json", json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}, indent=2) + "\n")
     recording = run.realizer.recording()
-    write_text(out / "feedback.jsonl", "".join(to_json(item) + "\n" for item in recording.feedback))
+    write_feedback(out / "feedback.jsonl", recording.feedback)
     # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the feedback's)
     track = run_track(recording, [ensemble_source(run)])
     # the report's sound is encoded on a thread of its own (libsndfile does not hold the interpreter) while

@@ -225,10 +225,8 @@ def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float 
 def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, window: float, seed: int,
                    plots: bool) -> "OrderedDict[str, float]":
     from agentsim.animation import evaluate_poses, write_bvh
-    from agentsim.core.feedback import to_json
-    from agentsim.core.written import written
     from agentsim.media.audio import run_track_stream
-    from agentsim.media.files import write_text, write_wav
+    from agentsim.media.files import write_feedback, write_text, write_wav
     from agentsim.media.report import write_report
     from agentsim.media.report.page import start_audio
     from agentsim.media.tables import gesture_rows, write_csv
@@ -251,8 +249,7 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
         wav = sound.submit(write_wav, out / "narration.wav", track) if track is not None else None
         ogg = start_audio(out / "report.html", track, sound)
         write_text(out / "story.bml", telling.bml)
-        with written(out / "feedback.jsonl") as tmp, open(tmp, "w", encoding="utf-8") as f:  # line by line
-            f.writelines(to_json(item) + "\n" for item in telling.recording.feedback)
+        write_feedback(out / "feedback.jsonl", telling.recording.feedback)
         t = stage("feedback", t)
         stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene, folder=scratch)
         t = stage("poses", t)
