@@ -20,7 +20,7 @@ from agentsim.engines.audio import AudioEngine
 from agentsim.engines.control import ControlEngine
 from agentsim.engines.speech import SpeechConfig, SpeechEngine
 from agentsim.engines.wait import WaitEngine
-from agentsim.speech.backend import TTSBackend
+from speech_timing.backend import TTSBackend
 
 
 class Realizer:
@@ -61,7 +61,7 @@ class Realizer:
         self.board = PegBoard()
         self.feedback = FeedbackLog(keep=None if keep is None else 100 * keep)
         if tts is None:
-            from agentsim.speech.builtin import BuiltinBackend
+            from speech_timing.builtin import BuiltinBackend
             tts = BuiltinBackend()
         self.scheduler = Scheduler(self.env, self.board, self.feedback, prediction_tolerance, keep=keep)
         context = self.scheduler.context

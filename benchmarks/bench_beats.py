@@ -3,11 +3,11 @@
 Each render is an ensemble (drums, bass, piano, strings) at 100 to 140 BPM in 4/4 or 3/4, with a tempo
 ramp of +10 % over 16 bars (from bar 4) and +-2 % smooth rubato, about 60 s long. Every tracker
 hears it block by block; predictions made at least 200 ms before each true beat are scored after the
-first 8 seconds (:func:`agentsim.beats.evaluation.evaluate_predictions`). The real-time factor is
+first 8 seconds (:func:`anticipators.beats.evaluation.evaluate_predictions`). The real-time factor is
 processing time over audio time; the target is at most 0.0015 for the causal tracker at every sample rate
 (22.05 and 44.1 kHz by default), with its F-measure and mean absolute error as they were. The causal
 tracker's time is that of ``track_file``, which lets the tracker record its updates
-(:meth:`~agentsim.beats.tracking.CausalBeatTracker.track`: the same updates as predicting after every
+(:meth:`~anticipators.beats.tracking.CausalBeatTracker.track`: the same updates as predicting after every
 block, without asking while they cannot have changed; a live caller asking after every block adds
 0.0001-0.0002 to the real-time factor). When aubio is
 importable (``pip install aubio``; a comparison here only, not a dependency of the package), its causal
@@ -32,8 +32,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from agentsim.beats.evaluation import evaluate_predictions, select_predictions, track_file  # noqa: E402
-from agentsim.beats.baselines import librosa_offline_beats  # noqa: E402
+from anticipators.beats.evaluation import evaluate_predictions, select_predictions, track_file  # noqa: E402
+from anticipators.beats.baselines import librosa_offline_beats  # noqa: E402
 from agentsim.music.ensemble import render_ensemble_full  # noqa: E402
 from agentsim.music.onsets import beat_onset_offset, measure_onset_offsets  # noqa: E402
 

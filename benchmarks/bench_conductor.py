@@ -36,8 +36,8 @@ PLOT_TARGET_S = 1.0
 def child(out: str) -> dict:
     started = time.perf_counter()
     cpu_started = time.process_time()
-    from agentsim.scenarios.conductor.config import load_config
-    from agentsim.scenarios.conductor.scenario import (TIMELINE_WINDOW, collect_metrics, run_tempo_figure, simulate,
+    from scenarios.conductor.config import load_config
+    from scenarios.conductor.scenario import (TIMELINE_WINDOW, collect_metrics, run_tempo_figure, simulate,
                                                        write_outputs)
 
     stages = {"imports": time.perf_counter() - started}

@@ -21,9 +21,9 @@ from agentsim.media.audio import run_track
 from agentsim.media.report import write_report
 from agentsim.media.report.browser import Chromium, open_report
 from agentsim.media.tables import gesture_rows
-from agentsim.scenarios.storytelling.markup import read_story
-from agentsim.scenarios.storytelling.run import STORIES_DIR
-from agentsim.scenarios.storytelling.telling import make_voice, tell
+from scenarios.storytelling.markup import read_story
+from scenarios.storytelling.run import STORIES_DIR
+from scenarios.storytelling.telling import make_voice, tell
 
 
 def main() -> None:

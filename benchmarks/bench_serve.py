@@ -27,7 +27,7 @@ import numpy as np
 from websockets.sync.client import connect
 
 from agentsim.live.service import Background, Service
-from agentsim.speech.espeak import EspeakBackend
+from speech_timing.espeak import EspeakBackend
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0" xmlns:bmla="http://www.asap-project.org/bmla"'
 

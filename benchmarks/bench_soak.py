@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from agentsim.anticipators.metronome import Metronome
+from anticipators.metronome import Metronome
 from agentsim.realizer import Realizer
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'

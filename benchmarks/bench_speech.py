@@ -10,11 +10,11 @@ import json
 import time
 
 from agentsim.bml.speech_text import normalize_space
-from agentsim.speech.backend import SpeechText
-from agentsim.speech.delivery import CONDITIONS
-from agentsim.speech.espeak import EspeakBackend
-from agentsim.scenarios.speech_sync import speech_sync
-from agentsim.speech.linear_model import TEXTS_DIR
+from speech_timing.backend import SpeechText
+from speech_timing.delivery import CONDITIONS
+from speech_timing.espeak import EspeakBackend
+from scenarios.speech_sync import speech_sync
+from speech_timing.linear_model import TEXTS_DIR
 
 
 def main() -> None:

@@ -3,13 +3,13 @@
 With ``--timing linear`` the planner knows only Chang's linear characters-to-time model, and the best
 strategy must predict each word onset from progress events a delivery delay and a jitter old. This
 benchmark gives the plan, beside its linear axis, per-phoneme durations of known quality
-(:attr:`agentsim.speech.plan.SpeechPlan.phoneme_durations`) and measures the best strategy's error
+(:attr:`speech_timing.plan.SpeechPlan.phoneme_durations`) and measures the best strategy's error
 under the first delivery condition of ``bench_speech_sync.py`` (delay 50 ms, jitter 30 ms, bursts):
 
 * ``linear only``: no durations (the strategy learns word durations online);
 * ``truth + N ms``: espeak-ng's own durations with Gaussian error of N ms per phoneme
-  (:func:`agentsim.speech.duration_model.noisy_durations`): a text-to-duration model of that accuracy;
-* ``calibrated phonetic model``: :class:`agentsim.speech.duration_model.PhonemeDurationModel` fitted on
+  (:func:`speech_timing.duration_model.noisy_durations`): a text-to-duration model of that accuracy;
+* ``calibrated phonetic model``: :class:`speech_timing.duration_model.PhonemeDurationModel` fitted on
   the calibration corpus (about 12,400 words) and given each word's true phonemes, so a perfect
   transcription is assumed; its per-phoneme error on the evaluation texts is reported.
 
@@ -39,12 +39,12 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from bench_speech_sync import bench_texts  # noqa: E402
 
-from agentsim.speech.delivery import CONDITIONS  # noqa: E402
-from agentsim.speech.duration_model import (PhonemeDurationModel, calibration_corpus, noisy_durations,  # noqa: E402
+from speech_timing.delivery import CONDITIONS  # noqa: E402
+from speech_timing.duration_model import (PhonemeDurationModel, calibration_corpus, noisy_durations,  # noqa: E402
                                           true_durations)
-from agentsim.speech.harness import run_sync_eval, synthesize_cached  # noqa: E402
-from agentsim.speech.linear_model import default_linear_model  # noqa: E402
-from agentsim.speech.metrics import error_summary  # noqa: E402
+from speech_timing.harness import run_sync_eval, synthesize_cached  # noqa: E402
+from speech_timing.linear_model import default_linear_model  # noqa: E402
+from speech_timing.metrics import error_summary  # noqa: E402
 
 #: Per-phoneme errors (s) of the noisy truth.
 ERRORS = (0.0, 0.0025, 0.005, 0.0075, 0.01, 0.015, 0.02)
@@ -58,7 +58,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--seeds", type=int, default=1, help="delivery seeds per text (default 1)")
     args = ap.parse_args(argv)
 
-    from agentsim.speech.espeak import EspeakBackend  # the real backend; raises if espeak-ng is missing
+    from speech_timing.espeak import EspeakBackend  # the real backend; raises if espeak-ng is missing
 
     backend = EspeakBackend()
     texts = bench_texts(args.quick)

@@ -1,8 +1,8 @@
 """Benchmark of animator-time strategies: beat gestures on content words of espeak-ng speech; prints JSON.
 
-Every strategy of :data:`agentsim.speech.animator_time.STRATEGIES` is run on the bundled texts
-(``agentsim/speech/texts/*.txt`` except ``calibration.txt``, about 420 words and two minutes each),
-under the delivery conditions A, B and C of :data:`agentsim.speech.delivery.CONDITIONS`, with the plan from espeak-ng's own timeline (``tts``) and from Chang's
+Every strategy of :data:`speech_timing.animator_time.STRATEGIES` is run on the bundled texts
+(``speech_timing/texts/*.txt`` except ``calibration.txt``, about 420 words and two minutes each),
+under the delivery conditions A, B and C of :data:`speech_timing.delivery.CONDITIONS`, with the plan from espeak-ng's own timeline (``tts``) and from Chang's
 linear characters-to-time model calibrated on ``calibration.txt`` (``linear``). Each text is
 synthesised once; all strategies see the same delivered events (same seed per text). Errors of all
 texts are pooled before the percentiles are taken; snaps and stall time are summed over the texts.
@@ -30,11 +30,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from agentsim.speech.animator_time import STRATEGIES  # noqa: E402
-from agentsim.speech.delivery import CONDITIONS, PLAYBACK  # noqa: E402
-from agentsim.speech.harness import TIMINGS, run_sync_eval  # noqa: E402
-from agentsim.speech.linear_model import TEXTS_DIR, default_linear_model  # noqa: E402
-from agentsim.speech.metrics import error_summary  # noqa: E402
+from speech_timing.animator_time import STRATEGIES  # noqa: E402
+from speech_timing.delivery import CONDITIONS, PLAYBACK  # noqa: E402
+from speech_timing.harness import TIMINGS, run_sync_eval  # noqa: E402
+from speech_timing.linear_model import TEXTS_DIR, default_linear_model  # noqa: E402
+from speech_timing.metrics import error_summary  # noqa: E402
 
 #: Acceptance targets: (timing, condition, strategy, p95 limit in ms, strict, snaps must be zero).
 TARGETS = [
@@ -61,7 +61,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--stress", action="store_true", help="aim strokes at stressed vowels")
     args = ap.parse_args(argv)
 
-    from agentsim.speech.espeak import EspeakBackend  # the real backend; raises if espeak-ng is missing
+    from speech_timing.espeak import EspeakBackend  # the real backend; raises if espeak-ng is missing
 
     backend = EspeakBackend()
     texts = bench_texts(args.quick)

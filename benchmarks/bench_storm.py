@@ -22,11 +22,11 @@ import time
 
 import numpy as np
 
-from agentsim.speech.animator_time import STRATEGIES, make_strategy
-from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.backend import SpeechText
-from agentsim.speech.delivery import true_events
-from agentsim.speech.linear_model import default_linear_model, plan_from_utterance
+from speech_timing.animator_time import STRATEGIES, make_strategy
+from speech_timing.builtin import BuiltinBackend
+from speech_timing.backend import SpeechText
+from speech_timing.delivery import true_events
+from speech_timing.linear_model import default_linear_model, plan_from_utterance
 
 WORDS = ["we", "walk", "along", "the", "river", "slowly", "today", "and", "talk", "about", "nothing"]
 
@@ -73,7 +73,7 @@ class Swarm:
     """An anticipator of ``n`` pulses that moves every one still to come by 1 us each millisecond."""
 
     def __new__(cls, n: int):
-        from agentsim.anticipators import Anticipator
+        from anticipators import Anticipator
 
         class _Swarm(Anticipator):
             def make_peg(self, sync_id):

@@ -38,7 +38,7 @@ MEMORY_TARGET_MB = 1024.0
 
 def story_source(times: int) -> str:
     """The bundled story's file with its text (everything but comments and directives) ``times`` over."""
-    from agentsim.scenarios.storytelling.run import resolve_story
+    from scenarios.storytelling.run import resolve_story
 
     lines = resolve_story(None).read_text(encoding="utf-8").splitlines()
     head = [line for line in lines if line.startswith(("#", "@"))]
@@ -51,10 +51,10 @@ def story_source(times: int) -> str:
 def child(times: int, cache_dir: str, out: str, tts: str) -> dict:
     """One run, in this process."""
     started = time.perf_counter()
-    from agentsim.scenarios.storytelling.markup import parse_story
-    from agentsim.scenarios.storytelling.run import write_outputs
-    from agentsim.scenarios.storytelling.telling import make_voice, tell
-    from agentsim.speech.backend import SpeechText
+    from scenarios.storytelling.markup import parse_story
+    from scenarios.storytelling.run import write_outputs
+    from scenarios.storytelling.telling import make_voice, tell
+    from speech_timing.backend import SpeechText
 
     stages: dict[str, float] = {"imports": time.perf_counter() - started}
     t = time.perf_counter()

@@ -165,7 +165,7 @@ def losses(realizer, cut_short: bool) -> list[str]:
 
 def run_case(case: int, seed: int, docs: list[str]) -> dict:
     """One case: two mutated documents; returns what happened."""
-    from agentsim.anticipators.metronome import Metronome
+    from anticipators.metronome import Metronome
     from agentsim.engines.speech import SpeechConfig
     from agentsim.realizer import Realizer
 

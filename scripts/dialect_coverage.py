@@ -16,7 +16,7 @@ from pathlib import Path
 
 from agentsim.bml.dialects import find_blocks, fold_case, without_doctype
 from agentsim.bml.tree import read_forest
-from agentsim.core.errors import BMLError
+from agentsim.errors import BMLError
 from agentsim.realizer import Realizer
 
 SUFFIXES = {".xml", ".bml"}

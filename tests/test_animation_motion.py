@@ -135,7 +135,7 @@ def test_gestures_without_a_mode_take_the_free_hand():
 
 
 def test_conducting_4_4_follows_the_metronome_through_a_tempo_change():
-    from agentsim.anticipators.metronome import Metronome
+    from anticipators.metronome import Metronome
 
     metronome = Metronome("metronome", bpm=100, start=1.0)
     gestures = "".join(f'<gesture id="c{k}" lexeme="CONDUCT_4_4" mode="RIGHT_HAND" '

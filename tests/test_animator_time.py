@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from agentsim.core.errors import AgentsimError
-from agentsim.speech.animator_time import (
+from agentsim.errors import AgentsimError
+from speech_timing.animator_time import (
     STRATEGIES,
     AnimatorTime,
     BestTime,
@@ -27,11 +27,11 @@ from agentsim.speech.animator_time import (
     lower_envelope_line,
     make_strategy,
 )
-from agentsim.speech.backend import SpeechText
-from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.delivery import CONDITIONS, DeliveryModel, ProgressEvent, deliver, true_events
-from agentsim.speech.harness import run_sync_eval, stroke_targets
-from agentsim.speech.linear_model import (
+from speech_timing.backend import SpeechText
+from speech_timing.builtin import BuiltinBackend
+from speech_timing.delivery import CONDITIONS, DeliveryModel, ProgressEvent, deliver, true_events
+from speech_timing.harness import run_sync_eval, stroke_targets
+from speech_timing.linear_model import (
     LinearModel,
     calibrate,
     estimate_phonemes,

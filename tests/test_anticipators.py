@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from agentsim.core.errors import AgentsimError
+from agentsim.errors import AgentsimError
 from agentsim.realizer import Realizer
-from agentsim.anticipators import registry
-from agentsim.anticipators.tap import TapTempo, read_taps
+from anticipators import registry
+from anticipators.tap import TapTempo, read_taps
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 

@@ -10,9 +10,9 @@ import sys
 import numpy as np
 import pytest
 
-from agentsim.core.errors import AgentsimError
+from agentsim.errors import AgentsimError
 from agentsim.realizer import Realizer
-from agentsim.anticipators.audio import AudioBeatAnticipator, DeviceSource
+from anticipators.audio import AudioBeatAnticipator, DeviceSource
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 

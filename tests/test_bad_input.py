@@ -208,7 +208,7 @@ def mutated(draw):
 @settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(docs=st.lists(mutated(), min_size=1, max_size=3), gap=st.floats(0, 3))
 def test_mutated_examples_never_raise_or_hang(docs, gap):
-    from agentsim.anticipators.metronome import Metronome
+    from anticipators.metronome import Metronome
 
     with deadline(20):
         r = realize(*docs, at=[i * gap for i in range(len(docs))], anticipators=[Metronome(bpm=100)])

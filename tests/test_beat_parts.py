@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agentsim.beats.envelope import ArrayEnvelope, SpectralFluxEnvelope
-from agentsim.beats.follower import BeatFollower
-from agentsim.beats.onsets import OnsetPicker, waveform_onset
-from agentsim.beats.phase import COMB_DECAY, comb_phase, comb_score
-from agentsim.beats.tempo import TempoEstimator, estimate_tempo
-from agentsim.beats.tracking import CausalBeatTracker
+from anticipators.beats.envelope import ArrayEnvelope, SpectralFluxEnvelope
+from anticipators.beats.follower import BeatFollower
+from anticipators.beats.onsets import OnsetPicker, waveform_onset
+from anticipators.beats.phase import COMB_DECAY, comb_phase, comb_score
+from anticipators.beats.tempo import TempoEstimator, estimate_tempo
+from anticipators.beats.tracking import CausalBeatTracker
 
 FPS = 100.0  # frames per second of the hand-made envelopes
 
@@ -232,20 +232,21 @@ def test_tracker_checks_and_uses_its_envelope_source():
 
 # ------------------------------------------------------------------------------------------ layout
 
-BEATS = Path(__file__).resolve().parent.parent / "agentsim" / "beats"
+BEATS = Path(__file__).resolve().parent.parent / "anticipators" / "beats"
+assert sorted(BEATS.glob("*.py")), f"no beat-tracking modules in {BEATS}"
 
 
 @pytest.mark.parametrize("path", sorted(BEATS.glob("*.py")), ids=lambda p: p.name)
 def test_beats_modules_use_only_the_core_and_each_others_public_names(path):
     tree = ast.parse(path.read_text(encoding="utf-8"))
     for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("agentsim"):
-            assert node.module.startswith(("agentsim.core", "agentsim.beats")), node.module
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith(("agentsim", "anticipators")):
+            assert node.module.startswith(("agentsim.core", "agentsim.errors", "anticipators.beats")), node.module
             assert not any(a.name.startswith("_") for a in node.names), f"private import from {node.module}"
         elif isinstance(node, ast.Import):
             for alias in node.names:
-                if alias.name.startswith("agentsim"):
-                    assert alias.name.startswith(("agentsim.core", "agentsim.beats")), alias.name
+                if alias.name.startswith(("agentsim", "anticipators")):
+                    assert alias.name.startswith(("agentsim.core", "agentsim.errors", "anticipators.beats")), alias.name
         elif isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__"):
             # private attributes only of the object itself
             assert isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"), (
@@ -259,7 +260,7 @@ def test_mel_filters_are_librosas():
 
     import librosa
 
-    from agentsim.beats.envelope import mel_filters
+    from anticipators.beats.envelope import mel_filters
 
     for sr in (8000, 22050, 44100, 48000):
         n_fft = int(2 ** round(math.log2(0.03 * sr)))
@@ -275,7 +276,7 @@ def test_beat_f_measure_is_mir_evals():
 
     import mir_eval
 
-    from agentsim.beats.evaluation import beat_f_measure
+    from anticipators.beats.evaluation import beat_f_measure
 
     rng = np.random.default_rng(0)
     for trial in range(600):

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy.signal import resample_poly
 
-from agentsim.beats.evaluation import evaluate_predictions, select_predictions, track_and_evaluate, track_file
-from agentsim.beats.baselines import IOIBaselineTracker
-from agentsim.beats.envelope import SpectralFluxEnvelope
-from agentsim.beats.tracking import CausalBeatTracker, make_tracker
+from anticipators.beats.evaluation import evaluate_predictions, select_predictions, track_and_evaluate, track_file
+from anticipators.beats.baselines import IOIBaselineTracker
+from anticipators.beats.envelope import SpectralFluxEnvelope
+from anticipators.beats.tracking import CausalBeatTracker, make_tracker
 from agentsim.music.ensemble import render_ensemble_full
 from agentsim.music.events import SynthEvent
 from agentsim.music.rendering import render_events

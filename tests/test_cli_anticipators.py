@@ -10,8 +10,8 @@ import sys
 import pytest
 
 from agentsim import __version__
-from agentsim.anticipators import registry
-from agentsim.core.errors import AgentsimError
+from anticipators import registry
+from agentsim.errors import AgentsimError
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 
@@ -30,7 +30,7 @@ def test_the_list_shows_each_anticipator_with_its_typed_parameters():
     proc = agentsim("anticipators", "list")
     assert proc.returncode == 0, proc.stderr
     lines = dict(line.split("\t", 1) for line in proc.stdout.splitlines())
-    assert lines["metronome"] == "agentsim.anticipators.metronome:Metronome\tbpm: float = 120.0, start: float = 0.0"
+    assert lines["metronome"] == "anticipators.metronome:Metronome\tbpm: float = 120.0, start: float = 0.0"
     assert "window: int = 8" in lines["tap"] and "keyboard: bool = False" in lines["tap"]
 
 

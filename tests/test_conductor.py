@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 import soundfile
 
-from agentsim.core.errors import AgentsimError
+from agentsim.errors import AgentsimError
 from agentsim.cli import build_parser
-from agentsim.scenarios.conductor import run as conductor_cli
-from agentsim.scenarios.conductor.config import ModelParams, config_from_dict, load_config, parse_meter
-from agentsim.scenarios.conductor.ensemble import Timekeeper
-from agentsim.scenarios.conductor.metrics import beats_to_recover, local_tempo
-from agentsim.scenarios.conductor.planning import ResponseEstimator
-from agentsim.scenarios.conductor.scenario import TIMELINE_WINDOW, collect_metrics, simulate
+from scenarios.conductor import run as conductor_cli
+from scenarios.conductor.config import ModelParams, config_from_dict, load_config, parse_meter
+from scenarios.conductor.ensemble import Timekeeper
+from scenarios.conductor.metrics import beats_to_recover, local_tempo
+from scenarios.conductor.planning import ResponseEstimator
+from scenarios.conductor.scenario import TIMELINE_WINDOW, collect_metrics, simulate
 
 QUIET = dict(timekeeper_sd=0.0, motor_sd=0.0, ictus_sd=0.0, drag=0.0)
 

@@ -7,7 +7,7 @@ import simpy
 
 from agentsim.bml.parser import parse_ref
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 from agentsim.core.pegboard import PegBoard, TimePeg
 from agentsim.core.solver import BlockSolver
 from agentsim.core.timed import BlockRun

@@ -1,4 +1,4 @@
-"""Tests of progress events and the delivery channel (agentsim.speech.delivery)."""
+"""Tests of progress events and the delivery channel (speech_timing.delivery)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import simpy
 
-from agentsim.speech.backend import SpeechText
-from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.delivery import (
+from speech_timing.backend import SpeechText
+from speech_timing.builtin import BuiltinBackend
+from speech_timing.delivery import (
     DeliveryModel,
     ProgressEvent,
     deliver,

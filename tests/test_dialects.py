@@ -9,7 +9,7 @@ import pytest
 
 from agentsim.bml.parser import Refused, parse_document
 from agentsim.realizer import Realizer
-from agentsim.speech.espeak import EspeakBackend
+from speech_timing.espeak import EspeakBackend
 
 CORPUS = Path(__file__).resolve().parent / "dialects"
 EXACT = 1e-9

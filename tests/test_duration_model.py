@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agentsim.speech.backend import SpeechText
-from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.delivery import CONDITIONS, DeliveryModel
-from agentsim.speech.duration_model import (PhonemeDurationModel, calibration_corpus, for_plan, noisy_durations,
+from speech_timing.backend import SpeechText
+from speech_timing.builtin import BuiltinBackend
+from speech_timing.delivery import CONDITIONS, DeliveryModel
+from speech_timing.duration_model import (PhonemeDurationModel, calibration_corpus, for_plan, noisy_durations,
                                           true_durations)
-from agentsim.speech.harness import run_sync_eval
-from agentsim.speech.linear_model import calibrate, plan_from_linear
-from agentsim.speech.plan import SpeechPlan
+from speech_timing.harness import run_sync_eval
+from speech_timing.linear_model import calibrate, plan_from_linear
+from speech_timing.plan import SpeechPlan
 
 TEXT = ("The keeper climbed the spiral stair every evening, counting the worn steps without meaning to. "
         "At the top he cleaned the great lens, checked the oil, and wound the gears that turned the light. "

@@ -9,7 +9,7 @@ import pytest
 from agentsim.animation.units import BEAT, NOD, motion_state
 from agentsim.core.clock import make_environment
 from agentsim.core.engine import stretch_times
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 from agentsim.realizer import Realizer
 from helpers import Result, realize
 

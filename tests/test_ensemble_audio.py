@@ -8,7 +8,7 @@ import threading
 import numpy as np
 import pytest
 
-from agentsim.core.errors import AgentsimError, Unavailable
+from agentsim.errors import AgentsimError, Unavailable
 from agentsim.music import rendering
 from agentsim.music.ensemble import read_beats, render_ensemble, render_ensemble_full, write_beats
 from agentsim.music.events import score_events

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agentsim.speech.backend import SpeechText, TTSBackend, Utterance
-from agentsim.core.errors import SpeechBackendUnavailable
-from agentsim.speech.espeak import INSTALL_HINT, EspeakBackend, _load_library
+from speech_timing.backend import SpeechText, TTSBackend, Utterance
+from agentsim.errors import SpeechBackendUnavailable
+from speech_timing.espeak import INSTALL_HINT, EspeakBackend, _load_library
 
 # Capitalised words after full stops: espeak makes a pause of about 300 ms before each.
 ISOLATED_WORDS = ("Apple Banana Cherry Dog Egg Fish Garden Hello Island Jump Kite Lemon Mango Nose Orange "
@@ -271,8 +271,8 @@ def test_repeated_synthesis_gives_the_same_timeline(backend):
 
 FRESH_PROCESS_SCRIPT = """
 import hashlib, sys
-from agentsim.speech.backend import SpeechText
-from agentsim.speech.espeak import EspeakBackend
+from speech_timing.backend import SpeechText
+from speech_timing.espeak import EspeakBackend
 u = EspeakBackend().synthesize(SpeechText(sys.argv[1], ((0, "m"),)))
 print(hashlib.sha256(u.audio.tobytes()).hexdigest(), repr((u.words, u.phonemes, u.marks, u.sentences)))
 """
@@ -342,7 +342,7 @@ def test_invalid_arguments(backend):
 def test_stress_marked_clause_by_clause_is_that_of_the_whole_text(backend, monkeypatch):
     """The stressed vowels found by aligning each clause with its transcription are those that aligning the
     whole text at once finds (which costs the square of a long story's length)."""
-    from agentsim.speech import espeak
+    from speech_timing import espeak
 
     text = (PARAGRAPH + " “Yes!” said the cat; and then — well. Mr. Smith paid $1,000.50 on 3/4/2021, didn't he? "
             "In the end, of a sort: it's (quite) 'odd'... isn't it?!")

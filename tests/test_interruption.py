@@ -7,10 +7,10 @@ import pytest
 
 from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer
-from agentsim.scenarios.speech_sync import beats_on_content_words
-from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.delivery import CONDITIONS
-from agentsim.speech.linear_model import TEXTS_DIR
+from scenarios.speech_sync import beats_on_content_words
+from speech_timing.builtin import BuiltinBackend
+from speech_timing.delivery import CONDITIONS
+from speech_timing.linear_model import TEXTS_DIR
 
 TEXT = (TEXTS_DIR / "orchard.txt").read_text()[:900]
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0" xmlns:bmla="http://www.asap-project.org/bmla"'

@@ -1,15 +1,19 @@
-"""The package layers: every module's imports point down or sideways, never up, and never in a circle.
+"""The layers of the four packages: every module's imports point down or sideways, never up, and never in a
+circle.
 
 The layers, lowest first (the README's "Layout" says the same in prose):
 
-* core: the clock, errors, PegBoard, block model, plan, solver, scheduler, feedback, anticipator
-  interface and recording;
-* libraries that know nothing of the realizer: reading BML, speech, beats, music, animation;
-* the realizer's parts: engines and anticipators;
-* the realizer, which wires them together, and the live realizer (``agentsim serve``), which runs it on
-  the real-time clock behind a WebSocket endpoint;
-* scenarios, which use the realizer;
-* the command line.
+* the error root: ``agentsim.errors`` (and the ``agentsim`` package itself, which holds only its version),
+  which every package can reach;
+* ``speech_timing``: text-to-speech backends with word and phoneme timing, event delivery, the linear
+  model, animator-time strategies, speech metrics;
+* the realizer (``agentsim``), itself in layers: its core (the clock, PegBoard, block model, plan, solver,
+  scheduler, feedback, the anticipator interface, the recording); libraries that know nothing of the
+  realizer (reading BML, music rendering, animation); engines and media; the realizer that wires them;
+* ``anticipators``: the beat tracker (``anticipators.beats``), then the metronome, tap tempo, audio beat
+  anticipator, plugin registry and template;
+* ``scenarios``: the conductor, the storyteller, the speech-sync measurement;
+* on top of everything: the command line (``agentsim.cli``) and the live service (``agentsim.live``).
 
 Every import statement counts, including those inside functions and under ``TYPE_CHECKING``: an
 import that is only deferred is still a dependency.
@@ -23,15 +27,20 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGE = ROOT / "agentsim"
+#: The four top-level packages of the design card.
+PACKAGES = ("agentsim", "speech_timing", "anticipators", "scenarios")
 
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
-    ("core", ("agentsim", "agentsim.core", "agentsim.examples")),
-    ("libraries", ("agentsim.bml", "agentsim.speech", "agentsim.beats", "agentsim.music", "agentsim.animation")),
-    ("realizer parts", ("agentsim.engines", "agentsim.anticipators", "agentsim.media")),
-    ("realizer", ("agentsim.realizer", "agentsim.live")),
-    ("scenarios", ("agentsim.scenarios",)),
-    ("command line", ("agentsim.cli", "agentsim.__main__")),
+    ("error root", ("agentsim", "agentsim.errors")),
+    ("speech timing", ("speech_timing",)),
+    ("realizer core", ("agentsim.core", "agentsim.examples", "agentsim.anticipators")),
+    ("realizer libraries", ("agentsim.bml", "agentsim.music", "agentsim.animation")),
+    ("realizer parts", ("agentsim.engines", "agentsim.media")),
+    ("realizer", ("agentsim.realizer",)),
+    ("beat tracking", ("anticipators.beats",)),
+    ("anticipators", ("anticipators",)),
+    ("scenarios", ("scenarios",)),
+    ("command line and live service", ("agentsim.cli", "agentsim.live", "agentsim.__main__")),
 ]
 
 
@@ -42,7 +51,10 @@ def module_name(path: Path) -> str:
     return ".".join(parts)
 
 
-MODULES = {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+#: Every module of the four packages (files in folders that are not Python names, such as the example plugin
+#: ``agentsim/examples/plugins/agentsim-countin``, are programs shipped for users to copy, not modules).
+MODULES = {module_name(p): p for package in PACKAGES for p in sorted((ROOT / package).rglob("*.py"))
+           if all(part.isidentifier() for part in p.relative_to(ROOT).parent.parts)}
 
 
 def unit_of(module: str) -> str:
@@ -93,14 +105,35 @@ def test_every_module_has_a_layer():
     assert [m for m in MODULES if not unit_of(m)] == []
 
 
-def test_no_import_points_up():
+def upward_imports(graph: dict[str, set[str]]) -> list[str]:
+    """Every import in ``graph`` that points to a higher layer."""
     upward = []
-    for module, targets in GRAPH.items():
+    for module, targets in graph.items():
         for target in targets:
             source_unit, target_unit = unit_of(module), unit_of(target)
             if RANK[target_unit] > RANK[source_unit]:
                 upward.append(f"{module} ({source_unit}) imports {target} ({target_unit})")
-    assert upward == []
+    return upward
+
+
+def test_no_import_points_up():
+    assert upward_imports(GRAPH) == []
+
+
+@pytest.mark.parametrize("module, target", [
+    ("speech_timing.backend", "agentsim.core.block"),        # speech timing knows nothing of the realizer
+    ("agentsim.errors", "speech_timing.backend"),            # the error root imports nothing
+    ("agentsim.core.scheduler", "anticipators.audio"),       # the realizer knows only the interface
+    ("agentsim.realizer", "anticipators.registry"),
+    ("agentsim.media.report.data", "anticipators.beats.tracking"),
+    ("anticipators.beats.tracking", "anticipators.audio"),   # the tracker knows nothing of the anticipator
+    ("anticipators.audio", "scenarios.conductor.scenario"),
+    ("scenarios.storytelling.run", "agentsim.cli.options"),  # the command line sits on top
+    ("scenarios.conductor.hearing", "agentsim.live.sound"),
+])
+def test_an_import_against_the_layers_fails(module, target):
+    assert upward_imports({module: {target}}) != []
+    assert upward_imports({target: {module}}) == []
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -163,7 +196,7 @@ def test_the_checks_catch_what_they_are_meant_to():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert unit_of("agentsim.core.scheduler") == "agentsim.core"
     assert unit_of("agentsim.cli.speech") == "agentsim.cli"
-    assert RANK[unit_of("agentsim.engines.speech")] > RANK[unit_of("agentsim.speech.backend")]
+    assert RANK[unit_of("agentsim.engines.speech")] > RANK[unit_of("speech_timing.backend")]
     assert "agentsim.core.pegboard" in GRAPH["agentsim.core.timed"]
 
 
@@ -199,7 +232,7 @@ def test_no_module_touches_another_modules_private_names():
     for module, tree in TREES.items():
         own = _private_names_defined(tree)
         for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("agentsim"):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] in PACKAGES:
                 found += [f"{module}: from {node.module} import {a.name}" for a in node.names
                           if a.name.startswith("_") and not a.name.startswith("__")]
             elif (isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")

@@ -10,9 +10,9 @@ import time
 import numpy as np
 import pytest
 
-from agentsim.anticipators.audio import AudioBeatAnticipator, DeviceSource
+from anticipators.audio import AudioBeatAnticipator, DeviceSource
 from agentsim.core.clock import make_environment
-from agentsim.core.errors import Unavailable
+from agentsim.errors import Unavailable
 from agentsim.core.pegboard import PegBoard
 
 

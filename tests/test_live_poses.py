@@ -23,7 +23,7 @@ from agentsim.live.poses import LivePoses
 from agentsim.live.service import Background, Service
 from agentsim.media.report.data import FACE, body_points, point_names
 from agentsim.realizer import Realizer
-from agentsim.speech.builtin import BuiltinBackend
+from speech_timing.builtin import BuiltinBackend
 from helpers import whole_run_points
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from agentsim.core.errors import Unavailable
+from agentsim.errors import Unavailable
 from agentsim.live.sound import (ClockMap, DacTracker, StreamClock, Steadiness, find_onset, open_device,
                                  render_block)
 from agentsim.media.audio import FADE, Source, mix

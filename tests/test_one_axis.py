@@ -16,8 +16,8 @@ from agentsim.engines.speech import SpeechConfig
 from agentsim.media.audio import run_track
 from agentsim.media.files import write_wav
 from agentsim.realizer import Realizer
-from agentsim.speech.delivery import CONDITIONS
-from agentsim.speech.espeak import EspeakBackend
+from speech_timing.delivery import CONDITIONS
+from speech_timing.espeak import EspeakBackend
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 # words after pauses, so that their onsets stand out of silence in the audio

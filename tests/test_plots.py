@@ -17,7 +17,7 @@ from matplotlib.text import Text
 from agentsim.animation.timeline import (heard_words, layout_words, overview_figure, plot_timelines, run_duration,
                                          time_windows, timeline_figure, window_path)
 from agentsim.realizer import Realizer
-from agentsim.scenarios.conductor.metrics import (asynchrony, asynchrony_series, beats_to_recover, local_tempo,
+from scenarios.conductor.metrics import (asynchrony, asynchrony_series, beats_to_recover, local_tempo,
                                                   recovery_phrase, tempo_figure)
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
@@ -245,8 +245,8 @@ def test_a_run_that_never_recovers_says_so_and_has_no_marker():
 
 
 def test_the_conductors_tempo_figure_of_a_run_that_falls_apart():
-    from agentsim.scenarios.conductor.config import config_from_dict
-    from agentsim.scenarios.conductor.scenario import collect_metrics, run_tempo_figure, simulate
+    from scenarios.conductor.config import config_from_dict
+    from scenarios.conductor.scenario import collect_metrics, run_tempo_figure, simulate
 
     from helpers import FALLS_APART
 

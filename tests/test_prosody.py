@@ -14,8 +14,8 @@ import pytest
 
 from agentsim.bml.parser import parse_bml
 from agentsim.realizer import Realizer
-from agentsim.speech.backend import Prosody, SpeechText, check_prosody, parse_time
-from agentsim.speech.builtin import BuiltinBackend, rate_factor
+from speech_timing.backend import Prosody, SpeechText, check_prosody, parse_time
+from speech_timing.builtin import BuiltinBackend, rate_factor
 
 TEXT = "The old man walked slowly down the quiet street towards the harbour."
 #          0   4   8   12     19     26   31  35    41     48      56  60
@@ -197,7 +197,7 @@ def test_builtin_sentences_start_after_a_break(builtin):
 
 @pytest.fixture(scope="module")
 def espeak():
-    from agentsim.speech.espeak import EspeakBackend
+    from speech_timing.espeak import EspeakBackend
 
     return EspeakBackend()
 

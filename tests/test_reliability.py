@@ -14,13 +14,13 @@ from pathlib import Path
 
 import pytest
 
-from agentsim.anticipators.metronome import Metronome
+from anticipators.metronome import Metronome
 from agentsim.bml.parser import MAX_BEHAVIOURS, MAX_DOCUMENT, guess_block_id, parse_document
 from agentsim.bml.tree import MAX_DEPTH
 from agentsim.core.block import Block
 from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer
-from agentsim.speech.animator_time import STRATEGIES
+from speech_timing.animator_time import STRATEGIES
 
 from helpers import realize
 
@@ -108,7 +108,7 @@ def test_an_appended_block_tied_inside_itself_after_a_speech_gets_finite_times(s
 
 def test_a_timing_that_is_not_a_number_is_refused_by_the_planner():
     from agentsim.core.engine import Planner
-    from agentsim.core.errors import ScheduleError
+    from agentsim.errors import ScheduleError
 
     with pytest.raises(ScheduleError, match="not a number"):
         Planner().check_times(None, [0.0, 1.0], [0.0, float("nan")])
@@ -261,7 +261,7 @@ def test_many_free_behaviours_end_one_by_one_without_rescanning_the_block():
 
 
 def test_marks_are_placed_at_the_word_after_them():
-    from agentsim.speech.backend import SpeechText, Word, mark_times_from_words
+    from speech_timing.backend import SpeechText, Word, mark_times_from_words
 
     words = [Word(i, f"w{i}", 0.5 * i, 0.5 * i + 0.4, 3 * i, 3 * i + 2) for i in range(4)]
     speech = SpeechText("w0 w1 w2 w3", ((0, "a"), (4, "b"), (6, "c"), (11, "d")))
@@ -272,7 +272,7 @@ def test_marks_are_placed_at_the_word_after_them():
 
 
 def test_a_path_crossing_is_found_by_binary_search_with_the_same_times():
-    from agentsim.speech.animator_time import Path
+    from speech_timing.animator_time import Path
 
     path = Path(0.0, 0.0, 1.0)
     for k in range(1, 2000):

@@ -23,7 +23,7 @@ from agentsim.media.report import data as report_data
 from agentsim.media.report import page as report_page
 from agentsim.media.tables import gesture_rows
 from agentsim.realizer import Realizer
-from agentsim.speech.builtin import BuiltinBackend
+from speech_timing.builtin import BuiltinBackend
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 BML = (f'<bml {NS} id="b1"><speech id="s1"><text>The <sync id="w1"/>lighthouse keeper walked '

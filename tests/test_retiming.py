@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from agentsim.realizer import Realizer
-from agentsim.anticipators.metronome import Metronome
+from anticipators.metronome import Metronome
 
 BEATS = """<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="bml1">
   <gesture id="g2" lexeme="BEAT" stroke="anticipators:metronome:beat2"/>

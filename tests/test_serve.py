@@ -13,7 +13,7 @@ import pytest
 from websockets.sync.client import connect
 
 from agentsim.live.service import Background, Service
-from agentsim.speech.builtin import BuiltinBackend
+from speech_timing.builtin import BuiltinBackend
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0" xmlns:bmla="http://www.asap-project.org/bmla"'
 LATENESS_SPREAD = 0.020

@@ -1,4 +1,4 @@
-"""Tests of the synchrony and smoothness metrics (agentsim.speech.metrics) on hand-made arrays."""
+"""Tests of the synchrony and smoothness metrics (speech_timing.metrics) on hand-made arrays."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from agentsim.speech.metrics import (
+from speech_timing.metrics import (
     error_summary,
     evaluate,
     frame_rates,

@@ -11,10 +11,10 @@ from agentsim.bml.parser import parse_bml
 from agentsim.core.scheduler import FRAME
 from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer
-from agentsim.speech.animator_time import make_strategy
-from agentsim.speech.backend import SpeechText
-from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.delivery import DeliveryModel
+from speech_timing.animator_time import make_strategy
+from speech_timing.backend import SpeechText
+from speech_timing.builtin import BuiltinBackend
+from speech_timing.delivery import DeliveryModel
 
 TEXT = ("The quick <sync id='w2'/>brown fox <sync id='w4'/>jumps over the <sync id='w7'/>lazy dog, "
         "and then <sync id='w10'/>runs home.")

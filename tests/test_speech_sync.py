@@ -13,11 +13,11 @@ import pytest
 from agentsim.bml.speech_text import normalize_space
 from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer
-from agentsim.speech.animator_time import make_strategy
-from agentsim.speech.builtin import BuiltinBackend
-from agentsim.speech.delivery import CONDITIONS
-from agentsim.scenarios.speech_sync import beats_on_content_words, speech_sync
-from agentsim.speech.linear_model import TEXTS_DIR
+from speech_timing.animator_time import make_strategy
+from speech_timing.builtin import BuiltinBackend
+from speech_timing.delivery import CONDITIONS
+from scenarios.speech_sync import beats_on_content_words, speech_sync
+from speech_timing.linear_model import TEXTS_DIR
 
 TEXT = normalize_space((TEXTS_DIR / "orchard.txt").read_text())[0]
 CONDITION_A = CONDITIONS["A"]
@@ -80,7 +80,7 @@ def test_linear_timing_plans_from_the_model_and_still_syncs_without_snaps():
 
 
 def test_espeak_speech_through_the_realizer():
-    from agentsim.speech.espeak import EspeakBackend
+    from speech_timing.espeak import EspeakBackend
 
     result = speech_sync(TEXT[:1200], EspeakBackend(), "best", CONDITION_A, seed=1)
     assert result["gestures"] > 50 and result["missed"] == 0

@@ -11,16 +11,16 @@ import numpy as np
 import pytest
 
 from agentsim.bml.parser import parse_bml
-from agentsim.core.errors import AgentsimError
+from agentsim.errors import AgentsimError
 from agentsim.realizer import Realizer
 from agentsim.cli import build_parser
 from agentsim.cli import main as cli_main
-from agentsim.scenarios.storytelling import run as story_run
-from agentsim.scenarios.storytelling.markup import StoryError, compile_bml, parse_story, read_story
-from agentsim.scenarios.storytelling.praat import export_textgrid, import_textgrid
-from agentsim.scenarios.storytelling.telling import DEFAULT_DELIVERY, make_voice, stress_offsets, syllable_times, tell
-from agentsim.scenarios.storytelling.voice import CachedBackend, PhonemeMarks, mark_event, place_mark
-from agentsim.speech.backend import Phoneme, SpeechText, Utterance, Word
+from scenarios.storytelling import run as story_run
+from scenarios.storytelling.markup import StoryError, compile_bml, parse_story, read_story
+from scenarios.storytelling.praat import export_textgrid, import_textgrid
+from scenarios.storytelling.telling import DEFAULT_DELIVERY, make_voice, stress_offsets, syllable_times, tell
+from scenarios.storytelling.voice import CachedBackend, PhonemeMarks, mark_event, place_mark
+from speech_timing.backend import Phoneme, SpeechText, Utterance, Word
 
 NS = "http://www.bml-initiative.org/bml/bml-1.0"
 SHORT = "the_north_wind_and_the_sun"
@@ -204,7 +204,7 @@ def test_phoneme_marks_and_the_cache(tmp_path):
     assert place_mark(timeline, 12, "w3.ph2") == 1.00
     assert place_mark(timeline, 11, "w3.stress.d250") == pytest.approx(1.07)
     assert place_mark(timeline, 18, "x.stress") == 1.30  # no stressed vowel: the word's onset
-    from agentsim.speech.builtin import BuiltinBackend
+    from speech_timing.builtin import BuiltinBackend
 
     first = CachedBackend(BuiltinBackend(), cache_dir=tmp_path)
     speech = SpeechText("Tell me a story.", ((8, "m1"),))
@@ -221,9 +221,9 @@ def test_the_cached_audio_is_read_back_as_it_was_said(tmp_path, monkeypatch):
     a time); a file cut short is not used: the text is synthesised again."""
     from dataclasses import replace
 
-    from agentsim.scenarios.storytelling import voice as voice_module
-    from agentsim.speech.builtin import BuiltinBackend
-    from agentsim.speech.samples import PcmFile
+    from scenarios.storytelling import voice as voice_module
+    from speech_timing.builtin import BuiltinBackend
+    from speech_timing.samples import PcmFile
 
     class Sounding(BuiltinBackend):
         def synthesize(self, speech):
@@ -343,7 +343,7 @@ def test_the_command_writes_every_output_and_repeats_itself(tmp_path, cache_dir,
     # --json that table goes to stderr and stdout is compare.json alone.
     assert story_run.main(_args(second, cache_dir, compare=True, json=True)) == 0
     printed = capsys.readouterr()
-    from agentsim.speech.animator_time import STRATEGIES
+    from speech_timing.animator_time import STRATEGIES
 
     assert all(f"\n{name} " in printed.err for name in STRATEGIES)
     assert json.loads(printed.out) == json.loads((second / "compare.json").read_text())

@@ -62,7 +62,7 @@ class TimeSource:
     @classmethod
     def from_function(cls, function: Callable[[float], float]) -> "TimeSource":
         """Driver time from any non-decreasing function of clock time, such as the ``position`` method of
-        an animator time strategy in :mod:`agentsim.speech.animator_time` after its events are in."""
+        an animator time strategy in :mod:`speech_timing.animator_time` after its events are in."""
         source = cls()
         source._function = function
         source.clock = np.zeros(0)  # not the clock

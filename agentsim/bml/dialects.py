@@ -25,7 +25,7 @@ from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_
 from agentsim.animation.units import motion_unit
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour
 from agentsim.core.engine import stretch_times
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 
 #: The namespace of the BML drafts before 1.0 (Greta, SEMAINE, the Vienna draft), read as BML 1.0.
 DRAFT_NAMESPACES = ("http://www.mindmakers.org/projects/BML", "http://www.mindmakers.org/projects/bml",

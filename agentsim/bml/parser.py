@@ -4,7 +4,7 @@
 strictly, one BML 1.0 block; leniently (the default), also BML as other realizers write it (see
 :mod:`agentsim.bml.dialects`), several blocks to a document, each adaptation said in one
 ``NONSTANDARD_BML`` warning of its block. Problems that spoil a whole block refuse it
-(:class:`~agentsim.core.errors.BMLError`); problems with one behaviour or constraint become
+(:class:`~agentsim.errors.BMLError`); problems with one behaviour or constraint become
 :class:`~agentsim.core.block.ParseWarning` entries and the rest of the block is kept.
 """
 
@@ -24,7 +24,7 @@ from agentsim.bml.tree import Node, encode, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
                                      EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
-from agentsim.core.errors import BMLError
+from agentsim.errors import BMLError
 from agentsim.core.gcpause import paused_collection
 
 #: Largest time or offset (seconds) accepted in a reference; beyond it a behaviour is refused.

@@ -15,7 +15,7 @@ import xml.sax.handler
 from defusedxml.common import DefusedXmlException
 from defusedxml.expatreader import create_parser
 
-from agentsim.core.errors import BMLError
+from agentsim.errors import BMLError
 
 #: Deepest nesting of elements read (BML nests a few levels; deeper documents are refused, not recursed into).
 MAX_DEPTH = 256

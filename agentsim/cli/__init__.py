@@ -21,7 +21,7 @@ import argparse
 import os
 import sys
 
-from agentsim.core.errors import AgentsimError
+from agentsim.errors import AgentsimError
 
 #: Exit status of an error that is a bug (the message asks for a report).
 INTERNAL_ERROR = 70

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from agentsim.core.errors import AgentsimError
+from agentsim.errors import AgentsimError
 
 
 def add_parsers(commands) -> None:
@@ -33,8 +33,8 @@ def add_parsers(commands) -> None:
 
 
 def track_beats(args: argparse.Namespace) -> int:
-    from agentsim.beats.evaluation import evaluate_predictions, track_file
-    from agentsim.beats.tracking import TRACKER_NAMES
+    from anticipators.beats.evaluation import evaluate_predictions, track_file
+    from anticipators.beats.tracking import TRACKER_NAMES
 
     if args.tracker not in TRACKER_NAMES:
         raise AgentsimError(f"unknown tracker {args.tracker!r}: choose from {', '.join(TRACKER_NAMES)}")
@@ -43,7 +43,7 @@ def track_beats(args: argparse.Namespace) -> int:
     else:
         if not args.audio:
             raise AgentsimError("give an AUDIO file, or --input DEVICE to listen live")
-        from agentsim.anticipators.audio import read_audio
+        from anticipators.audio import read_audio
 
         audio, sample_rate = read_audio(args.audio)
         run = track_file(audio, args.tracker, args.block, sample_rate=sample_rate)
@@ -78,7 +78,7 @@ def listen(args: argparse.Namespace) -> dict:
 
     from agentsim.core.clock import make_environment
     from agentsim.core.pegboard import PegBoard
-    from agentsim.anticipators.audio import AudioBeatAnticipator, DeviceSource
+    from anticipators.audio import AudioBeatAnticipator, DeviceSource
 
     device = None if args.input == "default" else int(args.input) if args.input.isdigit() else args.input
     source = DeviceSource(device, args.sample_rate)

@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 import math
 
-from agentsim.core.errors import AgentsimError, UsageError
-from agentsim.speech.delivery import CONDITIONS
+from agentsim.errors import AgentsimError, UsageError
+from speech_timing.delivery import CONDITIONS
 
 #: Speech backends by command-line name.
 TTS_NAMES = ("espeak", "builtin")
@@ -20,13 +20,13 @@ def add_tts(parser: argparse.ArgumentParser, default: str = "espeak") -> None:
 
 
 def backend(name: str):
-    """The speech backend named on the command line (an :class:`~agentsim.core.errors.Unavailable` if it
+    """The speech backend named on the command line (an :class:`~agentsim.errors.Unavailable` if it
     cannot run here)."""
     if name == "espeak":
-        from agentsim.speech.espeak import EspeakBackend
+        from speech_timing.espeak import EspeakBackend
 
         return EspeakBackend()
-    from agentsim.speech.builtin import BuiltinBackend
+    from speech_timing.builtin import BuiltinBackend
 
     return BuiltinBackend()
 
@@ -65,7 +65,7 @@ def add_delivery(parser: argparse.ArgumentParser) -> None:
 
 
 def delivery(args: argparse.Namespace):
-    """The :class:`~agentsim.speech.delivery.DeliveryModel` the delivery options ask for."""
+    """The :class:`~speech_timing.delivery.DeliveryModel` the delivery options ask for."""
     try:
         return CONDITIONS["A"].with_(latency=args.latency, start_jitter=args.start_jitter, drift_ppm=args.drift,
                                      delay=args.delay, jitter=args.jitter, burst_probability=args.burst,
@@ -124,8 +124,8 @@ def anticipators(args: argparse.Namespace, problems: list[str] | None = None) ->
     or a time that is not finite) raises AgentsimError; with ``problems`` given, it is left out instead and
     why is added there (the run goes on without it, and says so). A value of the wrong type or an unknown
     key is always an error: the command line is wrong, not the world."""
-    from agentsim.anticipators import registry
-    from agentsim.anticipators.metronome import Metronome
+    from anticipators import registry
+    from anticipators.metronome import Metronome
 
     found = []
 

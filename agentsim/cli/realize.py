@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from agentsim.cli import options
-from agentsim.core.errors import AgentsimError, UsageError
+from agentsim.errors import AgentsimError, UsageError
 
 
 def _times(text: str) -> list[float]:
@@ -255,7 +255,7 @@ def plot_timeline(args: argparse.Namespace) -> int:
 
 
 def list_anticipators(args: argparse.Namespace) -> int:
-    from agentsim.anticipators import registry
+    from anticipators import registry
 
     for name, target in sorted(registry.available().items()):
         try:
@@ -267,7 +267,7 @@ def list_anticipators(args: argparse.Namespace) -> int:
 
 
 def new_anticipator(args: argparse.Namespace) -> int:
-    from agentsim.anticipators.template import write_plugin
+    from anticipators.template import write_plugin
 
     folder = write_plugin(args.name, Path(args.dir))
     print(f"wrote {folder}/ (pyproject.toml, {folder.name.replace('-', '_')}.py, tests/, README.md); "

@@ -23,7 +23,7 @@ def add_parsers(commands) -> None:
 
 
 def add_conductor(scenarios) -> argparse.ArgumentParser:
-    from agentsim.scenarios.conductor.names import DEFAULT_OUT, STRATEGIES
+    from scenarios.conductor.names import DEFAULT_OUT, STRATEGIES
 
     parser = scenarios.add_parser(
         "conductor", help="the virtual orchestra conductor leads a simulated ensemble back to tempo",
@@ -31,9 +31,11 @@ def add_conductor(scenarios) -> argparse.ArgumentParser:
                     "hears a simulated ensemble (FluidSynth audio through a causal beat tracker) and re-times "
                     "its beats to lead the ensemble to the score's tempo. Writes metrics.json, tempo.png, "
                     "timeline.png, ensemble.wav, conductor.bvh and feedback.jsonl to --out.")
-    parser.add_argument("--config", metavar="FILE",
-                        help="scenario configuration (TOML); default: agentsim/scenarios/conductor/configs/"
-                             "default.toml")
+    parser.add_argument("--config", metavar="FILE|NAME",
+                        help="scenario configuration: a TOML file, or a shipped one by its short name "
+                             "(--config waltz_3_4; see --list-configs); default: default")
+    parser.add_argument("--list-configs", action="store_true",
+                        help="list the shipped configurations, with what each is, and exit")
     which = parser.add_mutually_exclusive_group()
     which.add_argument("--strategy", choices=STRATEGIES,
                        help="where the strokes go: follow, target, lead or best (default: the configuration's, "
@@ -70,13 +72,22 @@ def add_json(parser: argparse.ArgumentParser) -> None:
 
 
 def run_conductor(args: argparse.Namespace) -> int:
-    from agentsim.scenarios.conductor.run import main
+    if args.list_configs:
+        from scenarios.conductor.config import CONFIGS_DIR, config_names
+
+        for name in config_names():
+            first = next((line.lstrip("# ").strip() for line in
+                          (CONFIGS_DIR / f"{name}.toml").read_text(encoding="utf-8").splitlines()
+                          if line.startswith("#") and line.lstrip("# ").strip()), "")
+            print(f"{name:<14} {first}".rstrip())
+        return 0
+    from scenarios.conductor.run import main
 
     return main(args)
 
 
 def add_storytelling(scenarios) -> argparse.ArgumentParser:
-    from agentsim.scenarios.storytelling.names import ANCHORS, DEFAULT_OUT
+    from scenarios.storytelling.names import ANCHORS, DEFAULT_OUT
 
     parser = scenarios.add_parser(
         "storytelling", help="tell a story with gestures on the stressed syllables and measure the sync",
@@ -113,7 +124,7 @@ def add_storytelling(scenarios) -> argparse.ArgumentParser:
 
 
 def run_storytelling(args: argparse.Namespace) -> int:
-    from agentsim.scenarios.storytelling.run import main
+    from scenarios.storytelling.run import main
 
     options.check_fps(args)
     args.delivery = options.delivery(args)

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from agentsim.cli import options
-from agentsim.core.errors import UsageError
+from agentsim.errors import UsageError
 
 
 def add_parsers(commands) -> None:

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from agentsim.cli import options
-from agentsim.core.errors import AgentsimError
+from agentsim.errors import AgentsimError
 from agentsim.core.progress import progress
 
 DEFAULT_MODEL = Path("linear_model.json")
@@ -62,7 +62,7 @@ def add_parsers(commands) -> None:
 
 def read_text(path: str | None) -> str:
     if path is None:
-        from agentsim.speech.linear_model import TEXTS_DIR
+        from speech_timing.linear_model import TEXTS_DIR
 
         return (TEXTS_DIR / "clocks.txt").read_text(encoding="utf-8")
     from agentsim.examples import resolve
@@ -77,9 +77,9 @@ def read_text(path: str | None) -> str:
 
 
 def speech_sync(args: argparse.Namespace) -> int:
-    from agentsim.scenarios.speech_sync import speech_sync as run
-    from agentsim.speech.animator_time import STRATEGIES, check_strategy
-    from agentsim.speech.linear_model import LinearModel
+    from scenarios.speech_sync import speech_sync as run
+    from speech_timing.animator_time import STRATEGIES, check_strategy
+    from speech_timing.linear_model import LinearModel
 
     if args.list_strategies:
         for name in STRATEGIES:
@@ -140,7 +140,7 @@ def plot_errors(results: list[dict], path: str) -> None:
 
 def calibrate(args: argparse.Namespace) -> int:
     from agentsim.media.files import check_writable
-    from agentsim.speech.linear_model import calibrate as fit
+    from speech_timing.linear_model import calibrate as fit
 
     texts = None
     if args.texts:
@@ -155,8 +155,8 @@ def calibrate(args: argparse.Namespace) -> int:
 
 def export(args: argparse.Namespace) -> int:
     from agentsim.media.files import check_writable
-    from agentsim.speech.backend import SpeechText
-    from agentsim.speech.exports import write_textgrid, write_wav
+    from speech_timing.backend import SpeechText
+    from speech_timing.exports import write_textgrid, write_wav
 
     if not (args.wav or args.textgrid):
         raise AgentsimError("say what to write: --wav FILE.wav and/or --textgrid FILE.TextGrid")

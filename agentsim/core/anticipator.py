@@ -3,7 +3,7 @@
 An anticipator is code from outside the realizer (a plugin, a beat tracker): what it does wrong loses only
 itself or one of its pegs. Its pegs refuse times that are not finite, and moves of a peg that has not come
 yet into the past; an exception in its process stops that process (but for
-:class:`~agentsim.core.errors.Unavailable`, which says the run cannot go on), and one in :meth:`Anticipator.make_peg`
+:class:`~agentsim.errors.Unavailable`, which says the run cannot go on), and one in :meth:`Anticipator.make_peg`
 refuses that peg. Each is said to :attr:`Anticipator.report` (the scheduler turns it into a warning).
 """
 
@@ -14,7 +14,7 @@ from typing import Callable
 
 import simpy
 
-from agentsim.core.errors import ScheduleError, Unavailable
+from agentsim.errors import ScheduleError, Unavailable
 from agentsim.core.pegboard import PegBoard, TimePeg
 
 #: A peg move this far (seconds) before the clock still counts as "now".
@@ -105,7 +105,7 @@ class Anticipator:
     def peg(self, sync_id: str) -> TimePeg | None:
         """The peg for ``sync_id`` (created on first use), or None if this anticipator has no such sync.
 
-        :class:`~agentsim.core.errors.ScheduleError` if making it failed, or gave a time that is not finite.
+        :class:`~agentsim.errors.ScheduleError` if making it failed, or gave a time that is not finite.
         """
         peg = self.pegs.get(sync_id)
         if peg is None:

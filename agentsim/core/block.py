@@ -60,7 +60,7 @@ class Behaviour:
     text: str = ""
     marks: list[tuple[int, str]] = field(default_factory=list)
     #: how stretches of a speech's text are spoken: ``(kind, start, end, ((attr, value), ...))`` on text
-    #: offsets, kinds as in SSML (emphasis, prosody, break, say-as); see agentsim.speech.backend.Prosody
+    #: offsets, kinds as in SSML (emphasis, prosody, break, say-as); see speech_timing.backend.Prosody
     prosody: list[tuple[str, int, int, tuple[tuple[str, str], ...]]] = field(default_factory=list)
     #: parameters given by child elements (a BMLA trajectory, BMLT parameters), by name
     params: dict[str, str] = field(default_factory=dict)

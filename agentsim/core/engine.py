@@ -16,7 +16,7 @@ from typing import Callable, Iterable, Sequence
 import simpy
 
 from agentsim.core.block import Behaviour
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 from agentsim.core.interruption import due_by, skip_until
 from agentsim.core.pegboard import PegBoard
 from agentsim.core.timed import EPSILON, TimedBehaviour

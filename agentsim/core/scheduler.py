@@ -19,7 +19,7 @@ from agentsim.core import feedback as fb
 from agentsim.core.block import Block
 from agentsim.core.composition import Composition
 from agentsim.core.engine import Engine, EngineContext
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 from agentsim.core.gcpause import paused_collection
 from agentsim.core.interruption import Interruption
 from agentsim.core.pegboard import PegBoard, TimePeg

@@ -18,7 +18,7 @@ from typing import Callable, Protocol
 
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, SyncRef
 from agentsim.core.engine import Engine
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 from agentsim.core.pegboard import OffsetPeg, PegBoard, TimePeg
 from agentsim.core.timed import EPSILON, BlockRun, KeyRef, TimedBehaviour
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from agentsim.animation.units import curves_duration, motion_unit, repetition
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 from agentsim.core.interruption import due_by, skip_until
 from agentsim.core.timed import TimedBehaviour
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 from agentsim.core.timed import TimedBehaviour
 
 #: A sound may be off its length by this much (seconds) before the timing asked of it is refused.

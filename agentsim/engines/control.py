@@ -12,7 +12,7 @@ import re
 
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 from agentsim.core.timed import ParameterChange, TimedBehaviour
 
 #: The parameters a parametervaluechange can change, by the type of behaviour it targets: speech volume

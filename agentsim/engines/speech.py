@@ -8,8 +8,8 @@ constraints that would stretch it make it invalid.
 Once speech starts, its timing belongs to the audio. Without a :class:`SpeechConfig` strategy the audio
 plays exactly as planned and the speech's pegs are detached from whatever they were tied to. With one,
 the audio really starts after a playback latency, its clock drifts, and its progress events reach the
-realizer late, scattered and in bursts (:mod:`agentsim.speech.delivery`); an animator-time strategy
-(:mod:`agentsim.speech.animator_time`) turns them into ``t_A``, and every sync point of the speech, with
+realizer late, scattered and in bursts (:mod:`speech_timing.delivery`); an animator-time strategy
+(:mod:`speech_timing.animator_time`) turns them into ``t_A``, and every sync point of the speech, with
 everything tied to it, is passed when ``t_A`` reaches its planned speech time.
 """
 
@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 from agentsim.core.pegboard import ComputedPeg, OffsetPeg
 from agentsim.core.interruption import set_key_time
 from agentsim.core.timed import KeyRef, TimedBehaviour, parameter_at
-from agentsim.speech.backend import Prosody, SpeechText, TTSBackend, Utterance
+from speech_timing.backend import Prosody, SpeechText, TTSBackend, Utterance
 
 #: Speech keys may be off their rigid spacing by this much (seconds) before the speech is invalid.
 RIGID_TOLERANCE = 1e-6
@@ -38,7 +38,7 @@ class SpeechConfig:
     Parameters
     ----------
     strategy : str or None
-        Animator-time strategy (a key of ``agentsim.speech.animator_time.STRATEGIES``); None plays the
+        Animator-time strategy (a key of ``speech_timing.animator_time.STRATEGIES``); None plays the
         audio exactly as planned, with no latency and no events.
     delivery : DeliveryModel
         Playback latency, audio clock drift and the progress-event channel.
@@ -63,8 +63,8 @@ class SpeechConfig:
         if self.timing not in ("tts", "linear"):
             raise ValueError(f"timing must be 'tts' or 'linear', not {self.timing!r}")
         if self.strategy is not None:
-            from agentsim.speech.animator_time import check_strategy
-            from agentsim.speech.delivery import DeliveryModel
+            from speech_timing.animator_time import check_strategy
+            from speech_timing.delivery import DeliveryModel
 
             check_strategy(self.strategy)
             if self.delivery is None:
@@ -81,7 +81,7 @@ def speech_text(behaviour: Behaviour, rate: float = 1.0) -> SpeechText:
 
 
 class SpeechPlanner(Planner):
-    """Times speech with a :class:`~agentsim.speech.backend.TTSBackend` (or the linear model)."""
+    """Times speech with a :class:`~speech_timing.backend.TTSBackend` (or the linear model)."""
 
     behaviour_types = ("speech",)
     rigid = True
@@ -109,7 +109,7 @@ class SpeechPlanner(Planner):
 
     def linear_model(self):
         if self.config.linear_model is None:
-            from agentsim.speech.linear_model import default_linear_model
+            from speech_timing.linear_model import default_linear_model
 
             self.config.linear_model = default_linear_model(self.backend)
         return self.config.linear_model
@@ -118,11 +118,11 @@ class SpeechPlanner(Planner):
         """The speech plan made from the linear model alone (``timing="linear"``).
 
         The linear model knows the text only: the behaviour's prosody spans are ignored here (see
-        :func:`~agentsim.speech.linear_model.plan_from_linear`).
+        :func:`~speech_timing.linear_model.plan_from_linear`).
         """
         key = id(behaviour)
         if key not in self._plans:
-            from agentsim.speech.linear_model import plan_from_linear
+            from speech_timing.linear_model import plan_from_linear
 
             self._plans[key] = plan_from_linear(behaviour.text, self.linear_model())
         return self._plans[key]
@@ -408,16 +408,16 @@ class SpeechEngine(Engine):
 
     def play(self, timed: TimedBehaviour, t_request: float) -> None:
         """Start the audio and hand the speech's timing to the animator-time strategy."""
-        from agentsim.speech.animator_time import make_strategy
-        from agentsim.speech.delivery import deliver, true_events
-        from agentsim.speech.linear_model import plan_from_utterance
+        from speech_timing.animator_time import make_strategy
+        from speech_timing.delivery import deliver, true_events
+        from speech_timing.linear_model import plan_from_utterance
 
         config, planner = self.config, self.planner
         delivery = config.delivery
         utt = planner.utterance(timed.behaviour)
         known = dict(delay=delivery.delay, latency=delivery.latency, t_request=t_request)
         if config.timing == "linear":
-            from agentsim.speech.linear_model import plan_from_linear
+            from speech_timing.linear_model import plan_from_linear
 
             plan = plan_from_linear(timed.behaviour.text, planner.linear_model(), **known)
         else:

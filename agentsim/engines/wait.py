@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
-from agentsim.core.errors import ScheduleError
+from agentsim.errors import ScheduleError
 
 
 class WaitPlanner(Planner):

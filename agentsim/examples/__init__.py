@@ -33,6 +33,16 @@ def resolve(path: str | Path) -> Path:
     return path
 
 
+def read(name: str) -> str:
+    """The text of an example by its name (``"welcome.xml"``, ``"examples/bmla/talk.xml"``): the file of that
+    name under ``examples/`` where the program runs if there is one, else the installed example."""
+    name = name.removeprefix("examples/")
+    path = resolve(Path("examples") / name)
+    if not path.is_file():
+        raise FileNotFoundError(f"no example named {name!r} (agentsim examples lists them)")
+    return path.read_text(encoding="utf-8")
+
+
 def describe(name: str) -> str:
     """A line about an example: its first comment or docstring line, if it has one."""
     path = HOME / name.removeprefix("examples/")

@@ -32,7 +32,7 @@ from typing import Callable
 
 from agentsim.core import feedback as fb
 from agentsim.core.clock import make_environment
-from agentsim.core.errors import UsageError
+from agentsim.errors import UsageError
 
 #: How often the realizer's thread takes what clients sent (s): a block waits at most this long.
 POLL = 0.005

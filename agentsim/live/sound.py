@@ -40,7 +40,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from agentsim.core.errors import Unavailable
+from agentsim.errors import Unavailable
 from agentsim.media.audio import FADE, Source
 
 #: What ``delay=None`` adds to the measured output lead and one block (s): a simulation step can call
@@ -291,7 +291,7 @@ class Steadiness:
 
 def _sounddevice():
     """The sounddevice module, or Unavailable saying what to install (or what is wrong with ALSA)."""
-    from agentsim.anticipators.audio import alsa_problem
+    from anticipators.audio import alsa_problem
 
     problem = alsa_problem()
     if problem:

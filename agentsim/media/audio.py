@@ -74,7 +74,7 @@ def speech_sources(recording) -> list[Source]:
             continue
         gain = heard.gain if heard.volume else None
         # float32 samples left as they are: an array, or samples read from a file as they are needed
-        # (:class:`~agentsim.speech.samples.PcmFile`), which np.asarray would read whole
+        # (:class:`~speech_timing.samples.PcmFile`), which np.asarray would read whole
         samples = audio if getattr(audio, "dtype", None) == np.float32 else np.asarray(audio, np.float32)
         sources.append(Source(samples, int(heard.utterance.sample_rate), float(heard.t0),
                               1.0 + heard.drift_ppm * 1e-6, heard.stopped, gain,

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Iterable
 
 
-from agentsim.core.errors import UsageError
+from agentsim.errors import UsageError
 from agentsim.core.written import written
 from agentsim.media import AXIS
 if TYPE_CHECKING:  # checking where to write needs no audio

@@ -19,5 +19,5 @@ module           what lives there
 
 Times are seconds, tempi beats per minute, positions beats or bars counted from 0, levels decibels. A
 missing FluidSynth library or program or a missing soundfont raises
-:class:`~agentsim.core.errors.Unavailable` saying ``apt-get install fluidsynth fluid-soundfont-gm``.
+:class:`~agentsim.errors.Unavailable` saying ``apt-get install fluidsynth fluid-soundfont-gm``.
 """

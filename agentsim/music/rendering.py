@@ -16,7 +16,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from agentsim.core.errors import AgentsimError, Unavailable
+from agentsim.errors import AgentsimError, Unavailable
 from agentsim.music.events import EVENT_ORDER, SynthEvent
 from agentsim.music.instruments import DRUM_CHANNEL
 

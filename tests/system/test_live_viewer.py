@@ -16,7 +16,7 @@ import pytest
 from websockets.sync.client import connect
 
 from agentsim.live.service import Background, Service
-from agentsim.speech.builtin import BuiltinBackend
+from speech_timing.builtin import BuiltinBackend
 from helpers import whole_run_points
 
 pytestmark = pytest.mark.system

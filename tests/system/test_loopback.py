@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from agentsim.anticipators.audio import AudioBeatAnticipator, DeviceSource
+from anticipators.audio import AudioBeatAnticipator, DeviceSource
 from agentsim.cli import main
 from agentsim.core.clock import make_environment
 from agentsim.realizer import Realizer

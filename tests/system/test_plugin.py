@@ -15,7 +15,7 @@ import pytest
 pytestmark = pytest.mark.system
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
-PLUGIN = Path(__file__).parent / "plugins" / "agentsim-countin"
+PLUGIN = Path(__file__).resolve().parents[2] / "agentsim" / "examples" / "plugins" / "agentsim-countin"
 
 
 def new_environment(tmp_path) -> Path:
@@ -46,7 +46,7 @@ def test_third_party_plugin_installs_and_is_used_from_bml(plugin_python, tmp_pat
     listed = subprocess.run([plugin_python, "-m", "agentsim.cli", "anticipators", "list"], capture_output=True,
                             text=True, timeout=60)
     assert "countin\tagentsim_countin:CountIn" in listed.stdout, listed.stderr
-    assert "metronome\tagentsim.anticipators.metronome:Metronome" in listed.stdout
+    assert "metronome\tanticipators.metronome:Metronome" in listed.stdout
     # ... and the project's own environment never saw it
     ours = subprocess.run([sys.executable, "-m", "agentsim.cli", "anticipators", "list"], capture_output=True,
                           text=True, timeout=60)

@@ -17,7 +17,7 @@ from agentsim.media.report import write_report
 from agentsim.media.report.browser import open_report
 from agentsim.media.tables import gesture_rows
 from agentsim.realizer import Realizer
-from agentsim.speech.builtin import BuiltinBackend
+from speech_timing.builtin import BuiltinBackend
 
 pytestmark = pytest.mark.system
 
@@ -31,7 +31,7 @@ BML = (f'<bml {NS} id="b1"><speech id="s1"><text>The <sync id="w1"/>lighthouse k
 @pytest.fixture(scope="module")
 def spoken():
     """Two beats pegged to two words of a speech, realised with espeak-ng: recording, track, poses, table."""
-    from agentsim.speech.espeak import EspeakBackend
+    from speech_timing.espeak import EspeakBackend
 
     realizer = Realizer(tts=EspeakBackend())
     realizer.submit(BML)

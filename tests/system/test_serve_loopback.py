@@ -19,7 +19,7 @@ from scipy.signal import correlate, resample_poly
 from websockets.sync.client import connect
 
 from agentsim.live.service import Background, Service
-from agentsim.speech.espeak import EspeakBackend
+from speech_timing.espeak import EspeakBackend
 
 pytestmark = pytest.mark.system
 

@@ -29,7 +29,7 @@ from helpers import (
 )
 
 from agentsim.cli import main
-from agentsim.speech.linear_model import TEXTS_DIR
+from speech_timing.linear_model import TEXTS_DIR
 
 pytestmark = pytest.mark.system
 

@@ -18,7 +18,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from agentsim.core.errors import AgentsimError, UsageError
+from agentsim.errors import AgentsimError, UsageError
 
 USAGE = ("agentsim sweep SPEC.toml [--workers N | --scheduler ADDRESS] --out DIR [--quiet]\n"
          "       agentsim sweep report DIR [--metric M ...] [--by KEY] [--axis KEY] [--over KEY ...] [--markdown] "
@@ -35,7 +35,10 @@ def add_parsers(commands) -> None:
                     "error) and keeps each finished point in DIR/points/, so that a rerun computes only what is "
                     "missing. 'agentsim sweep report DIR' prints the means with 95 % bootstrap intervals per "
                     "strategy and draws DIR/summary.png.")
-    parser.add_argument("spec", metavar="SPEC.toml", help="the sweep's spec, or 'report'")
+    parser.add_argument("spec", nargs="?", metavar="SPEC.toml",
+                        help="the sweep's spec: a file, or a shipped spec by its short name (speech_sync, "
+                             "conductor; see --list-specs); or 'report'")
+    parser.add_argument("--list-specs", action="store_true", help="list the shipped specs and exit")
     parser.add_argument("folder", nargs="?", metavar="DIR", help="with 'report': the sweep's folder")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, metavar="N",
@@ -62,6 +65,14 @@ REPORT_ONLY = ("metric", "by", "axis", "over", "markdown", "png")
 
 
 def sweep_handler(args: argparse.Namespace) -> int:
+    if args.list_specs:
+        from scenarios import sweeps
+
+        for name in sweeps.names():
+            print(f"{name:<12} {sweeps.describe(name)}".rstrip())
+        return 0
+    if args.spec is None:
+        raise UsageError("name a sweep spec: agentsim sweep SPEC.toml --out DIR (shipped: agentsim sweep --list-specs)")
     if args.spec == "report" and not Path("report").is_file():
         return report_handler(args)
     if args.folder is not None:

@@ -21,7 +21,7 @@ import traceback
 from contextlib import redirect_stderr, redirect_stdout
 
 from agentsim.cli.sweep.spec import project_version, work_parser
-from agentsim.core.errors import AgentsimError
+from agentsim.errors import AgentsimError
 
 _LOCK = threading.Lock()
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from agentsim.cli.sweep.results import TAKEN_PREFIX, read
 from agentsim.cli.sweep.spec import ROW_COLUMNS
-from agentsim.core.errors import AgentsimError, UsageError
+from agentsim.errors import AgentsimError, UsageError
 
 #: Resamples of each bootstrap, and its seed.
 RESAMPLES = 9999

@@ -24,7 +24,7 @@ import math
 from pathlib import Path
 
 from agentsim.cli.sweep.spec import ROW_COLUMNS, Point, shell_line
-from agentsim.core.errors import Unavailable
+from agentsim.errors import Unavailable
 
 #: Prefix of a metric whose name is taken by a grid key or a row column.
 TAKEN_PREFIX = "result."

@@ -33,7 +33,7 @@ from pathlib import Path
 from agentsim.cli.sweep import results
 from agentsim.cli.sweep.point import run_point, worker_info
 from agentsim.cli.sweep.spec import Point, Spec, project_version
-from agentsim.core.errors import AgentsimError, Unavailable
+from agentsim.errors import AgentsimError, Unavailable
 
 #: How long to wait for a scheduler to answer and for its first worker to join (seconds).
 CONNECT_TIMEOUT = 30.0

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
-from agentsim.core.errors import UsageError
+from agentsim.errors import UsageError
 
 #: Keys of a spec's top level and of its [report] table.
 TOP_KEYS = ("command", "grid", "fixed", "report", "keep_outputs")
@@ -152,6 +152,10 @@ def load(path: str | Path) -> Spec:
     """Read and check a spec; every mistake is a :class:`UsageError` of one line naming it."""
     path = Path(path)
     where = f"sweep spec {str(path)!r}"
+    if not path.exists() and len(path.parts) == 1:
+        from scenarios import sweeps
+
+        path = sweeps.find(path.name) or path
     if not path.is_file():
         raise UsageError(f"no {where}")
     try:
@@ -332,17 +336,20 @@ def check_argv(argv: tuple[str, ...], values: dict, where: str) -> None:
 
 @lru_cache(maxsize=1)
 def project_version() -> str:
-    """agentsim's version and a digest of its files (code, configurations, stories, texts): a checkout whose
-    code changed does not reuse the results of the old one."""
+    """agentsim's version and a digest of the files of its four packages (code, configurations, stories,
+    texts): a checkout whose code changed does not reuse the results of the old one."""
+    import importlib.util
+
     import agentsim
 
-    package = Path(agentsim.__file__).resolve().parent
     digest = hashlib.sha256()
-    for path in sorted(package.rglob("*")):
-        if path.is_file() and "__pycache__" not in path.parts and path.suffix in (
-                ".py", ".toml", ".story", ".txt", ".json", ".js", ".css", ".mid", ".sf2"):
-            digest.update(path.relative_to(package).as_posix().encode() + b"\0")
-            digest.update(path.read_bytes())
+    for name in ("agentsim", "speech_timing", "anticipators", "scenarios"):
+        package = Path(importlib.util.find_spec(name).origin).resolve().parent
+        for path in sorted(package.rglob("*")):
+            if path.is_file() and "__pycache__" not in path.parts and path.suffix in (
+                    ".py", ".toml", ".story", ".txt", ".json", ".js", ".css", ".mid", ".sf2"):
+                digest.update(f"{name}/{path.relative_to(package).as_posix()}".encode() + b"\0")
+                digest.update(path.read_bytes())
     return f"{agentsim.__version__}+{digest.hexdigest()[:12]}"
 
 

@@ -1,0 +1,303 @@
+"""The storyteller's voice: a disk cache of synthesised utterances and phoneme-level sync marks.
+
+Two text-to-speech backends that wrap another one (both follow
+:class:`speech_timing.backend.TTSBackend`):
+
+:class:`CachedBackend`
+    Synthesises a text once and keeps the utterance (timeline and audio) on disk, keyed by a hash of
+    the backend, its voice, its rate and the text. Sync marks do not change the sound, so the text is
+    synthesised without them and the marks are placed afterwards on the cached words, the way the
+    espeak-ng backend places them: at the onset of the first word that starts at or after the mark.
+:class:`PhonemeMarks`
+    Moves marks from the onset of their word to a phoneme of it, after the named timestamps of de
+    Melo's EML (``<tm event="onStart|onEnd|onPhone">``). The event is written as a suffix of the BML
+    sync id, so that any realizer planner that takes mark times from the backend gets phoneme-level
+    sync points without knowing about phonemes:
+
+    ================================  =========================================================
+    ``<sync id="w12"/>``              onset of the next word (onStart, the plain BML meaning)
+    ``<sync id="w12.stress"/>``       onset of the next word's vowel with primary stress (the
+                                      word's onset when it has no stressed vowel)
+    ``<sync id="w12.end"/>``          end of the next word (onEnd)
+    ``<sync id="w12.ph2"/>``          onset of the next word's phoneme 2, counted from 0 (onPhone)
+    ``<sync id="w12.stress.d500"/>``  500 ms of speech after that (any of the above, ``.d<ms>``)
+    ================================  =========================================================
+
+The delayed form lets a behaviour tie a later sync point (a gesture's ``end``) to the speech's own
+timeline instead of to an offset after a speech sync point.
+
+Times are seconds from the start of the utterance's audio.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+from speech_timing.backend import Mark, Phoneme, SpeechText, Utterance, Word
+from speech_timing.samples import BLOCK, PcmFile
+
+#: 16-bit samples read from (and written to) a cache file at a time.
+READ_BLOCK = BLOCK
+
+__all__ = ["CachedBackend", "PhonemeMarks", "default_cache_dir", "word_after", "stressed_onset",
+           "mark_event", "place_mark", "CACHE_FORMAT"]
+
+#: Version of the cache files; bump it when their layout or the meaning of their contents changes.
+CACHE_FORMAT = 1
+
+_DELAY = re.compile(r"\.d\d+$")
+_EVENT = re.compile(r"^(?P<base>.+?)(?:\.(?P<event>stress|end|ph(?P<k>\d+)))?(?:\.d(?P<ms>\d+))?$")
+
+
+def default_cache_dir() -> Path:
+    """Where synthesised utterances are kept: ``$AGENTSIM_CACHE`` or ``$XDG_CACHE_HOME/agentsim/tts``
+    (``~/.cache/agentsim/tts``)."""
+    if os.environ.get("AGENTSIM_CACHE"):
+        return Path(os.environ["AGENTSIM_CACHE"]).expanduser()
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "agentsim" / "tts"
+
+
+# ----------------------------------------------------------------------------------------------------
+# Marks on a timeline.
+
+
+def word_after(utterance: Utterance, offset: int) -> int | None:
+    """Index of the first word of ``utterance`` starting at or after character ``offset`` (None: none)."""
+    return utterance.word_after(offset)
+
+
+def _phonemes_of(utterance: Utterance, k: int) -> list[Phoneme]:
+    return utterance.phonemes_of(k)
+
+
+def stressed_onset(utterance: Utterance, k: int) -> tuple[float, bool]:
+    """Onset (s) of word ``k``'s first vowel with primary stress, and whether it has one.
+
+    A word without a stressed phoneme gives its own onset and False.
+    """
+    for p in _phonemes_of(utterance, k):
+        if p.stressed:
+            return p.start, True
+    return utterance.words[k].start, False
+
+
+def mark_event(name: str) -> tuple[str, str, int | None, float]:
+    """``(base, event, phone, delay)`` of a sync id: event ``"start"``, ``"stress"``, ``"end"`` or
+    ``"phone"`` (then ``phone`` is the phoneme's index in its word), and the delay in seconds."""
+    match = _EVENT.match(name)
+    if not match:
+        return name, "start", None, 0.0
+    delay = int(match.group("ms")) / 1000.0 if match.group("ms") else 0.0
+    event = match.group("event") or "start"
+    if match.group("k") is not None:
+        return match.group("base"), "phone", int(match.group("k")), delay
+    return match.group("base"), event, None, delay
+
+
+def place_mark(utterance: Utterance, offset: int, name: str) -> float:
+    """Time (s) of the mark ``name`` at character ``offset``: the event its suffix names
+    (:func:`mark_event`) in the first word starting at or after ``offset``, plus its delay; after the
+    last word, the end of the last word."""
+    k = word_after(utterance, offset)
+    if k is None:
+        return utterance.words[-1].end if utterance.words else utterance.duration
+    word = utterance.words[k]
+    _, event, phone, delay = mark_event(name)
+    if event == "stress":
+        time = stressed_onset(utterance, k)[0]
+    elif event == "end":
+        time = word.end
+    elif event == "phone":
+        phonemes = _phonemes_of(utterance, k)
+        time = phonemes[min(phone, len(phonemes) - 1)].start if phonemes else word.start
+    else:
+        time = word.start
+    return time + delay
+
+
+class PhonemeMarks:
+    """A backend whose marks may stand for a phoneme of their word (see the module docstring).
+
+    Parameters
+    ----------
+    backend : TTSBackend
+        The backend that speaks; its words and phonemes are kept as they are.
+    """
+
+    def __init__(self, backend) -> None:
+        self.backend = backend
+        self.name = getattr(backend, "name", "")
+
+    def synthesize(self, speech: SpeechText) -> Utterance:
+        """Speak ``speech``; every mark is placed at the event its name asks for.
+
+        A delayed mark (``w12.stress.d500``) whose undelayed name (``w12.stress``) is also a mark of
+        ``speech`` is timed from that mark's word, wherever it stands in the text.
+        """
+        utterance = self.backend.synthesize(speech)
+        offsets = dict((name, offset) for offset, name in speech.marks)
+        marks = []
+        for offset, name in speech.marks:
+            undelayed = _DELAY.sub("", name)
+            marks.append(Mark(name, place_mark(utterance, offsets.get(undelayed, offset), name)))
+        return replace(utterance, marks=marks)
+
+
+# ----------------------------------------------------------------------------------------------------
+# The disk cache.
+
+
+def _identity(backend) -> dict:
+    """What, besides the text, decides what a backend says: its class, name, voice and rate."""
+    return {"class": f"{type(backend).__module__}.{type(backend).__qualname__}",
+            "name": getattr(backend, "name", ""), "voice": getattr(backend, "voice", None),
+            "rate": getattr(backend, "rate", None), "format": CACHE_FORMAT}
+
+
+class CachedBackend:
+    """A backend that synthesises each text once and keeps the utterance on disk and in memory.
+
+    Parameters
+    ----------
+    backend : TTSBackend
+        The backend that speaks (espeak-ng, or the built-in timing model).
+    cache_dir : str or Path, optional
+        Directory of the cache files (default :func:`default_cache_dir`); None with ``enabled=False``
+        keeps utterances in memory only.
+    enabled : bool
+        Whether to read and write the disk cache.
+
+    Attributes
+    ----------
+    synthesis_seconds : float
+        Wall time spent synthesising (cache misses only).
+    load_seconds : float
+        Wall time spent reading cache files.
+    hits, misses : int
+        Texts found in the cache, and texts synthesised.
+
+    Notes
+    -----
+    A cache entry is ``<key>.json`` (words, phonemes, sentences, duration, sample rate) and, when the
+    backend makes sound, ``<key>.npy`` (the audio as 16-bit samples, exactly as espeak-ng produced
+    them). The key is the SHA-256 of the backend's identity and the text. espeak-ng is only exactly
+    reproducible on the first synthesis in a process; the cache makes every later run identical.
+    """
+
+    def __init__(self, backend, cache_dir: str | Path | None = None, enabled: bool = True) -> None:
+        self.backend = backend
+        self.name = getattr(backend, "name", "")
+        self.enabled = enabled
+        self.cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+        self.synthesis_seconds = 0.0
+        self.load_seconds = 0.0
+        self.hits = 0
+        self.misses = 0
+        #: keys of the texts synthesised (not found in the cache) by this backend
+        self.synthesised: set[str] = set()
+        self._memory: dict[str, Utterance] = {}
+
+    def key(self, text: str) -> str:
+        """Cache key of ``text`` spoken by this backend."""
+        blob = json.dumps({"backend": _identity(self.backend), "text": text}, sort_keys=True, ensure_ascii=False)
+        return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:32]
+
+    def utterance(self, text: str) -> Utterance:
+        """The utterance of ``text`` without marks: from memory, from disk, or synthesised now."""
+        key = self.key(text)
+        utt = self._memory.get(key)
+        if utt is not None:
+            return utt
+        if self.enabled:
+            started = time.perf_counter()
+            utt = self._load(key, text)
+            if utt is not None:
+                self.load_seconds += time.perf_counter() - started
+                self.hits += 1
+        if utt is None:
+            started = time.perf_counter()
+            utt = self.backend.synthesize(SpeechText(text))
+            self.synthesis_seconds += time.perf_counter() - started
+            self.misses += 1
+            self.synthesised.add(key)
+            if self.enabled:
+                utt = self._save(key, utt)
+                forget = getattr(self.backend, "forget", None)
+                if forget is not None and isinstance(utt.audio, PcmFile):  # its samples in memory: let go
+                    forget(SpeechText(text))
+        self._memory[key] = utt
+        return utt
+
+    def synthesize(self, speech: SpeechText) -> Utterance:
+        """Speak ``speech``: the cached utterance of its text with its marks placed on word onsets (a speech
+        at another rate is not cached)."""
+        if speech.rate != 1.0:
+            return self.backend.synthesize(speech)
+        utt = self.utterance(speech.text)
+        marks = [Mark(name, place_mark(utt, offset, "")) for offset, name in speech.marks]
+        return replace(utt, marks=marks)
+
+    # -- files ---------------------------------------------------------------------------------------
+    def _paths(self, key: str) -> tuple[Path, Path]:
+        return self.cache_dir / f"{key}.json", self.cache_dir / f"{key}.npy"
+
+    def _save(self, key: str, utt: Utterance) -> Utterance:
+        """Write ``utt`` into the cache; returns it with its audio read from the cache file from now on
+        (not held in memory) when the file gives back exactly its samples."""
+        meta_path, audio_path = self._paths(key)
+        self.cache_dir.mkdir(parents=True, exist_ok=True)
+        has_audio = utt.audio is not None
+        if has_audio:
+            audio = utt.audio if isinstance(utt.audio, PcmFile) else np.asarray(utt.audio)
+            tmp = audio_path.with_suffix(f".{os.getpid()}.tmp.npy")  # processes that write at once: one each
+            with open(tmp, "wb") as f:  # the file np.save writes, a block at a time (no 16-bit copy held whole)
+                np.lib.format.write_array_header_1_0(f, {"descr": "<i2", "fortran_order": False,
+                                                         "shape": (len(audio),)})
+                for a in range(0, len(audio), READ_BLOCK):  # no float64 copy of a long narration either
+                    block = np.round(np.asarray(audio[a:a + READ_BLOCK], dtype=np.float64) * 32768.0)
+                    f.write(np.clip(block, -32768, 32767).astype("<i2").tobytes())
+            tmp.replace(audio_path)
+        meta = {"format": CACHE_FORMAT, "backend": _identity(self.backend), "text": utt.text,
+                "duration": utt.duration, "sample_rate": utt.sample_rate, "backend_name": utt.backend,
+                "sentences": list(utt.sentences), "audio": has_audio,
+                "words": [asdict(w) for w in utt.words], "phonemes": [asdict(p) for p in utt.phonemes]}
+        tmp = meta_path.with_suffix(f".{os.getpid()}.tmp.json")
+        tmp.write_text(json.dumps(meta, ensure_ascii=False))
+        tmp.replace(meta_path)
+        if has_audio:
+            try:
+                stored = PcmFile(audio_path)
+            except (OSError, ValueError):
+                return utt
+            if len(stored) == len(audio) and all(
+                    np.array_equal(stored.read(a, a + READ_BLOCK), audio[a:a + READ_BLOCK])
+                    for a in range(0, len(audio), READ_BLOCK)):
+                return replace(utt, audio=stored)
+            stored.close()
+        return utt
+
+    def _load(self, key: str, text: str) -> Utterance | None:
+        meta_path, audio_path = self._paths(key)
+        try:
+            meta = json.loads(meta_path.read_text())
+            if meta.get("format") != CACHE_FORMAT or meta.get("text") != text:
+                return None
+            audio = None
+            if meta["audio"]:
+                audio = PcmFile(audio_path)  # read from the file as it is mixed, never held whole
+        except (OSError, ValueError, KeyError):
+            return None
+        return Utterance(text=text, duration=float(meta["duration"]),
+                         words=[Word(**w) for w in meta["words"]],
+                         phonemes=[Phoneme(**p) for p in meta["phonemes"]], marks=[],
+                         sentences=[float(s) for s in meta["sentences"]], sample_rate=int(meta["sample_rate"]),
+                         audio=audio, backend=meta.get("backend_name", ""))
