@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agentsim.errors import AgentsimError
+from agentsim.errors import AgentsimError, UsageError
 from agentsim.music.instruments import DRUM_CHANNEL, DRUM_KIT, PARTS, default_part, gm_program, program_name
 from agentsim.music.score import DYNAMICS_DB
 from agentsim.music.tempo import Meter, TempoChange, TempoMap
@@ -626,7 +626,7 @@ def find_config(name: str | Path) -> Path:
     shipped = CONFIGS_DIR / (path.name if path.suffix == ".toml" else f"{path.name}.toml")
     if shipped.is_file():
         return shipped
-    raise AgentsimError(f"no configuration file or shipped configuration named {str(name)!r} "
+    raise UsageError(f"no configuration file or shipped configuration named {str(name)!r} "
                         f"(shipped: {', '.join(config_names())}; 'agentsim run conductor --list-configs')")
 
 
