@@ -124,3 +124,14 @@ def test_an_attribute_nothing_reads_is_named(tmp_path):
     assert [(w["id"], w["warningType"], w["description"]) for w in warnings] == [
         ("b:h", "CUSTOM_ATTRIBUTE_NOT_SUPPORTED",
          f"attribute 'lexme' of h is not one this realizer reads; ignored (line 1, column {text.index('<head') + 1})")]
+
+
+def test_anticipators_list_shows_the_built_in_audio_anticipator():
+    proc = subprocess.run([sys.executable, "-m", "agentsim", "anticipators", "list"], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    names = {line.split("\t")[0]: line.split("\t")[1] for line in proc.stdout.splitlines()}
+    assert names["audio"] == "anticipators.audio:AudioBeatAnticipator"
+    assert {"metronome", "tap"} <= set(names)
+    audio_line = next(line for line in proc.stdout.splitlines() if line.startswith("audio\t"))
+    assert "tracker: str = 'causal'" in audio_line
