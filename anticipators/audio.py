@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agentsim.errors import AgentsimError, Unavailable
+from agentsim.errors import AgentsimError, Unavailable, UsageError
 from agentsim.core.anticipator import Anticipator
 
 _BEAT = re.compile(r"^beat(\d{1,9})$")
@@ -212,7 +212,8 @@ def read_audio(path: str | Path) -> tuple[np.ndarray, int]:
 
     path = Path(path)
     if not path.is_file():
-        raise AgentsimError(f"no audio file {str(path)!r}")
+        raise UsageError(f"{str(path)!r} is a folder, not an audio file" if path.is_dir()
+                         else f"no audio file {str(path)!r}")
     try:
         data, sample_rate = soundfile.read(str(path), dtype="float32", always_2d=True)
     except RuntimeError as exc:

@@ -365,7 +365,7 @@ def test_a_missing_story_fails_before_anything_runs(tmp_path, cache_dir):
     with pytest.raises(AgentsimError, match="no story file or shipped story"):
         story_run.main(_args(out, cache_dir, story=str(tmp_path / "gone.story")))
     assert not out.exists()
-    assert cli_main(["run", "storytelling", "--story", "no_such_story", "--out", str(out)]) == 1
+    assert cli_main(["run", "storytelling", "--story", "no_such_story", "--out", str(out)]) == 2  # a usage error
     assert not out.exists()
 
 

@@ -149,6 +149,8 @@ def read_document(path: str) -> str | bytes:
     if path == "-":
         return sys.stdin.buffer.read()
     p = resolve(path)
+    if p.is_dir():
+        raise UsageError(f"{path} is a folder, not a BML file (name the files in it: {path}/*.xml)")
     if not p.is_file():
         raise UsageError(f"no such file: {path}")
     return p.read_bytes()

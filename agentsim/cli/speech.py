@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from agentsim.cli import options
-from agentsim.errors import AgentsimError
+from agentsim.errors import AgentsimError, UsageError
 from agentsim.core.progress import progress
 
 DEFAULT_MODEL = Path("linear_model.json")
@@ -69,7 +69,7 @@ def read_text(path: str | None) -> str:
 
     p = resolve(path)
     if not p.is_file():
-        raise AgentsimError(f"no text file {path!r}")
+        raise UsageError(f"{path!r} is a folder, not a text file" if p.is_dir() else f"no text file {path!r}")
     text = p.read_text(encoding="utf-8")
     if not text.strip():
         raise AgentsimError(f"{path!r} has no text")

@@ -70,7 +70,10 @@ _NAME = re.compile(r"^[A-Za-z_][\w\-]*$")
 
 
 class StoryError(AgentsimError):
-    """A story that cannot be read: a missing file, or a tag or directive that makes no sense."""
+    """A story that cannot be read: a missing file, or a tag or directive that makes no sense (a usage error:
+    exit status 2)."""
+
+    exit_status = 2
 
 
 @dataclass(frozen=True)
