@@ -1,0 +1,93 @@
+#!/usr/bin/env python3
+"""The README's result tables, made from fresh runs, so that they cannot go stale.
+
+Each table the script owns sits in README.md between ``<!-- figures:NAME -->`` and ``<!-- /figures:NAME -->``.
+``python scripts/readme_figures.py`` runs what each table reports and writes the tables into the README;
+``--check`` writes nothing and exits 1, printing the difference, when a table differs from a fresh run (CI's
+system tests run it); ``--only NAME`` does one table.
+
+Tables:
+
+``storyteller-strategies``
+    ``agentsim run storytelling --compare`` (the longest shipped story, every animator-time strategy, seed 0,
+    espeak-ng): p50, p95 and max sync error, snaps and stall of each strategy, the best one in bold.
+"""
+
+from __future__ import annotations
+
+import argparse
+import difflib
+import json
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+README = ROOT / "README.md"
+
+
+def figure(value: float) -> str:
+    """A figure as the README prints it: three or four significant digits, never a lost integer part."""
+    if abs(value) >= 1000:
+        return f"{value:.0f}"
+    if abs(value) >= 1:
+        return f"{value:.1f}"
+    return f"{value:.2f}"
+
+
+def storyteller_strategies() -> str:
+    with tempfile.TemporaryDirectory() as out:
+        proc = subprocess.run([sys.executable, "-m", "agentsim", "run", "storytelling", "--compare", "--json",
+                               "--out", out, "--cache", str(Path(out) / "cache")],
+                              capture_output=True, text=True, timeout=1800)
+    if proc.returncode != 0:
+        raise SystemExit(f"readme_figures: run storytelling --compare failed: {proc.stderr.strip()}")
+    rows = json.loads(proc.stdout)["strategies"]
+    lines = ["| strategy | p50 (ms) | p95 (ms) | max (ms) | snaps | stall (s) |", "|---|---|---|---|---|---|"]
+    for name, r in rows.items():
+        cells = [name, figure(r["p50_ms"]), figure(r["p95_ms"]), figure(r["max_ms"]), str(r["snaps"]),
+                 f"{r['stall_s']:.2f}"]
+        if name == "best":
+            cells = [f"**{c}**" for c in cells]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+TABLES = {"storyteller-strategies": storyteller_strategies}
+
+
+def place(text: str, name: str, table: str) -> str:
+    pattern = re.compile(rf"(<!-- figures:{re.escape(name)} -->\n).*?(\n<!-- /figures:{re.escape(name)} -->)", re.S)
+    if not pattern.search(text):
+        raise SystemExit(f"readme_figures: README.md has no '<!-- figures:{name} -->' ... "
+                         f"'<!-- /figures:{name} -->' block")
+    return pattern.sub(lambda m: m.group(1) + table + m.group(2), text, count=1)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from a run")
+    parser.add_argument("--only", choices=sorted(TABLES), help="one table only")
+    args = parser.parse_args(argv)
+    old = README.read_text(encoding="utf-8")
+    new = old
+    for name in ([args.only] if args.only else TABLES):
+        new = place(new, name, TABLES[name]())
+    if new == old:
+        print("readme_figures: every table matches a fresh run", file=sys.stderr)
+        return 0
+    if args.check:
+        sys.stdout.writelines(difflib.unified_diff(old.splitlines(True), new.splitlines(True),
+                                                   "README.md", "README.md (fresh run)"))
+        print("readme_figures: the README's tables differ from a fresh run; "
+              "run 'python scripts/readme_figures.py' to update them", file=sys.stderr)
+        return 1
+    README.write_text(new, encoding="utf-8")
+    print("readme_figures: README.md updated", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

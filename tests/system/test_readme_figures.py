@@ -1,0 +1,38 @@
+"""The README's result tables match a fresh run (``scripts/readme_figures.py --check``): a change that moves
+a figure fails here until the README says the new one."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.system
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_readme_tables_match_a_fresh_run():
+    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "readme_figures.py"), "--check"],
+                          capture_output=True, text=True, timeout=1800)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stderr.strip() == "readme_figures: every table matches a fresh run"
+
+
+def test_the_check_fails_on_a_stale_figure(tmp_path, monkeypatch):
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        import readme_figures
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    readme = tmp_path / "README.md"
+    readme.write_text("a\n<!-- figures:storyteller-strategies -->\n| stale |\n<!-- /figures:storyteller-strategies -->\n")
+    monkeypatch.setattr(readme_figures, "README", readme)
+    monkeypatch.setitem(readme_figures.TABLES, "storyteller-strategies", lambda: "| fresh |")
+    assert readme_figures.main(["--check"]) == 1
+    assert "| stale |" in readme.read_text()
+    assert readme_figures.main([]) == 0
+    assert readme.read_text() == ("a\n<!-- figures:storyteller-strategies -->\n| fresh |\n"
+                                  "<!-- /figures:storyteller-strategies -->\n")
