@@ -68,7 +68,7 @@ def many_short(n: int = 240, seconds: float = 60.0, seed: int = 0) -> str:
     return f'<bml {NS} id="short">{"".join(parts)}</bml>'
 
 
-def realise(bml: str) -> Realizer:
+def realize(bml: str) -> Realizer:
     r = Realizer()
     r.submit(bml)
     r.run()
@@ -100,10 +100,10 @@ def measure(r: Realizer, duration: float, repeats: int) -> dict:
 
 
 def main() -> None:
-    twenty = realise(twenty_active())
+    twenty = realize(twenty_active())
     assert not twenty.feedback.warnings(), twenty.feedback.warnings()
     result_20, _ = measure(twenty, 31.0, repeats=7)
-    short = realise(many_short())
+    short = realize(many_short())
     result_short, stream = measure(short, 61.0, repeats=3)
     measured = measure_strokes(stream, short.feedback.sync_times())
     errors = np.array([m.error for m in measured if m.intact])

@@ -2,7 +2,7 @@
 over (its text concatenated), with its speech synthesised anew (an empty cache) and from the cache.
 
 Each run is a process of its own (so that its peak memory is its own): it reads the story, synthesises
-or loads the speech, compiles the BML, realises it, and writes every output but the plots (poses, BVH,
+or loads the speech, compiles the BML, realizes it, and writes every output but the plots (poses, BVH,
 the motion check, the WAV, the TextGrid and the run report). Prints JSON: per run the wall seconds of
 every stage, the whole, the fraction of the story's duration it took and the peak RSS; then the growth
 exponent of each (time ~ N^k, fitted over 1x, 4x, 16x) and the targets: every exponent at most 1.05, the

@@ -1,7 +1,7 @@
 """Speech-gesture synchronisation measured through the realizer: a beat on every content word.
 
 :func:`speech_sync` writes a BML block whose speech has a ``<sync>`` before every content word and a beat
-gesture whose stroke is tied to it, realises it with an animator-time strategy under a delivery
+gesture whose stroke is tied to it, realizes it with an animator-time strategy under a delivery
 condition, and scores when each stroke was passed against when its word was really heard.
 """
 
@@ -49,7 +49,7 @@ def beats_on_content_words(text: str, block_id: str = "sync") -> tuple[str, list
 
 def speech_sync(text: str, backend, strategy: str, delivery: DeliveryModel, timing: str = "tts",
                 seed: int = 0, linear_model=None) -> dict[str, Any]:
-    """Realise beats on every content word and measure their synchronisation with the speech.
+    """Realize beats on every content word and measure their synchronisation with the speech.
 
     Returns ``{"strategy", "timing", "seed", "words", "gestures", "missed", "error_ms": {p50, p95, max,
     mean, signed_mean, n}, "snaps", "stall_s", "rate": {"min", "max"}, "wall_seconds", "speech_seconds",

@@ -40,7 +40,7 @@ class SpeechText:
     """Plain text to speak, with named sync marks at character offsets.
 
     ``marks`` holds ``(offset, name)`` pairs: a mark at ``offset`` stands before the character at that
-    offset, so it is realised at the onset of the first word that starts at or after it. ``rate`` speeds
+    offset, so it is realized at the onset of the first word that starts at or after it. ``rate`` speeds
     the backend's own rate up (above 1) or slows it down. ``prosody`` holds SSML-like spans (emphasis,
     rate/pitch/volume, breaks, say-as), nested properly (a span ends before, or inside, the one around it).
     """

@@ -1,4 +1,4 @@
-"""Helpers the tests share: realise BML and look at the feedback; where the BML 1.0 examples are."""
+"""Helpers the tests share: realize BML and look at the feedback; where the BML 1.0 examples are."""
 
 from __future__ import annotations
 

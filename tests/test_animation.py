@@ -38,7 +38,7 @@ LONG_BLOCK = f"""<bml xmlns="{BML_NS}" id="long" characterId="agent">
 </bml>"""
 
 
-def realise(*documents, at=None) -> Realizer:
+def realize(*documents, at=None) -> Realizer:
     r = Realizer()
     for t, doc in zip(at or [0.0] * len(documents), documents):
         r.submit_at(t, doc)
@@ -54,7 +54,7 @@ def example_files() -> list[Path]:
 
 @pytest.fixture(scope="module")
 def long_realizer() -> Realizer:
-    r = realise(LONG_BLOCK)
+    r = realize(LONG_BLOCK)
     assert not r.feedback.warnings(), r.feedback.warnings()
     return r
 
@@ -93,7 +93,7 @@ def test_stroke_feedback_is_where_the_motion_has_its_stroke(path: Path, fps: flo
 
 
 def test_nod_bottom_and_beat_ictus_on_a_sync_timed_example():
-    r = realise((EXAMPLES / "testbeatandnod.xml").read_bytes())
+    r = realize((EXAMPLES / "testbeatandnod.xml").read_bytes())
     syncs = r.feedback.sync_times()
     stream = evaluate_poses(r, fps=60)
     pitch, _, _ = head_orientation(stream)
@@ -143,7 +143,7 @@ def test_a_bml_nod_during_a_gaze_rides_on_the_gaze():
       <gaze id="look" target="violins" influence="NECK" start="0.5" ready="1.2" relax="4" end="4.5"/>
       <head id="nod" lexeme="NOD" start="2"/>
     </bml>"""
-    r = realise(bml)
+    r = realize(bml)
     stream = evaluate_poses(r, fps=60)
     syncs = r.feedback.sync_times()
     names = stream.driver_names

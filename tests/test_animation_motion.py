@@ -17,7 +17,7 @@ from agentsim.realizer import Realizer
 BML_NS = "http://www.bml-initiative.org/bml/bml-1.0"
 
 
-def realise(bml: str, anticipators=()) -> Realizer:
+def realize(bml: str, anticipators=()) -> Realizer:
     r = Realizer(anticipators=anticipators)
     r.submit(bml)
     r.run()
@@ -91,7 +91,7 @@ def _wrist(stream, side="r"):
     'start="1" stroke="1.5" strokeEnd="1.7" relax="3.5" end="3.8"',  # long post-stroke hold
 ])
 def test_squeezed_and_stretched_beats_keep_the_ictus_on_the_stroke(timing):
-    r = realise(block(f'<gesture id="g" lexeme="BEAT" mode="RIGHT_HAND" {timing}/>'))
+    r = realize(block(f'<gesture id="g" lexeme="BEAT" mode="RIGHT_HAND" {timing}/>'))
     syncs = r.feedback.sync_times()
     for fps in (60, 120):
         stream = evaluate_poses(r, fps=fps)
@@ -100,7 +100,7 @@ def test_squeezed_and_stretched_beats_keep_the_ictus_on_the_stroke(timing):
 
 
 def test_a_long_pre_stroke_hold_holds_the_hand_still():
-    r = realise(block('<gesture id="g" lexeme="BEAT" mode="RIGHT_HAND" start="1" ready="1.4" '
+    r = realize(block('<gesture id="g" lexeme="BEAT" mode="RIGHT_HAND" start="1" ready="1.4" '
                       'strokeStart="3" stroke="3.15"/>'))
     stream = evaluate_poses(r, fps=60)
     hold = (stream.times > 1.45) & (stream.times < 2.95)
@@ -110,7 +110,7 @@ def test_a_long_pre_stroke_hold_holds_the_hand_still():
 
 
 def test_coarticulated_beats_on_one_hand_skip_the_retraction_between_them():
-    r = realise(block('<gesture id="g1" lexeme="BEAT" mode="RIGHT_HAND" start="1" stroke="1.5" end="2.6"/>'
+    r = realize(block('<gesture id="g1" lexeme="BEAT" mode="RIGHT_HAND" start="1" stroke="1.5" end="2.6"/>'
                       '<gesture id="g2" lexeme="BEAT" mode="RIGHT_HAND" start="1.8" stroke="2.3" end="3"/>'))
     syncs = r.feedback.sync_times()
     stream = evaluate_poses(r, fps=60)
@@ -123,11 +123,11 @@ def test_coarticulated_beats_on_one_hand_skip_the_retraction_between_them():
 
 
 def test_gestures_without_a_mode_take_the_free_hand():
-    r = realise(block('<gesture id="g1" lexeme="BEAT" mode="RIGHT_HAND" start="1" end="3"/>'
+    r = realize(block('<gesture id="g1" lexeme="BEAT" mode="RIGHT_HAND" start="1" end="3"/>'
                       '<gesture id="g2" lexeme="BEAT" start="0.5" end="2.5"/>'))
     stream = evaluate_poses(r, fps=60)
     assert stream.unit("g1")["sides"] == ["r"] and stream.unit("g2")["sides"] == ["l"]
-    both = realise(block('<gesture id="g" lexeme="OFFER" mode="BOTH_HANDS" start="1" end="2.5"/>'))
+    both = realize(block('<gesture id="g" lexeme="OFFER" mode="BOTH_HANDS" start="1" end="2.5"/>'))
     s2 = evaluate_poses(both, fps=60)
     assert s2.unit("g")["sides"] == ["l", "r"]
     for m in measure_strokes(s2, both.feedback.sync_times()):
@@ -165,7 +165,7 @@ def test_conducting_4_4_follows_the_metronome_through_a_tempo_change():
 
 
 def test_pointing_reaches_the_target_at_the_stroke():
-    r = realise(block('<pointing id="p" target="bluebox" start="1" end="4"/>'
+    r = realize(block('<pointing id="p" target="bluebox" start="1" end="4"/>'
                       '<pointing id="q" target="-0.1 1.2 0.35" mode="RIGHT_HAND" start="5" end="8"/>'))
     syncs = r.feedback.sync_times()
     stream = evaluate_poses(r, fps=60)
@@ -176,14 +176,14 @@ def test_pointing_reaches_the_target_at_the_stroke():
     k = np.searchsorted(stream.times, syncs["b:q:stroke"] + 0.1)
     assert np.linalg.norm(stream.position("r_wrist")[k] - [-0.1, 1.2, 0.35]) < 1e-9
     # unknown targets fall back to a point ahead
-    r2 = realise(block('<pointing id="p" target="nowhere" start="1" end="4"/>'))
+    r2 = realize(block('<pointing id="p" target="nowhere" start="1" end="4"/>'))
     s2 = evaluate_poses(r2, fps=60)
     t = pointing_arrival(s2, s2.unit("p")["sides"][0], s2.unit("p")["target"], 1.0, 4.0)
     assert abs(t - r2.feedback.sync_times()["b:p:stroke"]) <= 1 / 60
 
 
 def test_gaze_eyes_and_neck_reach_the_target_at_ready():
-    r = realise(block('<gaze id="g" target="violins" influence="NECK" start="1" ready="1.6" relax="3" end="3.5"/>'))
+    r = realize(block('<gaze id="g" target="violins" influence="NECK" start="1" ready="1.6" relax="3" end="3.5"/>'))
     syncs = r.feedback.sync_times()
     stream = evaluate_poses(r, fps=60)
     target = np.array(stream.unit("g")["target"])
@@ -273,7 +273,7 @@ def test_eyelids_follow_the_eyes_down_between_blinks():
 def test_animator_time_moves_speech_pegged_strokes():
     bml = block('<speech id="s"><text>Hello there, <sync id="m"/>everybody in the hall.</text></speech>'
                 '<gesture id="g" lexeme="BEAT" mode="RIGHT_HAND" stroke="s:m"/>')
-    r = realise(bml)
+    r = realize(bml)
     stroke = r.feedback.sync_times()["b:g:stroke"]
     late = TimeSource([0.0, 100.0], [-0.2, 99.8])  # the speech is 0.2 s behind the clock
     stream = evaluate_poses(r, fps=120, animator_time=late)

@@ -33,7 +33,7 @@ def viseme(bid, name, start, ready, relax, end, articulation=None):
     return behaviour(bid, "lips", attrs, start=start, ready=ready, relax=relax, end=end)
 
 
-def realise(*behaviours) -> Realizer:
+def realize(*behaviours) -> Realizer:
     r = Realizer()
     r.submit(Block("b1", behaviours=list(behaviours)))
     r.run()
@@ -100,7 +100,7 @@ def test_the_table_shapes_do_what_their_visemes_need_on_this_skeleton():
     ("Aa", None, "aa"), ("Aa", 0.8, "aa"), ("iY", 0.5, "iy"), ("OO", None, "oo"), ("BMP", 1.0, "bmp"),
     ("f", 0.6, "f"), ("_", None, "_")])
 def test_a_viseme_holds_its_table_shape_times_articulation_from_ready_to_relax(name, articulation, table):
-    r = realise(viseme("lips1", name, 0.2, 0.3, 0.5, 0.6, articulation))
+    r = realize(viseme("lips1", name, 0.2, 0.3, 0.5, 0.6, articulation))
     s = evaluate_poses(r, fps=FPS)
     scale = 1.0 if articulation is None else articulation
     expected = VISEMES[table].dofs(scale)
@@ -116,7 +116,7 @@ def test_a_viseme_holds_its_table_shape_times_articulation_from_ready_to_relax(n
 
 
 def test_an_unknown_viseme_gets_a_neutral_half_open_mouth_and_a_note():
-    r = realise(viseme("lips1", "Qx", 0.2, 0.3, 0.5, 0.6))
+    r = realize(viseme("lips1", "Qx", 0.2, 0.3, 0.5, 0.6))
     s = evaluate_poses(r, fps=FPS)
     k = frames(s, 0.4, 0.4)[0]
     assert mouth(s, k) == pytest.approx(NEUTRAL.dofs(), abs=1e-9)
@@ -125,7 +125,7 @@ def test_an_unknown_viseme_gets_a_neutral_half_open_mouth_and_a_note():
 
 
 def test_a_viseme_reports_its_sync_points_when_they_pass():
-    r = realise(viseme("lips1", "Aa", 0.2, 0.3, 0.5, 0.6))
+    r = realize(viseme("lips1", "Aa", 0.2, 0.3, 0.5, 0.6))
     progress = {f["id"]: f["globalTime"] for f in r.feedback.of_type("syncPointProgress")}
     assert progress["b1:lips1:start"] == pytest.approx(0.2, abs=1e-12)
     assert progress["b1:lips1:ready"] == pytest.approx(0.3, abs=1e-12)
@@ -153,7 +153,7 @@ def check_transition(s, first: dict, second: dict, t0: float, t1: float, ramp: f
 
 def test_a_viseme_starting_in_the_previous_ones_retraction_takes_over_from_its_shape():
     a, b = VISEMES["aa"].dofs(), VISEMES["uw"].dofs()
-    r = realise(viseme("lips1", "Aa", 0.2, 0.3, 0.5, 0.6), viseme("lips2", "Uw", 0.55, 0.65, 0.8, 0.9))
+    r = realize(viseme("lips1", "Aa", 0.2, 0.3, 0.5, 0.6), viseme("lips2", "Uw", 0.55, 0.65, 0.8, 0.9))
     s = evaluate_poses(r, fps=FPS)
     check_transition(s, a, b, 0.3, 0.65, ramp=0.1)
     assert s.writer(frames(s, 0.54, 0.54)[0], JAW) == "b1:lips1"  # the first holds its shape until then
@@ -164,7 +164,7 @@ def test_a_viseme_starting_in_the_previous_ones_retraction_takes_over_from_its_s
 
 def test_a_viseme_starting_in_the_previous_ones_hold_takes_over_at_its_start():
     a, b = VISEMES["iy"].dofs(0.9), VISEMES["oh"].dofs()
-    r = realise(viseme("lips1", "Iy", 0.2, 0.3, 0.6, 0.7, 0.9), viseme("lips2", "Oh", 0.4, 0.5, 0.8, 0.9))
+    r = realize(viseme("lips1", "Iy", 0.2, 0.3, 0.6, 0.7, 0.9), viseme("lips2", "Oh", 0.4, 0.5, 0.8, 0.9))
     s = evaluate_poses(r, fps=FPS)
     check_transition(s, a, b, 0.3, 0.5, ramp=0.1)
     for k in frames(s, 0.5, 0.8):
@@ -174,7 +174,7 @@ def test_a_viseme_starting_in_the_previous_ones_hold_takes_over_at_its_start():
 def test_visemes_written_back_to_back_without_ramps_blend_over_the_shortest_ramp():
     # SmartBody's lip sync: ready at start, end at relax, each viseme starting where the last ends
     row = [("Ih", 0.2, 0.34), ("Aa", 0.34, 0.48), ("BMP", 0.48, 0.6), ("W", 0.6, 0.76)]
-    r = realise(*[viseme(f"lips{i + 1}", v, a, a, e, e) for i, (v, a, e) in enumerate(row)])
+    r = realize(*[viseme(f"lips{i + 1}", v, a, a, e, e) for i, (v, a, e) in enumerate(row)])
     s = evaluate_poses(r, fps=FPS)
     rest = {d: 0.0 for d in MOUTH_DOFS}
     shapes = [VISEMES[v.lower()].dofs() for v, _, _ in row]
@@ -192,7 +192,7 @@ def test_visemes_written_back_to_back_without_ramps_blend_over_the_shortest_ramp
 
 def test_the_speech_jaw_yields_to_visemes_and_comes_back_after_them():
     speech = behaviour("s1", "speech", text="Hello there, how are you today my friend", start=0.5)
-    r = realise(speech, viseme("lips1", "Aa", "s1:start+0.5", "s1:start+0.6", "s1:start+0.8", "s1:start+0.9"),
+    r = realize(speech, viseme("lips1", "Aa", "s1:start+0.5", "s1:start+0.6", "s1:start+0.8", "s1:start+0.9"),
                 viseme("lips2", "Uw", "s1:start+0.85", "s1:start+0.95", "s1:start+1.1", "s1:start+1.2"))
     syncs = r.feedback.sync_times()
     assert syncs["b1:lips1:start"] == pytest.approx(1.0) and syncs["b1:lips2:end"] == pytest.approx(1.7)
@@ -221,7 +221,7 @@ CURVES = {"curve:open": "0 0 0.2 0.5 0.5 1 0.8 0", "curve:wide": "0 0 0.5 0.6 0.
 
 
 def test_curves_channels_move_the_mouth_by_their_keys_times_their_shapes():
-    r = realise(behaviour("c1", "curves", params=CURVES, start=1.0))
+    r = realize(behaviour("c1", "curves", params=CURVES, start=1.0))
     assert r.feedback.sync_times()["b1:c1:end"] == pytest.approx(1.8)
     s = evaluate_poses(r, fps=FPS)
     open_, wide, w = CHANNELS["open"], CHANNELS["wide"], CHANNELS["w"]
@@ -246,7 +246,7 @@ def test_curves_channels_move_the_mouth_by_their_keys_times_their_shapes():
 
 
 def test_curves_stretched_by_the_plan_place_their_keys_in_proportion():
-    r = realise(behaviour("c1", "curves", params={"curve:open": "0 0 0.5 1 0.8 0"}, start=1.0, end=2.6))
+    r = realize(behaviour("c1", "curves", params={"curve:open": "0 0 0.5 1 0.8 0"}, start=1.0, end=2.6))
     s = evaluate_poses(r, fps=FPS)
     jaw = s.channel(JAW)
     assert jaw[frames(s, 2.0, 2.0)[0]] == pytest.approx(CHANNELS["open"].jaw, abs=1e-9)  # key 0.5 s, doubled
@@ -272,7 +272,7 @@ def test_bvh_carries_the_lip_joints_and_reads_back_with_an_independent_reader(tm
 
     from helpers import bvh_reader
 
-    r = realise(viseme("lips1", "BMP", 0.2, 0.3, 0.5, 0.6), viseme("lips2", "Aa", 0.6, 0.7, 0.9, 1.0),
+    r = realize(viseme("lips1", "BMP", 0.2, 0.3, 0.5, 0.6), viseme("lips2", "Aa", 0.6, 0.7, 0.9, 1.0),
                 viseme("lips3", "Iy", 1.0, 1.1, 1.3, 1.4))
     s = evaluate_poses(r, fps=FPS)
     path = write_bvh(tmp_path / "lips.bvh", s)

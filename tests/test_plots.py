@@ -25,7 +25,7 @@ SENTENCE = ("Once upon a time a keeper lived on the hill and every night he clim
             "for the boats that came home late across the water")
 
 
-def realise(*blocks, at=None):
+def realize(*blocks, at=None):
     realizer = Realizer()
     for t, doc in zip(at or [0.0] * len(blocks), blocks):
         realizer.submit_at(t, doc)
@@ -59,7 +59,7 @@ def row_labels(fig) -> list[str]:
 def talk():
     """A speech heard 0.25 s late on a clock that drifts by 5000 ppm (exaggerated so that it shows), and
     three beat gestures, the last one well after the others."""
-    recording = realise(f'<bml {NS} id="b"><speech id="s"><text>{SENTENCE}</text></speech>'
+    recording = realize(f'<bml {NS} id="b"><speech id="s"><text>{SENTENCE}</text></speech>'
                         '<gesture id="g1" lexeme="BEAT" start="0.5"/><gesture id="g2" lexeme="BEAT" start="3"/>'
                         '<gesture id="g3" lexeme="BEAT" start="14"/></bml>')
     (speech,) = recording.speech
@@ -128,7 +128,7 @@ def test_an_interrupted_speech_has_no_words_after_its_stop(talk):
 
 
 def test_a_speech_cut_by_another_block_has_no_words_after_the_cut():
-    recording = realise(f'<bml {NS} id="one"><speech id="s"><text>{SENTENCE}</text></speech></bml>',
+    recording = realize(f'<bml {NS} id="one"><speech id="s"><text>{SENTENCE}</text></speech></bml>',
                         f'<bml {NS} id="two" composition="REPLACE"><head id="n" lexeme="NOD"/></bml>', at=[0.0, 2.0])
     assert recording.behaviour("one:s").stopped == 2.0
     words = heard_words(recording)
@@ -158,7 +158,7 @@ def test_a_window_leaves_out_the_behaviours_outside_it(talk):
 def long_run(seconds: float = 95.0):
     """Beat gestures every 2.5 s for ``seconds``: one row each."""
     gestures = "".join(f'<gesture id="g{i}" lexeme="BEAT" start="{2.5 * i}"/>' for i in range(int(seconds / 2.5)))
-    return realise(f'<bml {NS} id="long">{gestures}</bml>')
+    return realize(f'<bml {NS} id="long">{gestures}</bml>')
 
 
 def test_a_long_run_writes_an_overview_and_one_file_per_window(tmp_path):
@@ -270,7 +270,7 @@ def test_the_conductors_tempo_figure_of_a_run_that_falls_apart():
 
 
 def test_no_text_says_none_or_nan_for_speech_without_gestures_and_a_dropped_behaviour():
-    recording = realise(f'<bml {NS} id="one"><speech id="s"><text>{SENTENCE}</text></speech>'
+    recording = realize(f'<bml {NS} id="one"><speech id="s"><text>{SENTENCE}</text></speech>'
                         '<gesture id="g" lexeme="BEAT" start="4"/></bml>',
                         f'<bml {NS} id="two" composition="REPLACE"><head id="n" lexeme="NOD"/></bml>', at=[0.0, 2.0])
     for fig in (timeline_figure(recording), timeline_figure(recording, start=1.0, end=3.0), overview_figure(recording)):

@@ -1,4 +1,4 @@
-"""Poses out: evaluate a realised plan into a PoseStream, and write it as BVH or npz.
+"""Poses out: evaluate a realized plan into a PoseStream, and write it as BVH or npz.
 
 ``evaluate_poses`` takes the recording of a run (:class:`~agentsim.core.recording.Recording`, or anything
 with a ``recording()`` method, such as a realizer after ``run()``), builds the drivers that play each

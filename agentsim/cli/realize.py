@@ -23,7 +23,7 @@ def _times(text: str) -> list[float]:
 
 def add_parsers(commands) -> None:
     realize = commands.add_parser(
-        "realize", help="realise BML files and print their feedback as JSON lines",
+        "realize", help="realize BML files and print their feedback as JSON lines",
         description="Send each FILE as a BML block (at the --at times, default all at 0, in order), run until "
                     "every block has ended (or --until), and print the feedback to stdout, one JSON object "
                     "per line. Diagnostics go to stderr.")
@@ -43,8 +43,8 @@ def add_parsers(commands) -> None:
     realize.set_defaults(handler=realize_files)
 
     plot = commands.add_parser(
-        "plot", help="pictures of a realisation",
-        description="Realise FILE and draw its timeline: behaviours, phases, pegs, feedback, the words heard "
+        "plot", help="pictures of a realization",
+        description="Realize FILE and draw its timeline: behaviours, phases, pegs, feedback, the words heard "
                     "and the poses. --from/--to draw only that window of the run; without them a run longer "
                     "than 60 s is drawn as an overview in OUT.png plus one picture per 30 s next to it "
                     "(OUT_0000-0030s.png, ...).")
@@ -207,7 +207,7 @@ def realize_files(args: argparse.Namespace) -> int:
 
 
 def plot_timeline(args: argparse.Namespace) -> int:
-    """``agentsim plot timeline``: realise the file and draw its timeline, or the ``--from``/``--to`` window
+    """``agentsim plot timeline``: realize the file and draw its timeline, or the ``--from``/``--to`` window
     of it (a usage error, before anything runs, if the window is not seconds that end after they start)."""
     import math
 

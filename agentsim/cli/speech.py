@@ -28,7 +28,7 @@ def add_parsers(commands) -> None:
     kinds = evaluate.add_subparsers(dest="kind", required=True)
     sync = kinds.add_parser(
         "speech-sync", help="beats on every content word: how far from their words do the strokes land?",
-        description="Peg a beat gesture's stroke to every content word of the text, realise it with an "
+        description="Peg a beat gesture's stroke to every content word of the text, realize it with an "
                     "animator-time strategy while progress events arrive late, scattered and in bursts, and "
                     "report the sync error (stroke minus word onset as heard), snaps, stalls and rates.")
     sync.add_argument("--text", metavar="FILE", help="text to speak (default: a bundled text)")

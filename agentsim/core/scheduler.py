@@ -106,7 +106,7 @@ class Scheduler(Composition, Interruption, Retiming):
                                      blocks=BlockControl(self))
 
     def add_engine(self, engine: Engine) -> None:
-        """Let ``engine`` realise the behaviour types its planner names (it was made with :attr:`context`)."""
+        """Let ``engine`` realize the behaviour types its planner names (it was made with :attr:`context`)."""
         self.engine_list.append(engine)
         for behaviour_type in engine.planner.behaviour_types:
             self.engines[behaviour_type] = engine

@@ -126,7 +126,7 @@ class BlockSolver:
         self.issues.append(Issue(kind, f"{behaviour_id}: {reason}; behaviour dropped", [behaviour_id]))
         beh = self.block.behaviour(behaviour_id)
         if beh is not None and beh.required:
-            self.fail(f"required behaviour {behaviour_id} cannot be realised ({reason})")
+            self.fail(f"required behaviour {behaviour_id} cannot be realized ({reason})")
         timed = self.timed.pop(behaviour_id, None)
         if timed is not None:
             timed.state = "dropped"
@@ -191,7 +191,7 @@ class BlockSolver:
         """Apply synchronisations; return the before/after constraints with their resolved nodes."""
         for beh in self.block.behaviours:
             if BEHAVIOUR_TYPES[beh.type].name not in self.engines:
-                self.drop(beh.id, f"no engine realises <{beh.type}>", "BEHAVIOR_TYPE_NOT_SUPPORTED")
+                self.drop(beh.id, f"no engine realizes <{beh.type}>", "BEHAVIOR_TYPE_NOT_SUPPORTED")
         for beh in self.block.behaviours:
             for sync_id, ref in beh.refs.items():
                 if beh.id in self.dropped:

@@ -7,7 +7,7 @@ phoneme-level sync marks (EML ``<tm event="onStart|onEnd|onPhone">``):
               its compiler to BML
 ``praat``     stories from, and tellings to, Praat TextGrids (words, phones and gestures tiers)
 ``voice``     the voice: a disk cache of synthesised utterances and phoneme-level sync marks
-``telling``   realising a story under an event-delivery condition and scoring every stroke against
+``telling``   realizing a story under an event-delivery condition and scoring every stroke against
               the stressed syllable it aims at
 ``run``       ``agentsim run storytelling``: the command, its outputs and the strategy comparison
 ``stories/``  the stories shipped

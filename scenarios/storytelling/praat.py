@@ -129,14 +129,14 @@ def written_labels(text: str, utterance: Utterance) -> list[tuple[str, float, fl
 
 
 def export_textgrid(path: str | Path, story: Story, utterance: Utterance, planned: Sequence[float],
-                    realised: Sequence[float] | None = None, ids: Sequence[str] | None = None,
+                    realized: Sequence[float] | None = None, ids: Sequence[str] | None = None,
                     to_axis: Callable[[float], float] | None = None, axis: str = "") -> Path:
     """Write a telling as a TextGrid, on the audio's time axis or (``to_axis``) the run's.
 
     Tiers: ``words`` (:func:`written_labels`) and ``phones`` (intervals; a stressed vowel's label ends
     in ``ˈ``), ``gestures``
     (points at each gesture's planned syllable time, labelled with its tag; tags on one word share a
-    point: ``nod beat``) and, when ``realised`` is given, ``strokes`` (points where each gesture's sync
+    point: ``nod beat``) and, when ``realized`` is given, ``strokes`` (points where each gesture's sync
     point was passed, labelled ``id error_ms``).
 
     Parameters
@@ -148,13 +148,13 @@ def export_textgrid(path: str | Path, story: Story, utterance: Utterance, planne
         The speech as synthesised (its times are the audio's).
     planned : sequence of float
         Audio time (s) of each gesture's stressed syllable.
-    realised : sequence of float, optional
+    realized : sequence of float, optional
         Audio time (s) at which each gesture's sync point was passed (NaN: never).
     ids : sequence of str, optional
         BML id of each gesture (labels of the ``strokes`` tier).
     to_axis : callable, optional
         Maps an audio time (of ``utterance`` and ``planned``) to the TextGrid's axis (the run's: where the
-        audio was heard); ``realised`` is already on that axis.
+        audio was heard); ``realized`` is already on that axis.
     axis : str
         Said by an empty point tier named ``axis: ...`` (which axis the times are on).
     """
@@ -165,8 +165,8 @@ def export_textgrid(path: str | Path, story: Story, utterance: Utterance, planne
     planned = [at(float(p)) for p in planned]
     end = float(at(utterance.duration))
     start = 0.0
-    if realised is not None:
-        finite = [float(t) for t in realised if np.isfinite(t)]
+    if realized is not None:
+        finite = [float(t) for t in realized if np.isfinite(t)]
         start = math.floor(min([0.0] + finite) * 1000.0) / 1000.0  # a stroke may come before the audio
         end = math.ceil(max([end] + finite) * 1000.0) / 1000.0
 
@@ -190,10 +190,10 @@ def export_textgrid(path: str | Path, story: Story, utterance: Utterance, planne
         points.setdefault(float(t), []).append(g.label)
     grid.addTier(textgrid.PointTier("gestures", [Point(t, " ".join(labels)) for t, labels in sorted(points.items())],
                                     start, end))
-    if realised is not None:
+    if realized is not None:
         ids = list(ids) if ids is not None else [str(i) for i in range(len(story.gestures))]
         strokes: dict[float, list[str]] = {}
-        for gid, t, p in zip(ids, realised, planned):
+        for gid, t, p in zip(ids, realized, planned):
             if np.isfinite(t):
                 strokes.setdefault(float(t), []).append(f"{gid} {1000.0 * (t - p):+.1f}ms")
         grid.addTier(textgrid.PointTier("strokes", [Point(t, " ".join(v)) for t, v in sorted(strokes.items())],

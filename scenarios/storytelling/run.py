@@ -1,14 +1,14 @@
 """``agentsim run storytelling``: tell a story with its gestures on the stressed syllables, and measure it.
 
 ``main(args)`` reads the story (a ``.story`` file of the annotation format, a shipped story by name, or
-a Praat TextGrid with ``words`` and ``gestures`` tiers), compiles it to BML, realises it with an
+a Praat TextGrid with ``words`` and ``gestures`` tiers), compiles it to BML, realizes it with an
 animator-time strategy under an event-delivery condition, and writes to ``--out``:
 
 =====================  ==============================================================================
 ``metrics.json``       the figures: words, gestures, duration, strategy, sync error (p50, p95, max, ms)
                        overall and per kind, snaps, stalls, warnings, wall time and its stages
 ``narration.wav``      the speech where the run's listener heard it (from ``audio_start_s``, drifting)
-``story.TextGrid``     words, phones, gestures (planned), strokes (realised)
+``story.TextGrid``     words, phones, gestures (planned), strokes (realized)
 ``story.bvh``          the body's motion
 ``gestures.csv``       one row per gesture: its word, when it sounded, when its stroke came, the error
 ``report.html``        the run to watch and hear in a browser (with ``report_files/``)
@@ -16,7 +16,7 @@ animator-time strategy under an event-delivery condition, and writes to ``--out`
                        ... behaviours, phases, pegs, feedback and words of each ``--window`` seconds
 ``sync_errors.png``    every gesture's sync error over the whole story
 ``feedback.jsonl``     the BML feedback, one JSON object per line
-``story.bml``          the BML block that was realised
+``story.bml``          the BML block that was realized
 ``compare.json``       with ``--compare``: the figures of every strategy on the same seed
 =====================  ==============================================================================
 
@@ -108,7 +108,7 @@ def main(args: argparse.Namespace) -> int:
     ``args.delivery``, the event-delivery condition they make); returns the exit status.
 
     Raises :class:`AgentsimError` (a missing story, a bad tag, an unknown strategy) before anything is
-    synthesised or realised.
+    synthesised or realized.
     """
     from speech_timing.animator_time import STRATEGIES, check_strategy
 

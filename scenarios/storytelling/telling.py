@@ -1,8 +1,8 @@
-"""Telling a story: realise its BML under an event-delivery condition and score every gesture against
+"""Telling a story: realize its BML under an event-delivery condition and score every gesture against
 the stressed syllable it aims at.
 
 :func:`tell` compiles a :class:`~scenarios.storytelling.markup.Story` to one BML block (one speech,
-one behaviour per gesture), realises it with an animator-time strategy while the speech's progress
+one behaviour per gesture), realizes it with an animator-time strategy while the speech's progress
 events arrive late, scattered and in bursts, and returns a :class:`Telling`. A gesture's *sync error* is
 the time its syllable sync point was passed (stroke; attack peak of a face; end of a gaze shift) minus
 the time its word's stressed vowel was really heard, ``playback.true_time(stressed_phoneme.start)``
@@ -86,13 +86,13 @@ def stress_offsets(story: Story, utterance: Utterance) -> dict[int, float]:
 
 @dataclass
 class Telling:
-    """One realisation of a story and its scores.
+    """One realization of a story and its scores.
 
     Attributes
     ----------
     story : Story
     bml : str
-        The block that was realised.
+        The block that was realized.
     realizer : Realizer
         After ``run()``.
     recording : Recording
@@ -108,7 +108,7 @@ class Telling:
     stressed : numpy.ndarray of bool
         Whether the word has a stressed vowel (else ``heard`` is its onset).
     wall_seconds : float
-        Wall time of the simulation (compiling, realising, scoring), synthesis excluded.
+        Wall time of the simulation (compiling, realizing, scoring), synthesis excluded.
     """
 
     story: Story
@@ -197,7 +197,7 @@ class Telling:
 def tell(story: Story, strategy: str = "best", delivery: DeliveryModel = DEFAULT_DELIVERY, seed: int = 0,
          voice=None, anchor: str = "stress", timing: str = "tts", release: bool = True,
          start: float = SPEECH_START) -> Telling:
-    """Realise ``story`` and score its gestures.
+    """Realize ``story`` and score its gestures.
 
     Parameters
     ----------

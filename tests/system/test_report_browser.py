@@ -1,5 +1,5 @@
 """The HTML run report in a real browser: headless Chromium opens it from file:// (no network) and the test
-reads the page's ``window.report`` over the DevTools protocol, on a run realised with espeak-ng.
+reads the page's ``window.report`` over the DevTools protocol, on a run realized with espeak-ng.
 
 Nothing here plays sound: time is moved by seeking, and a run without sound plays on the page's own clock,
 so no audio device is needed."""
@@ -30,7 +30,7 @@ BML = (f'<bml {NS} id="b1"><speech id="s1"><text>The <sync id="w1"/>lighthouse k
 
 @pytest.fixture(scope="module")
 def spoken():
-    """Two beats pegged to two words of a speech, realised with espeak-ng: recording, track, poses, table."""
+    """Two beats pegged to two words of a speech, realized with espeak-ng: recording, track, poses, table."""
     from speech_timing.espeak import EspeakBackend
 
     realizer = Realizer(tts=EspeakBackend())
