@@ -73,13 +73,11 @@ def add_json(parser: argparse.ArgumentParser) -> None:
 
 def run_conductor(args: argparse.Namespace) -> int:
     if args.list_configs:
+        from scenarios import first_comment
         from scenarios.conductor.config import CONFIGS_DIR, config_names
 
         for name in config_names():
-            first = next((line.lstrip("# ").strip() for line in
-                          (CONFIGS_DIR / f"{name}.toml").read_text(encoding="utf-8").splitlines()
-                          if line.startswith("#") and line.lstrip("# ").strip()), "")
-            print(f"{name:<14} {first}".rstrip())
+            print(f"{name:<14} {first_comment(CONFIGS_DIR / f'{name}.toml')}".rstrip())
         return 0
     from scenarios.conductor.run import main
 

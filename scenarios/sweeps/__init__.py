@@ -22,8 +22,6 @@ def find(name: str) -> Path | None:
 
 def describe(name: str) -> str:
     """The first line of a shipped spec's opening comment."""
-    for line in (HOME / f"{name}.toml").read_text(encoding="utf-8").splitlines():
-        text = line.lstrip("#").strip()
-        if line.startswith("#") and text:
-            return text
-    return ""
+    from scenarios import first_comment
+
+    return first_comment(HOME / f"{name}.toml")
