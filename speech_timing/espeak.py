@@ -31,7 +31,9 @@ Observed behaviour of espeak-ng 1.51 that the code relies on or works around:
 * espeak-ng keeps state between syntheses (the phase of its pitch flutter, its gain control), so the
   same text spoken again in one process gives the same words and phonemes but times that differ by
   up to about 20 ms, and different audio samples. The first synthesis in a fresh process is exactly
-  reproducible.
+  reproducible: every synthesis here is one, in a fork of an engine that has never spoken
+  (:class:`_Pristine`), so the same text gives the same samples and times in every process, whatever
+  was said before.
 
 Prosody spans (:class:`~speech_timing.backend.Prosody`) are sent as espeak-ng's SSML elements, with
 the values it reads (``docs/markup.md`` and ``ssml.c`` of espeak-ng; others are left out, see
@@ -63,6 +65,7 @@ import difflib
 import functools
 import itertools
 import mmap
+import os
 import re
 import threading
 from dataclasses import dataclass, field
@@ -225,6 +228,15 @@ class _PcmBuffer:
         ctypes.memmove(self.array.ctypes.data + 2 * self.filled, wav, 2 * count)
         self.filled += count
 
+    @classmethod
+    def of(cls, pcm: bytes) -> "_PcmBuffer":
+        """A buffer holding the 16-bit samples ``pcm``."""
+        buffer = cls()
+        if pcm:
+            data = ctypes.create_string_buffer(pcm, len(pcm))
+            buffer.append(data, len(pcm) // 2)
+        return buffer
+
     def samples(self):
         """The samples appended so far (int16, a view of the buffer: valid until :meth:`to_float`)."""
         import numpy as np
@@ -260,6 +272,8 @@ class _Engine:
 
     def __init__(self, library: str = LIBRARY_NAME) -> None:
         self.lock = threading.RLock()
+        self.library = library
+        self._pristine: _Pristine | None = None
         self._lib = _load_library(library)
         options = _INITIALIZE_PHONEME_EVENTS | _INITIALIZE_PHONEME_IPA | _INITIALIZE_DONT_EXIT
         sample_rate = self._lib.espeak_Initialize(_AUDIO_OUTPUT_SYNCHRONOUS, 0, None, options)
@@ -300,7 +314,17 @@ class _Engine:
 
     def synth(self, ssml: str, voice: str, rate: int) -> tuple[_PcmBuffer, list[_RawEvent]]:
         """Synthesise SSML; return the int16 audio (in its buffer) and the events in the order espeak
-        reported them."""
+        reported them. The synthesis runs in a fork of an engine that has never synthesised
+        (:class:`_Pristine`), so that it comes out as the first synthesis of a fresh process does, whatever
+        was said before."""
+        with self.lock:
+            if self._pristine is None or self._pristine.pid != os.getpid():  # a forked copy starts its own
+                self._pristine = _Pristine(self.library)
+            pcm, events = self._pristine.synth(ssml, voice, rate)
+        return _PcmBuffer.of(pcm), events
+
+    def synth_here(self, ssml: str, voice: str, rate: int) -> tuple[_PcmBuffer, list[_RawEvent]]:
+        """:meth:`synth` in this process: what it gives depends on what this engine said before."""
 
         with self.lock:
             self.select(voice, rate)
@@ -366,6 +390,113 @@ def _event_name(symbol: str) -> str:
 _ENGINE: _Engine | None = None
 _ENGINE_ERROR: SpeechBackendUnavailable | None = None
 _ENGINE_LOCK = threading.Lock()
+
+
+class _Pristine:
+    """espeak-ng as it is before its first synthesis, kept in a process of its own that forks for every
+    synthesis: the fork synthesises and exits, and the engine it came from stays as it was.
+
+    espeak-ng keeps state from one synthesis to the next (the phase of its pitch flutter, its gain
+    control): spoken again in one process, the same text keeps its words and phonemes but its times move
+    by samples to milliseconds, and its audio differs. The first synthesis of a fresh process is exactly
+    reproducible, and so every synthesis is, made this way: the same text gives the same samples and
+    times in every process, whatever was spoken before (a fork costs about a millisecond). Messages on
+    the pipes are pickles behind their length.
+    """
+
+    def __init__(self, library: str) -> None:
+        import subprocess
+        import sys
+        from pathlib import Path
+
+        self.pid = os.getpid()
+        env = dict(os.environ)
+        root = str(Path(__file__).resolve().parents[1])  # where speech_timing (and agentsim) are
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", "from speech_timing.espeak import _serve_pristine; _serve_pristine()", library],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+        ready = _receive(self.process.stdout)
+        if ready != "ready":
+            self.process.kill()
+            raise SpeechBackendUnavailable(f"espeak-ng could not be started in a process of its own ({ready}); "
+                                           f"install it with: {INSTALL_HINT}")
+
+    def synth(self, ssml: str, voice: str, rate: int) -> tuple[bytes, list[_RawEvent]]:
+        try:
+            _send(self.process.stdin, (ssml, voice, rate))
+            reply = _receive(self.process.stdout)
+        except (OSError, EOFError) as exc:
+            reply = f"its process ended ({exc})"
+        if isinstance(reply, str):
+            raise RuntimeError(f"espeak-ng synthesis failed: {reply}")
+        return reply
+
+    def __del__(self) -> None:
+        process = getattr(self, "process", None)
+        if process is not None and self.pid == os.getpid():
+            process.kill()
+
+
+def _send(stream, value) -> None:
+    import pickle
+
+    data = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(len(data).to_bytes(8, "little") + data)
+    stream.flush()
+
+
+def _receive(stream):
+    import pickle
+
+    head = stream.read(8)
+    if len(head) < 8:
+        raise EOFError("no reply")
+    size = int.from_bytes(head, "little")
+    data = stream.read(size)
+    if len(data) < size:
+        raise EOFError("a cut reply")
+    return pickle.loads(data)
+
+
+def _serve_pristine() -> None:
+    """The loop of :class:`_Pristine`'s process: for each request on stdin, fork; the fork synthesises and
+    hands its samples and events back through a pipe; the reply goes to stdout. Ends when stdin closes."""
+    import sys
+
+    requests, replies = sys.stdin.buffer, sys.stdout.buffer
+    try:
+        engine = _Engine(sys.argv[1])
+    except BaseException as exc:  # said to the parent, which raises it there
+        _send(replies, f"{type(exc).__name__}: {exc}")
+        return
+    _send(replies, "ready")
+    while True:
+        try:
+            ssml, voice, rate = _receive(requests)
+        except EOFError:
+            return
+        read, write = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the fork: synthesise once, reply, and go
+            os.close(read)
+            try:
+                engine.select(voice, rate)
+                buffer, events = engine.synth_here(ssml, voice, rate)
+                reply = (buffer.samples().tobytes(), events)
+            except BaseException as exc:
+                reply = f"{type(exc).__name__}: {exc}"
+            with os.fdopen(write, "wb") as out:
+                _send(out, reply)
+            os._exit(0)
+        os.close(write)
+        with os.fdopen(read, "rb") as reply_stream:
+            try:
+                reply = _receive(reply_stream)
+            except EOFError:
+                reply = "the synthesising process died"
+        os.waitpid(pid, 0)
+        _send(replies, reply)
 
 
 def _engine() -> _Engine:
@@ -813,8 +944,8 @@ class EspeakBackend:
         self._engine.select(voice, int(rate))
         self.voice = voice
         self.rate = int(rate)
-        # espeak-ng carries state from one utterance to the next (the same text spoken again can come out
-        # some milliseconds longer): a text is synthesised once per backend, and said the same every time
+        # what was said, kept: the same text is said the same every time (each synthesis is a fresh
+        # engine's, see _Pristine), and asked for again it is not synthesised again
         self._spoken: OrderedDict[SpeechText, Utterance] = OrderedDict()
         self._remembered = threading.Lock()
 

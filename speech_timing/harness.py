@@ -39,8 +39,7 @@ _UTTERANCES: dict[tuple, Utterance] = {}
 def synthesize_cached(backend: TTSBackend, text: str) -> Utterance:
     """Synthesise ``text`` once per process and backend configuration; later calls return the same object.
 
-    espeak-ng keeps state between syntheses, so speaking a text twice can shift its times by up to
-    about 20 ms; caching keeps every strategy and condition on the same timeline.
+    Every strategy and condition is scored on the same timeline, synthesised once.
     """
     key = (backend_key(backend), text)
     if key not in _UTTERANCES:

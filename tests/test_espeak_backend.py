@@ -374,3 +374,30 @@ def test_a_speech_forgotten_is_synthesised_again(backend):
     assert abs(len(again.audio) - len(first.audio)) < 0.01 * len(first.audio)
     assert again.duration == len(again.audio) / again.sample_rate
     backend.forget(SpeechText("never said"))  # nothing to forget: no error
+
+
+def test_a_text_is_said_the_same_whatever_was_said_before_and_in_every_process(tmp_path):
+    """espeak-ng keeps state from one synthesis to the next; each synthesis runs in a fork of an engine that
+    has never spoken, so it is the first synthesis of a fresh process, sample for sample."""
+    import subprocess
+    import sys
+
+    from speech_timing.linear_model import TEXTS_DIR
+
+    text = " ".join((TEXTS_DIR / "clocks.txt").read_text().split())
+    other = " ".join((TEXTS_DIR / "orchard.txt").read_text().split())
+    first = EspeakBackend().synthesize(SpeechText(text))
+    EspeakBackend().synthesize(SpeechText(other))
+    again = EspeakBackend().synthesize(SpeechText(text))  # a new backend: synthesised anew, after another text
+    assert again is not first and np.array_equal(again.audio, first.audio)
+    assert again.words == first.words and again.phonemes == first.phonemes
+    # ... and as a fresh process says it first, in that process itself (the engine's own synthesis)
+    script = ("import sys, numpy as np; from speech_timing.espeak import EspeakBackend, _engine; "
+              "from speech_timing.backend import SpeechText; e = _engine(); e.synth = e.synth_here; "
+              "np.save(sys.argv[2], EspeakBackend().synthesize(SpeechText(sys.argv[1])).audio)")
+    subprocess.run([sys.executable, "-c", script, text, str(tmp_path / "fresh.npy")], check=True, timeout=120)
+    assert np.array_equal(np.load(tmp_path / "fresh.npy"), first.audio)
+    # while the engine's own synthesis, spoken after the other text, comes out otherwise
+    script = script.replace("np.save(", "EspeakBackend().synthesize(SpeechText(sys.argv[3])); np.save(")
+    subprocess.run([sys.executable, "-c", script, text, str(tmp_path / "later.npy"), other], check=True, timeout=120)
+    assert not np.array_equal(np.load(tmp_path / "later.npy"), first.audio)
