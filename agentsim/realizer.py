@@ -33,7 +33,9 @@ class Realizer:
     realtime : bool
         Run in real time (``simpy.rt.RealtimeEnvironment``) instead of as fast as possible.
     tts : TTSBackend, optional
-        Text-to-speech backend for speech timing; by default the deterministic built-in one.
+        Text-to-speech backend for speech timing; by default espeak-ng when it is installed, else the
+        deterministic built-in one (with a warning), as every command does
+        (:func:`speech_timing.choice.default_backend`).
     anticipators : iterable of Anticipator
         Anticipators whose pegs BML may refer to as ``anticipators:<id>:<sync>``.
     speech : SpeechConfig, optional
@@ -61,8 +63,8 @@ class Realizer:
         self.board = PegBoard()
         self.feedback = FeedbackLog(keep=None if keep is None else 100 * keep)
         if tts is None:
-            from speech_timing.builtin import BuiltinBackend
-            tts = BuiltinBackend()
+            from speech_timing.choice import default_backend
+            tts = default_backend()
         self.scheduler = Scheduler(self.env, self.board, self.feedback, prediction_tolerance, keep=keep)
         context = self.scheduler.context
         self.speech = SpeechEngine(context, tts, speech)

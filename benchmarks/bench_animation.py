@@ -19,6 +19,7 @@ import numpy as np
 from agentsim.animation import evaluate_poses
 from agentsim.animation.analysis import measure_strokes
 from agentsim.realizer import Realizer
+from speech_timing.builtin import BuiltinBackend
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 FPS = 60.0
@@ -69,7 +70,7 @@ def many_short(n: int = 240, seconds: float = 60.0, seed: int = 0) -> str:
 
 
 def realize(bml: str) -> Realizer:
-    r = Realizer()
+    r = Realizer(tts=BuiltinBackend())
     r.submit(bml)
     r.run()
     return r

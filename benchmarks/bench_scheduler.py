@@ -23,6 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agentsim.bml.parser import _parse_ref, parse_bml, parse_document  # noqa: E402
 from agentsim.realizer import Realizer  # noqa: E402
+from speech_timing.builtin import BuiltinBackend  # noqa: E402
 
 TARGET_MS = 50.0
 EXPONENT_TARGET = 1.05
@@ -64,7 +65,7 @@ def measure(n: int, repeats: int) -> dict:
         t0 = time.perf_counter()
         parse_document(text)
         lenient_s.append(time.perf_counter() - t0)
-        realizer = Realizer()
+        realizer = Realizer(tts=BuiltinBackend())
         _parse_ref.cache_clear()
         c0 = time.process_time()
         t0 = time.perf_counter()

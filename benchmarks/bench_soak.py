@@ -23,6 +23,7 @@ import numpy as np
 
 from anticipators.metronome import Metronome
 from agentsim.realizer import Realizer
+from speech_timing.builtin import BuiltinBackend
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 WORDS = ["we", "walk", "along", "the", "river", "slowly", "today", "and", "talk"]
@@ -42,7 +43,7 @@ class Soak:
     def __init__(self, every: float, keep: int, seed: int = 0):
         self.rng = np.random.default_rng(seed)
         self.metronome = Metronome("metronome", bpm=100.0)
-        self.realizer = Realizer(anticipators=[self.metronome], keep=keep)
+        self.realizer = Realizer(anticipators=[self.metronome], keep=keep, tts=BuiltinBackend())
         self.every = every
         self.blocks = 0
         self.worst = 0.0

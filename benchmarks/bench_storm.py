@@ -97,7 +97,7 @@ def peg_storm(n_pegs: int, seconds: float) -> dict:
     from agentsim.realizer import Realizer
 
     swarm = Swarm(n_pegs)
-    realizer = Realizer(anticipators=[swarm])
+    realizer = Realizer(anticipators=[swarm], tts=BuiltinBackend())
     ns = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
     nods = "".join(f'<head id="h{i}" lexeme="NOD" stroke="anticipators:swarm:p{i}"/>' for i in range(n_pegs))
     realizer.submit(f'<bml {ns} id="b">{nods}</bml>')

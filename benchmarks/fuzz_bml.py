@@ -168,6 +168,7 @@ def run_case(case: int, seed: int, docs: list[str]) -> dict:
     from anticipators.metronome import Metronome
     from agentsim.engines.speech import SpeechConfig
     from agentsim.realizer import Realizer
+    from speech_timing.builtin import BuiltinBackend
 
     rng = np.random.default_rng([seed, case])
     texts, mutations = [], []
@@ -179,7 +180,7 @@ def run_case(case: int, seed: int, docs: list[str]) -> dict:
     result = {"case": case, "mutations": mutations, "strategy": strategy}
     start = time.perf_counter()
     try:
-        realizer = Realizer(anticipators=[Metronome(bpm=float(rng.uniform(60, 180)))],
+        realizer = Realizer(anticipators=[Metronome(bpm=float(rng.uniform(60, 180)))], tts=BuiltinBackend(),
                             speech=SpeechConfig(strategy=strategy) if strategy else None, strict=case % 7 == 0)
         realizer.submit_at(0.0, texts[0])
         realizer.submit_at(0.5, texts[1].encode("utf-8", "surrogatepass") if case % 5 == 0 else texts[1])

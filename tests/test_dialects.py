@@ -9,6 +9,7 @@ import pytest
 
 from agentsim.bml.parser import Refused, parse_document
 from agentsim.realizer import Realizer
+from speech_timing.builtin import BuiltinBackend
 from speech_timing.espeak import EspeakBackend
 
 CORPUS = Path(__file__).resolve().parent / "dialects"
@@ -245,11 +246,11 @@ def test_ssml_prosody_reaches_the_speech_engine():
                      ("prosody", "very good"): {"rate": "slow", "volume": "loud"},
                      ("break", " Cal"): {"time": "300ms"}, ("say-as", "ABC"): {"interpret-as": "characters"}}
     # the built-in backend pauses 300 ms at the break: every word after it is later by exactly that much
-    plain = Realizer()
+    plain = Realizer(tts=BuiltinBackend())
     plain.submit(f'<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="p"><speech id="s"><text>{speech.text}'
                  '</text></speech></bml>')
     plain.run()
-    marked = Run("ssml/in_text.xml")
+    marked = Run("ssml/in_text.xml", tts=BuiltinBackend())
     words = {h.block: h.utterance.words for h in (*plain.recording().speech, *marked.realizer.recording().speech)}
     call = [w.text for w in words["p"]].index("Call")
     assert words["b4"][call].start - words["p"][call].start == pytest.approx(

@@ -208,7 +208,7 @@ def test_a_rate_change_before_the_speech_makes_it_faster():
         change = ("" if rate is None else
                   f'<bmla:parametervaluechange id="p" target="s" paramId="rate" start="0" end="0.5">'
                   f'<bmla:trajectory type="instant" targetValue="{rate}"/></bmla:parametervaluechange>')
-        realizer = Realizer()
+        realizer = Realizer(tts=BuiltinBackend())  # its rate applies exactly
         realizer.submit(f'<bml {NS} id="b"><speech id="s" start="1"><text>one two <sync id="m"/>three four'
                         f'</text></speech><gesture id="g" lexeme="BEAT" stroke="s:m"/>{change}</bml>')
         realizer.run()

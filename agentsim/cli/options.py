@@ -5,30 +5,40 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
+import warnings
 
 from agentsim.errors import AgentsimError, UsageError
+from speech_timing.choice import NAMES, default_name, named
 from speech_timing.delivery import CONDITIONS
 
 #: Speech backends by command-line name.
-TTS_NAMES = ("espeak", "builtin")
+TTS_NAMES = NAMES
 
 
-def add_tts(parser: argparse.ArgumentParser, default: str = "espeak") -> None:
-    parser.add_argument("--tts", choices=TTS_NAMES, default=default,
-                        help=f"speech backend: espeak-ng through its C library, or the deterministic built-in "
-                             f"one ({default})")
+def add_tts(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--tts", choices=TTS_NAMES, default=None,
+                        help="speech backend: espeak-ng through its C library, or the deterministic built-in "
+                             "one (default: espeak-ng when it is installed, as Realizer() in Python)")
 
 
-def backend(name: str):
-    """The speech backend named on the command line (an :class:`~agentsim.errors.Unavailable` if it
-    cannot run here)."""
-    if name == "espeak":
-        from speech_timing.espeak import EspeakBackend
+def tts_name(name: str | None) -> str:
+    """The backend the command line asks for: ``name``, or the default one (espeak-ng when it is installed;
+    otherwise the built-in one, with a line on stderr saying what to install)."""
+    if name is not None:
+        return name
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        name = default_name()
+    for warning in caught:
+        print(f"agentsim: {warning.message}", file=sys.stderr)
+    return name
 
-        return EspeakBackend()
-    from speech_timing.builtin import BuiltinBackend
 
-    return BuiltinBackend()
+def backend(name: str | None):
+    """The speech backend named on the command line, or the default one (see :func:`tts_name`); an
+    :class:`~agentsim.errors.Unavailable` if the one named cannot run here."""
+    return named(tts_name(name))
 
 
 def describe_backend(tts) -> str:

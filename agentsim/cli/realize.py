@@ -36,7 +36,7 @@ def add_parsers(commands) -> None:
     realize.add_argument("--until", type=float, metavar="SECONDS", help="stop the run at this simulated time")
     realize.add_argument("--realtime", action="store_true", help="run in real time instead of simulated time")
     options.add_anticipators(realize)
-    options.add_tts(realize, default="espeak")
+    options.add_tts(realize)
     add_outputs(realize)
     options.add_fps(realize, "--bvh/--poses/--report")
     options.add_seed(realize, "the background motion (blinks, sway)")
@@ -56,6 +56,7 @@ def add_parsers(commands) -> None:
     plot.add_argument("--to", dest="end", metavar="SECONDS",
                       help="draw the run up to this time (seconds of the run; default its end)")
     options.add_anticipators(plot)
+    options.add_tts(plot)
     plot.set_defaults(handler=plot_timeline)
 
     anticipators = commands.add_parser("anticipators", help="installed anticipators, and a new plugin",
@@ -176,7 +177,7 @@ def realize_files(args: argparse.Namespace) -> int:
     options.check_fps(args)
     check_outputs(args)
     tts = options.backend(args.tts)
-    if args.wav and args.tts == "builtin":
+    if args.wav and tts.name == "builtin":
         raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak")
     print(f"speech: {options.describe_backend(tts)}", file=sys.stderr)
     out = sys.stdout
@@ -232,7 +233,9 @@ def plot_timeline(args: argparse.Namespace) -> int:
     if start is not None and end is not None and not end > start:
         raise UsageError(f"--to ({end:g} s) must come after --from ({start:g} s)")
     check_writable([args.out])
-    realizer = Realizer(anticipators=options.anticipators(args))
+    tts = options.backend(args.tts)
+    print(f"speech: {options.describe_backend(tts)}", file=sys.stderr)
+    realizer = Realizer(anticipators=options.anticipators(args), tts=tts)
     realizer.submit(read_document(args.file), source=str(resolve(args.file)))
     realizer.run()
     recording = realizer.recording()

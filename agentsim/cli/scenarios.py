@@ -126,6 +126,7 @@ def run_storytelling(args: argparse.Namespace) -> int:
 
     options.check_fps(args)
     args.delivery = options.delivery(args)
+    args.tts = options.tts_name(args.tts)
     return main(args)
 
 

@@ -24,7 +24,7 @@ def add_parsers(commands) -> None:
                        help="before serving, play clicks and record them from this input device (the output's "
                             "loop back: a cable, or a PulseAudio monitor such as 'pulse' with PULSE_SOURCE set) "
                             "to measure what the device adds to its reported latency, and make up for it")
-    options.add_tts(serve, default="espeak")
+    options.add_tts(serve)
     serve.add_argument("--strict", action="store_true", help="read pure BML 1.0 only")
     serve.add_argument("--fps", type=float, default=30.0, help="poses per second streamed to viewers (30)")
     serve.set_defaults(handler=run_server)

@@ -41,9 +41,14 @@ SPEECH_START = 1.0
 BLOCK_ID = "story"
 
 
-def make_voice(tts: str = "espeak", cache_dir=None, cache: bool = True, voice: str = "en", rate: int = 175):
-    """The storyteller's backend: ``tts`` ("espeak" or "builtin") behind the disk cache, with
-    phoneme-level marks (:class:`~scenarios.storytelling.voice.PhonemeMarks`)."""
+def make_voice(tts: str | None = None, cache_dir=None, cache: bool = True, voice: str = "en", rate: int = 175):
+    """The storyteller's backend: ``tts`` ("espeak" or "builtin"; by default espeak-ng when it is installed,
+    as everywhere) behind the disk cache, with phoneme-level marks
+    (:class:`~scenarios.storytelling.voice.PhonemeMarks`)."""
+    if tts is None:
+        from speech_timing.choice import default_name
+
+        tts = default_name()
     if tts == "espeak":
         from speech_timing.espeak import EspeakBackend
 

@@ -1,0 +1,42 @@
+"""The one default speech backend, and backends by name: what ``Realizer()``, every command and the live
+service speak with when nothing is asked for."""
+
+from __future__ import annotations
+
+import warnings
+
+from speech_timing.backend import TTSBackend
+
+#: Speech backends by name (``--tts NAME``).
+NAMES = ("espeak", "builtin")
+
+
+def named(name: str) -> TTSBackend:
+    """The backend ``name`` (one of :data:`NAMES`); espeak-ng raises
+    :class:`~agentsim.errors.SpeechBackendUnavailable`, saying what to install, when it cannot run here."""
+    if name == "espeak":
+        from speech_timing.espeak import EspeakBackend
+
+        return EspeakBackend()
+    if name == "builtin":
+        from speech_timing.builtin import BuiltinBackend
+
+        return BuiltinBackend()
+    raise ValueError(f"no speech backend {name!r}; there are {', '.join(NAMES)}")
+
+
+def default_backend() -> TTSBackend:
+    """espeak-ng when its library is here, else the deterministic built-in timing model, with a
+    :class:`UserWarning` that says what to install for speech with sound."""
+    from agentsim.errors import SpeechBackendUnavailable
+
+    try:
+        return named("espeak")
+    except SpeechBackendUnavailable as exc:
+        warnings.warn(f"speech is timed by the built-in model, without sound: {exc}", UserWarning, stacklevel=2)
+        return named("builtin")
+
+
+def default_name() -> str:
+    """The name of :func:`default_backend`'s choice here (with its warning when it is the built-in one)."""
+    return default_backend().name
