@@ -135,3 +135,31 @@ def test_anticipators_list_shows_the_built_in_audio_anticipator():
     assert {"metronome", "tap"} <= set(names)
     audio_line = next(line for line in proc.stdout.splitlines() if line.startswith("audio\t"))
     assert "tracker: str = 'causal'" in audio_line
+
+
+def test_anticipate_beats_json_prints_what_the_readme_says(tmp_path):
+    import re
+    from pathlib import Path
+
+    import soundfile
+
+    from agentsim.music.ensemble import render_ensemble
+
+    audio, sr, beats = render_ensemble(bpm=112, meter="4/4", bars=4, seed=2, sample_rate=22050)
+    soundfile.write(tmp_path / "e.wav", audio, sr)
+    proc = subprocess.run([sys.executable, "-m", "agentsim", "anticipate", "beats", "e.wav", "--json"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    run = json.loads(proc.stdout)
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    said = re.search(r"`agentsim anticipate beats AUDIO --json` prints one JSON object: (.*?); `--reference",
+                     " ".join(readme.split())).group(1)
+    assert set(re.findall(r"`(\w+)`", said)) == set(run)  # every key it prints, and no other
+    assert run["tracker"] == "causal" and run["audio_seconds"] == pytest.approx(len(audio) / sr)
+    updates = run["updates"]
+    assert [set(u) for u in updates] == [{"t", "beats"}] * len(updates)
+    assert [u["t"] for u in updates] == sorted(u["t"] for u in updates)  # in the order they were made
+    locked = [u for u in updates if u["beats"]]
+    assert len(locked) > 5 and all(b > u["t"] for u in locked for b in u["beats"])  # upcoming beats only
+    middle = min(locked, key=lambda u: abs(u["t"] - 6.0))  # and they are the music's
+    assert max(min(abs(p - b) for b in beats) for p in middle["beats"] if p < beats[-1]) < 0.07

@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from agentsim.examples import names
+from agentsim.examples import HOME, names
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -44,8 +44,16 @@ def test_examples_copy_into_a_folder_once(tmp_path):
     copied = sorted(f"examples/{p.relative_to(tmp_path / 'examples').as_posix()}"
                     for p in (tmp_path / "examples").rglob("*") if p.is_file())
     assert copied == names()
+    again = agentsim("examples", "copy", tmp_path, cwd=tmp_path)  # the same files again: nothing to do
+    assert again.returncode == 0 and "wrote the 0 that were missing" in again.stderr, again.stderr
+    (tmp_path / "examples" / "welcome.xml").unlink()
+    again = agentsim("examples", "copy", tmp_path, cwd=tmp_path)  # one gone: it alone is copied
+    assert again.returncode == 0 and "wrote the 1 that were missing" in again.stderr
+    assert (tmp_path / "examples" / "welcome.xml").read_bytes() == (HOME / "welcome.xml").read_bytes()
+    (tmp_path / "examples" / "cue.xml").write_text("<bml/>")  # edited there: never overwritten
     again = agentsim("examples", "copy", tmp_path, cwd=tmp_path)
-    assert again.returncode == 2 and "exists already" in again.stderr
+    assert again.returncode == 2 and "exists already and cue.xml there differs" in again.stderr
+    assert (tmp_path / "examples" / "cue.xml").read_text() == "<bml/>"
 
 
 def test_plot_timeline_makes_its_folder_and_says_what_it_wrote(tmp_path):

@@ -24,6 +24,10 @@ AGENTSIM = [sys.executable, "-m", "agentsim"]
     (["run", "conductor", "--config", "nosuch"], "agentsim: no configuration file or shipped configuration named "
      "'nosuch' (shipped: default, falls_apart, march_2_4, waltz_3_4; 'agentsim run conductor --list-configs')"),
     (["sweep", "nosuch", "--out", "x"], "agentsim: no sweep spec 'nosuch'"),
+    (["speech", "export", "examples/story.txt"], "agentsim: say what to write: --wav FILE.wav and/or --textgrid "
+                                                 "FILE.TextGrid"),
+    (["speech", "export", "examples/story.txt", "--tts", "builtin", "--wav", "x.wav"],
+     "agentsim: --wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak"),
 ])
 def test_a_missing_or_wrong_input_is_a_usage_error_of_one_line(tmp_path, args, message):
     (tmp_path / "folder").mkdir()

@@ -281,6 +281,7 @@ def new_anticipator(args: argparse.Namespace) -> int:
 
 
 def examples_command(args: argparse.Namespace) -> int:
+    import filecmp
     import shutil
 
     from agentsim.examples import HOME, describe, names
@@ -291,11 +292,25 @@ def examples_command(args: argparse.Namespace) -> int:
             print(f"{name}\t{about}" if about else name)
         return 0
     target = Path(args.dir) / "examples"
-    if target.exists():
-        raise UsageError(f"{target} exists already: copy into another folder")
+    wanted = [name.removeprefix("examples/") for name in names()]
+    if target.exists():  # copied before: what is there must be the examples as shipped, else nothing is touched
+        if not target.is_dir():
+            raise UsageError(f"{target} exists and is not a folder: copy into another folder")
+        changed = [name for name in wanted if (target / name).exists() and not filecmp.cmp(
+            HOME / name, target / name, shallow=False)]
+        if changed:
+            raise UsageError(f"{target} exists already and {changed[0]} there differs from the shipped one"
+                             f"{f' (and {len(changed) - 1} more)' if len(changed) > 1 else ''}: copy into another "
+                             f"folder")
+    missing = [name for name in wanted if not (target / name).exists()]
     try:
-        shutil.copytree(HOME, target, ignore=shutil.ignore_patterns("__init__.py", "__pycache__"))
+        for name in missing:
+            (target / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(HOME / name, target / name)
     except OSError as exc:
         raise UsageError(f"cannot copy the examples into {target}: {exc.strerror or exc}") from None
-    print(f"wrote {target}/ ({len(names())} files)", file=sys.stderr)
+    if len(missing) == len(wanted):
+        print(f"wrote {target}/ ({len(wanted)} files)", file=sys.stderr)
+    else:
+        print(f"{target}/ holds the examples already; wrote the {len(missing)} that were missing", file=sys.stderr)
     return 0

@@ -17,7 +17,12 @@ def add_parsers(commands) -> None:
     scenarios = run.add_subparsers(dest="scenario", required=True)
     add_conductor(scenarios)
     add_storytelling(scenarios)
-    demo = commands.add_parser("demo", help="the conductor and the storyteller, end to end in simulated time")
+    demo = commands.add_parser(
+        "demo", help="the conductor and the storyteller, end to end in simulated time",
+        description="The virtual conductor leading a dragging ensemble back to tempo, then the virtual storyteller "
+                    "telling the longest shipped story, each with its defaults: 'agentsim run conductor --out "
+                    "DIR/conductor' and 'agentsim run storytelling --out DIR/storytelling', which write into "
+                    "conductor/ and storytelling/ inside --out what their help says.")
     options.add_out(demo, DEMO_OUT, "where to write the results")
     demo.set_defaults(handler=lambda args: demo_handler(commands, args))
 
@@ -29,8 +34,11 @@ def add_conductor(scenarios) -> argparse.ArgumentParser:
         "conductor", help="the virtual orchestra conductor leads a simulated ensemble back to tempo",
         description="A virtual conductor beats time with BML conducting gestures pegged to anticipator beats, "
                     "hears a simulated ensemble (FluidSynth audio through a causal beat tracker) and re-times "
-                    "its beats to lead the ensemble to the score's tempo. Writes metrics.json, tempo.png, "
-                    "timeline.png, ensemble.wav, conductor.bvh and feedback.jsonl to --out.")
+                    "its beats to lead the ensemble to the score's tempo. Writes to --out: metrics.json, tempo.png, "
+                    "timeline.png (an overview) with timeline_0000-0015s.png, ... (each 15 s in detail), "
+                    "ensemble.wav, conductor.bvh, beats.csv, gestures.csv, feedback.jsonl and report.html with "
+                    "its folder report_files/; with --compare, compare.json and a folder of those per strategy "
+                    "(follow/, target/, lead/, best/).")
     parser.add_argument("--config", metavar="FILE|NAME",
                         help="scenario configuration: a TOML file, or a shipped one by its short name "
                              "(--config waltz_3_4; see --list-configs); default: default")
@@ -91,8 +99,11 @@ def add_storytelling(scenarios) -> argparse.ArgumentParser:
         "storytelling", help="tell a story with gestures on the stressed syllables and measure the sync",
         description="Tell an annotated story (beats, pointing, iconic gestures, nods, gaze shifts, eyebrow "
                     "raises on the stressed syllables of their words) through the realizer while the speech's "
-                    "progress events arrive late, scattered and in bursts; write metrics.json, narration.wav, "
-                    "story.TextGrid, story.bvh, timeline.png and feedback.jsonl to --out.")
+                    "progress events arrive late, scattered and in bursts. Writes to --out: metrics.json, "
+                    "narration.wav, story.TextGrid, story.bvh, story.bml (the BML the story compiles to), "
+                    "gestures.csv, feedback.jsonl, timeline.png (an overview) with timeline_0000-0030s.png, ... "
+                    "(each --window seconds in detail), sync_errors.png and report.html with its folder "
+                    "report_files/; with --compare, compare.json too.")
     parser.add_argument("--story", metavar="NAME|FILE",
                         help="a shipped story's name, a .story file or a TextGrid (default: the longest shipped story)")
     parser.add_argument("--scene", metavar="NAME|FILE",

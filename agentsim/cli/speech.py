@@ -52,11 +52,17 @@ def add_parsers(commands) -> None:
     calibrate_parser.add_argument("--texts", metavar="FILE", help="calibration texts, one per line (default: bundled)")
     options.add_out(calibrate_parser, str(DEFAULT_MODEL), "where to save the model", metavar="FILE")
     calibrate_parser.set_defaults(handler=calibrate)
-    export_parser = tools.add_parser("export", help="speak a text; write its audio (WAV) and timeline (Praat TextGrid)")
-    export_parser.add_argument("text", metavar="FILE")
+    export_parser = tools.add_parser(
+        "export", help="speak a text; write its audio (WAV) and timeline (Praat TextGrid)",
+        description="Speak the text of FILE and write what was spoken, on one time axis: --wav its audio, "
+                    "--textgrid its words and phonemes with their times (tiers words and phones; open both in "
+                    "Praat). At least one of the two is needed.")
+    export_parser.add_argument("text", metavar="FILE", help="a plain UTF-8 text file (examples/story.txt is one)")
     options.add_tts(export_parser)
-    export_parser.add_argument("--wav", metavar="FILE.wav")
-    export_parser.add_argument("--textgrid", metavar="FILE.TextGrid")
+    export_parser.add_argument("--wav", metavar="FILE.wav",
+                               help="the audio, 16-bit PCM at the backend's sample rate (needs --tts espeak)")
+    export_parser.add_argument("--textgrid", metavar="FILE.TextGrid",
+                               help="the words and phonemes as Praat interval tiers, from the speech's start")
     export_parser.set_defaults(handler=export)
 
 
@@ -159,10 +165,13 @@ def export(args: argparse.Namespace) -> int:
     from speech_timing.exports import write_textgrid, write_wav
 
     if not (args.wav or args.textgrid):
-        raise AgentsimError("say what to write: --wav FILE.wav and/or --textgrid FILE.TextGrid")
+        raise UsageError("say what to write: --wav FILE.wav and/or --textgrid FILE.TextGrid")
     check_writable([args.wav, args.textgrid])
     text = " ".join(read_text(args.text).split())
-    utterance = options.backend(args.tts).synthesize(SpeechText(text))
+    tts = options.backend(args.tts)
+    if args.wav and tts.name == "builtin":
+        raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak")
+    utterance = tts.synthesize(SpeechText(text))
     written = []
     if args.wav:
         write_wav(args.wav, utterance)

@@ -29,8 +29,21 @@ def show(item: dict) -> None:
     print(f"{when:8.3f}  {item['type']:<20} {item['id']} {extra}")
 
 
+def connect_when_up(url: str, wait: float = 15.0):
+    """Connect to ``url``; a server just started in the background may still be starting: try again for up to
+    ``wait`` seconds."""
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            return connect(url)
+        except OSError as exc:
+            if time.monotonic() > deadline:
+                raise SystemExit(f"client: no agentsim serve at {url} ({exc}); start one with: agentsim serve") from None
+            time.sleep(0.2)
+
+
 def main(url: str) -> None:
-    with connect(url) as ws:
+    with connect_when_up(url) as ws:
         ws.send(TALK)
         sent_interrupt = None
         started = time.monotonic()
