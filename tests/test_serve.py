@@ -162,3 +162,47 @@ def test_sigterm_stops_the_service_and_what_it_started():
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+#: ALSA configurations PortAudio finds no output device in, whatever the machine has: only a default device
+#: on a card that is not there (and no ``ctl.hw``, so no real card is listed), or one that only records.
+NO_CARD = "pcm.!default {\n  type hw\n  card 99\n}\n"
+INPUT_ONLY = "pcm.!default {\n  type asym\n  capture.pcm { type null }\n}\n"
+
+
+def serve_without_sound_card(tmp_path, alsa: str, *options: str) -> subprocess.CompletedProcess:
+    """``agentsim serve --port 0 OPTIONS`` where PortAudio's ALSA reads ``alsa`` and no PulseAudio answers."""
+    import os
+
+    (tmp_path / "asound.conf").write_text(alsa)
+    env = dict(os.environ, ALSA_CONFIG_PATH=str(tmp_path / "asound.conf"),
+               PULSE_SERVER=f"unix:{tmp_path / 'no-pulse'}", PULSE_RUNTIME_PATH=str(tmp_path / "no-pulse"))
+    return subprocess.run([sys.executable, "-m", "agentsim.cli", "serve", "--port", "0", "--fps", "0", "--tts",
+                           "builtin", *options], capture_output=True, text=True, timeout=120, env=env)
+
+
+@pytest.mark.parametrize("alsa, options, problem", [
+    (NO_CARD, (), "there is no audio output device here (PortAudio finds no sound card and no sound server)"),
+    (NO_CARD, ("--audio", "default"), "there is no audio output device here (PortAudio finds no sound card"),
+    (INPUT_ONLY, (), "there is no audio output device here (PortAudio finds no sound card and no sound server; "
+                     "only input devices: default)"),
+    (INPUT_ONLY, ("--audio", "0"), "audio device 0 (default) has no output channels; output devices here: none"),
+], ids=["no-card", "no-card-default", "input-only", "input-only-by-index"])
+def test_serve_without_an_output_device_says_so_and_names_audio_none(tmp_path, alsa, options, problem):
+    proc = serve_without_sound_card(tmp_path, alsa, *options)
+    assert proc.returncode == 1, proc.stderr
+    (line,) = proc.stderr.splitlines()  # one line, before anything started (not even the speech line)
+    assert line.startswith(f"agentsim: {problem}"), line
+    assert "Serve without sound with --audio none" in line and "with --audio DEVICE" in line, line
+    assert "Error querying device" not in line and "internal error" not in line
+
+
+def test_serve_calibrating_from_no_input_device_names_calibrate(tmp_path):
+    proc = serve_without_sound_card(tmp_path, NO_CARD, "--calibrate", "default")
+    assert proc.returncode == 1, proc.stderr
+    (line,) = proc.stderr.splitlines()
+    assert line.startswith("agentsim: there is no audio output device here"), line  # the output is looked at first
+    proc = serve_without_sound_card(tmp_path, "pcm.!default { type null }\n", "--calibrate", "no such input")
+    assert proc.returncode == 1, proc.stderr
+    (line,) = proc.stderr.splitlines()
+    assert line.startswith("agentsim: no audio input device 'no such input'") and "--calibrate INPUT" in line, line

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from agentsim.cli import options
-from agentsim.errors import UsageError
+from agentsim.errors import Unavailable, UsageError
 
 
 def add_parsers(commands) -> None:
@@ -34,6 +34,7 @@ def run_server(args: argparse.Namespace) -> int:
     import signal
 
     from agentsim.live.service import Service
+    from agentsim.live.sound import GET_A_DEVICE, NoAudioDevice
 
     # A service is stopped with SIGTERM as with Ctrl-C: it closes what it started (the poses' evaluator
     # process, the audio stream) instead of leaving them behind.
@@ -41,8 +42,15 @@ def run_server(args: argparse.Namespace) -> int:
 
     if not 0 <= args.fps <= options.MAX_FPS:  # (0: no poses)
         raise UsageError(f"--fps must be between 0 and {options.MAX_FPS:g} poses per second, got {args.fps:g}")
-    service = Service(host=args.host, port=args.port, audio=args.audio, tts=options.backend(args.tts),
-                      strict=args.strict, fps=args.fps, calibrate=args.calibrate)
+    try:
+        service = Service(host=args.host, port=args.port, audio=args.audio, tts=options.backend(args.tts),
+                          strict=args.strict, fps=args.fps, calibrate=args.calibrate)
+    except NoAudioDevice as exc:  # say which option chooses the device, and how to do without one
+        if exc.kind == "input":
+            raise Unavailable(f"{exc.problem}. Leave --calibrate out, or {GET_A_DEVICE} and name its input "
+                              "with --calibrate INPUT (e.g. --calibrate pulse with PULSE_SOURCE set)") from None
+        raise Unavailable(f"{exc.problem}. Serve without sound with --audio none, or {GET_A_DEVICE} and name "
+                          "its device with --audio DEVICE (e.g. --audio pulse)") from None
     print(f"speech: {options.describe_backend(service.live.realizer.speech.planner.backend)}", file=sys.stderr)
     try:
         import asyncio
