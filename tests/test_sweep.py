@@ -10,6 +10,7 @@ dask scheduler and dask worker processes, and kill them, are in tests/system/tes
 from __future__ import annotations
 
 import io
+import json
 import math
 import re
 import shutil
@@ -278,3 +279,31 @@ def test_the_readmes_example_spec_is_a_valid_spec(tmp_path):
     assert len(checked.points) == 2 * 3 * 2 * 2
     assert checked.points[-1].values == {"strategy": "chang-naive", "seed": 3, "jitter": 0.1, "channel": "far"}
     assert "--loss" in checked.points[-1].argv and str(tmp_path / "story.txt") in checked.points[-1].argv
+
+
+def test_kept_outputs_are_named_by_the_points_values(tmp_path, capsys):
+    (tmp_path / "short.story").write_text("The clock struck nine.\n")
+    long_name = "x" * 190
+    path = tmp_path / "spec.toml"
+    path.write_text('command = ["run", "storytelling"]\nkeep_outputs = true\n[grid]\nseed = [1, 2]\n'
+                    '[grid.channel]\nnear = { delay = 0.05 }\n"far/away" = { delay = 0.2 }\n'
+                    f'"far_away" = {{ delay = 0.3 }}\n{long_name} = {{ delay = 0.4 }}\n'
+                    '[fixed]\ntts = "builtin"\nstory = "short.story"\nno-cache = true\n')
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--workers", "2", "--out", str(out), "--quiet"]) == 0, capsys.readouterr().err
+    keys = {(p.values["seed"], p.values["channel"]): p.key for p in spec.load(path).points}
+    expected = set()
+    for seed in (1, 2):
+        expected.add(f"seed={seed},channel=near")
+        # "far/away" made safe is "far_away", which the next name is: both end in their keys
+        expected |= {f"seed={seed},channel=far_away~{keys[seed, name][:8]}" for name in ("far/away", "far_away")}
+        name = f"seed={seed},channel={long_name}"  # 205 characters: shortened to 191 and the key
+        expected.add(f"{name[:191]}~{keys[seed, long_name][:8]}")
+    assert {p.name for p in (out / "outputs").iterdir()} == expected
+    assert all(len(name) <= 200 for name in expected)
+    for name in expected:  # each holds what that point's run wrote
+        metrics = json.loads((out / "outputs" / name / "metrics.json").read_text())
+        assert metrics["seed"] == int(name.split(",")[0].split("=")[1])
+        assert (out / "outputs" / name / "story.bvh").is_file()
+    table = pd.read_parquet(out / "results.parquet")
+    assert (table["status"] == "ok").all() and len(table) == 8

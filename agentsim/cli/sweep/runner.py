@@ -11,7 +11,9 @@ The folder (``--out DIR``) holds:
 ``results.csv``        as CSV; written when the sweep ends
 ``sweep.json``         the spec as read (command, grid, fixed options, report settings), for
                        ``agentsim sweep report``
-``outputs/<key>/``     with ``keep_outputs = true``: each point's ``--out`` folder
+``outputs/<point>/``   with ``keep_outputs = true``: each point's ``--out`` folder, named by its values in
+                       the grid's order (``strategy=best,seed=1,jitter=0.03``; :func:`~agentsim.cli.
+                       sweep.spec.output_folders` says how names that would clash or be too long end)
 =====================  ================================================================================
 
 A point that fails is a row with its error and is not cached: a rerun tries it again. A worker that dies
@@ -32,7 +34,7 @@ from pathlib import Path
 
 from agentsim.cli.sweep import results
 from agentsim.cli.sweep.point import run_point, worker_info
-from agentsim.cli.sweep.spec import Point, Spec, project_version
+from agentsim.cli.sweep.spec import Point, Spec, output_folders, project_version
 from agentsim.errors import AgentsimError, Unavailable
 
 #: How long to wait for a scheduler to answer and for its first worker to join (seconds).
@@ -176,8 +178,9 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
             sending = time.perf_counter()
             startup = sending - connecting
             futures = {}
+            kept = output_folders(spec.points)
             for key, (point, *_) in todo.items():
-                keep = str((folder / "outputs" / key).resolve()) if spec.keep_outputs else None
+                keep = str((folder / "outputs" / kept[key]).resolve()) if spec.keep_outputs else None
                 futures[client.submit(run_point, list(point.argv), out_at, keep, key=f"agentsim-point-{key}",
                                       pure=False)] = point
             pending = set(futures)

@@ -4,7 +4,8 @@ of the command before any work, and expanded into points, each with its command 
 The format::
 
     command = ["eval", "speech-sync"]       # any agentsim command that prints --json
-    keep_outputs = false                    # keep each point's --out folder in DIR/outputs/<point>/
+    keep_outputs = false                    # keep each point's --out folder in DIR/outputs/<point>/,
+                                            # <point> its values: strategy=best,seed=1,condition=A
     [grid]                                  # every combination of these is one point
     strategy = ["best", "chang-naive"]
     seed = [1, 2, 3]
@@ -33,9 +34,11 @@ import hashlib
 import io
 import itertools
 import json
+import re
 import shlex
 import tomllib
 from contextlib import redirect_stderr, redirect_stdout
+from collections import Counter
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -363,6 +366,41 @@ def point_key(argv: tuple[str, ...], version: str) -> str:
             files[word] = hashlib.sha256(p.read_bytes()).hexdigest()
     blob = json.dumps({"argv": list(argv), "version": version, "files": files}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
+
+
+#: The longest name of a point's folder in ``outputs/`` (file systems take 255 bytes).
+MAX_FOLDER_NAME = 200
+#: What a grid key or value may keep of itself in a folder name; anything else becomes ``_``.
+UNSAFE_IN_NAME = re.compile(r"[^A-Za-z0-9._+-]")
+
+
+def folder_name(values: dict) -> str:
+    """A point's values as a folder name, in the grid's key order: ``strategy=best,seed=1,jitter=0.03``
+    (a named axis by its name; each key and value keeps letters, digits and ``._+-``, the rest is ``_``)."""
+    return ",".join(f"{UNSAFE_IN_NAME.sub('_', key)}={UNSAFE_IN_NAME.sub('_', text(value))}"
+                    for key, value in values.items())
+
+
+def output_folders(points: list[Point]) -> dict[str, str]:
+    """The folder name in ``outputs/`` of each point's ``--out``, by its key: :func:`folder_name` of its values.
+    Names that two points would share (once made safe, or differing only in case) and names longer than
+    :data:`MAX_FOLDER_NAME` end in ``~`` and the first 8 characters of the key instead; a grid of no keys is
+    its key. Points of one command line (one key) are computed once, into the folder of the first."""
+    names: dict[str, str] = {}
+    for point in points:
+        names.setdefault(point.key, folder_name(point.values))
+    shared = Counter(name.lower() for name in names.values())
+    folders = {}
+    for key, name in names.items():
+        if not name:
+            folders[key] = key
+        elif len(name) > MAX_FOLDER_NAME or shared[name.lower()] > 1:
+            folders[key] = f"{name[:MAX_FOLDER_NAME - 9]}~{key[:8]}"
+        else:
+            folders[key] = name
+    if len({name.lower() for name in folders.values()}) < len(folders):  # shortened alike, keys alike to 8
+        return {key: key for key in folders}
+    return folders
 
 
 def shell_line(argv) -> str:
