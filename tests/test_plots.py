@@ -312,3 +312,56 @@ def test_the_command_line_draws_a_window(tmp_path):
     # one row fewer (g1 is outside the window): a shorter picture of the same width
     (w0, h0), (w1, h1) = Image.open(whole).size, Image.open(part).size
     assert w0 == w1 and h1 < h0
+
+
+def boxes_of(fig, artists):
+    renderer = fig.canvas.get_renderer()
+    return [a.get_window_extent(renderer) for a in artists]
+
+
+def overlapping(boxes, names) -> list[tuple[str, str]]:
+    return [(names[i], names[j]) for i in range(len(boxes)) for j in range(i + 1, len(boxes))
+            if boxes[i].overlaps(boxes[j])]
+
+
+def test_no_label_of_the_conductors_timelines_overlaps_another_or_leaves_the_picture(tmp_path, monkeypatch):
+    """A conductor run through the command line: the lane labels on the left of every timeline picture, the
+    block names at the top of its lines (bar4:end and bar6:start 0.1 s apart) and the stroke labels, as the
+    renderer lays them out in the files written."""
+    from agentsim.animation import timeline
+    from agentsim.cli import main
+
+    figures = []
+    for name in ("timeline_figure", "overview_figure"):
+        def keep(*args, _make=getattr(timeline, name), **kwargs):
+            figures.append(_make(*args, **kwargs))
+            return figures[-1]
+        monkeypatch.setattr(timeline, name, keep)
+    assert main(["run", "conductor", "--bars", "8", "--out", str(tmp_path)]) == 0
+    assert len(figures) == 3 and (tmp_path / "timeline_0000-0015s.png").is_file()
+    import json
+
+    feedback = [json.loads(line) for line in (tmp_path / "feedback.jsonl").read_text().splitlines()]
+    starts_and_ends = sorted(f["globalTime"] for f in feedback if f["type"] == "blockProgress")
+    # two blocks end and start within 0.12 s of each other (bar4:end and bar6:start, in the first window)
+    assert any(b - a < 0.12 and b < 15.0 for a, b in zip(starts_and_ends, starts_and_ends[1:]))
+    for fig in figures:
+        ax = fig.axes[0]
+        page = fig.bbox
+        lanes = [t for t in ax.get_yticklabels() if t.get_text()]
+        lane_boxes = boxes_of(fig, lanes)
+        assert len(lanes) >= 2
+        assert overlapping(lane_boxes, [t.get_text() for t in lanes]) == []
+        assert all(page.x0 <= b.x0 and b.x1 <= page.x1 and page.y0 <= b.y0 and b.y1 <= page.y1 for b in lane_boxes)
+        names = [t for t in ax.texts if t.get_rotation() == 90]  # the block names (gid "block-name")
+        strokes = [t for t in ax.texts if t.get_text() == "stroke"]
+        if fig.axes[0].get_title(loc="left").endswith("(strokes as ticks; the detail is drawn per 15 s window)"):
+            assert not names  # the overview
+            continue
+        assert names and strokes
+        name_boxes = boxes_of(fig, names)
+        assert overlapping(name_boxes, [t.get_text() for t in names]) == []
+        axis = ax.get_window_extent(fig.canvas.get_renderer())
+        assert all(axis.x0 <= b.x0 and b.x1 <= axis.x1 + 0.5 and b.y1 <= axis.y1 for b in name_boxes)
+        others = boxes_of(fig, strokes + list(ax.patches))
+        assert not [t.get_text() for t, b in zip(names, name_boxes) if any(b.overlaps(o) for o in others)]

@@ -56,6 +56,10 @@ WORD_GAP = 4.0
 WORD_MARGIN = 0.6
 #: Height of one behaviour row (inches).
 ROW_INCHES = 0.34
+#: Font size (points) of the block names (``block:start``, ``block:end``) at the top of a timeline, and the
+#: room kept across the axis for each of them (points; they are written upwards, so this is their height).
+BLOCK_FONT = 6.0
+BLOCK_PITCH = 1.45 * BLOCK_FONT
 _DPI = 120
 
 
@@ -224,7 +228,8 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
 
     One row per behaviour (block:behaviour) with its phases shaded between its sync points (dropped
     behaviours hatched from where they stopped), a tick at every sync point and a label at every stroke,
-    dashed lines joining sync points that share a time peg, block starts and ends, and a feedback row
+    dashed lines joining sync points that share a time peg, block starts and ends (named in a band above
+    the rows, a name moved aside where two would overlap), and a feedback row
     with every sync point progress (dots), prediction (diamonds) and warning (red triangles). Under each
     speech row, the words heard (:func:`heard_words`), each label starting at its word's onset (a tick
     marks every onset), staggered on up to ``WORD_LINES`` lines; labels that would overlap at this width
@@ -232,7 +237,8 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
     wrist heights and head pitch of the evaluated poses with the stroke feedback.
 
     Artists a reader (or a test) can find by ``get_gid()``: ``"word"`` (a word's label, at its onset),
-    ``"word-note"``, ``"behaviour:<block:behaviour>"`` (a row's bars).
+    ``"word-note"``, ``"behaviour:<block:behaviour>"`` (a row's bars), ``"block-name"`` (a block start's or
+    end's name).
     """
     from matplotlib.collections import LineCollection
     from matplotlib.patches import Patch
@@ -267,7 +273,13 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
         y += 1.0 + band_of.get(record.name, 0.0)
         ys.append(y)
     ys.reverse()
-    top = y + 1.0
+    # the block starts and ends are named in a band of their own above the rows, as long as the longest name
+    blocks = sorted((f["globalTime"], str(f.get("id") or "")) for f in recording.feedback
+                    if f["type"] == "blockProgress" and math.isfinite(f.get("globalTime", math.nan))
+                    and (not window or lo <= f["globalTime"] <= hi))
+    block_band = (max(_text_width(name, BLOCK_FONT) for _, name in blocks) / 72.0 / ROW_INCHES + 0.2
+                  if blocks else 0.0)
+    top = y + 1.0 + block_band
     units = top + 1.3
     panels = 2 if stream is not None else 1
     height = max(2.5, ROW_INCHES * units + 1.6) + (2.2 if stream is not None else 0.0)
@@ -342,9 +354,6 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
         if kind == "warningFeedback":
             ax.text(t, y_fb - 0.75, str(f.get("warningType") or "warning"), fontsize=5.5, color="#de2d26",
                     ha="center", va="top", clip_on=True)
-        elif kind == "blockProgress":
-            ax.text(t, top - 0.1, str(f.get("id") or ""), fontsize=6, rotation=90, va="top", color="#777777",
-                    clip_on=True)
     for kind, dy, style, colour, size in (("syncPointProgress", 0.0, "o", "#636363", 2.5),
                                           ("predictionFeedback", 0.25, "D", "#756bb1", 3),
                                           ("warningFeedback", 0.5, "^", "#de2d26", 5)):
@@ -386,7 +395,38 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
     fig.tight_layout(rect=(0.0, 0.3 / height, 1.0, 1.0))
     if words_by_row:
         _draw_words(fig, ax, dict(zip((r.name for r in rows), ys)), words_by_row, lines_of, x0, x1, line_step, note)
+    _draw_block_names(fig, ax, blocks, top, x0, x1)  # after the words: they can narrow the axis
     return fig
+
+
+def spread(xs: list[float], gap: float, lo: float = -math.inf, hi: float = math.inf) -> list[float]:
+    """Positions as near to the sorted ``xs`` as they can be with at least ``gap`` between neighbours, inside
+    ``[lo, hi]`` where there is room: a run of labels too close together is spaced out around where it wants
+    to be (the mean of its members' wishes)."""
+    groups: list[list] = []  # [members, sum of the position each member wants for the group's first]
+
+    def first(group) -> float:
+        n, wish = group
+        return min(max(wish / n, lo), hi - (n - 1) * gap)
+
+    for x in xs:
+        groups.append([1, float(x)])
+        while len(groups) > 1 and first(groups[-2]) + groups[-2][0] * gap > first(groups[-1]):
+            n, wish = groups.pop()
+            groups[-1] = [groups[-1][0] + n, groups[-1][1] + wish - n * groups[-1][0] * gap]
+    return [first(group) + k * gap for group in groups for k in range(group[0])]
+
+
+def _draw_block_names(fig, ax, blocks: list[tuple[float, str]], top: float, x0: float, x1: float) -> None:
+    """Name each block start and end at the top of its line (after the layout is final: how far apart the
+    names must be in seconds depends on the axis' width), moved aside where two would overlap."""
+    if not blocks:
+        return
+    inches = ax.get_position().width * fig.get_figwidth()
+    gap = BLOCK_PITCH / 72.0 * (x1 - x0) / inches
+    for x, (_, name) in zip(spread([t for t, _ in blocks], gap, x0, x1 - gap), blocks):
+        ax.text(x, top - 0.1, name, fontsize=BLOCK_FONT, rotation=90, va="top", ha="left", color="#777777",
+                clip_on=True, gid="block-name")
 
 
 def _draw_words(fig, ax, row_y: dict[str, float], words_by_row: dict[str, list[HeardWord]],
