@@ -307,3 +307,56 @@ def test_kept_outputs_are_named_by_the_points_values(tmp_path, capsys):
         assert (out / "outputs" / name / "story.bvh").is_file()
     table = pd.read_parquet(out / "results.parquet")
     assert (table["status"] == "ok").all() and len(table) == 8
+
+
+def drawn_summaries(monkeypatch) -> list:
+    """The figures 'sweep report' draws, kept as they were saved (instead of closed)."""
+    import matplotlib.pyplot as plt
+
+    figures = []
+    monkeypatch.setattr(plt, "close", figures.append)
+    return figures
+
+
+def inside(fig, artist) -> bool:
+    box, page = artist.get_window_extent(fig.canvas.get_renderer()), fig.bbox
+    return page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0 and box.y1 <= page.y1
+
+
+@pytest.mark.parametrize("metrics", [["error_ms.p95"], ["error_ms.p95", "snaps"], []], ids=["one", "two", "all"])
+def test_the_summary_pictures_title_lies_inside_it_above_the_plots(swept, tmp_path, monkeypatch, capsys, metrics):
+    out = copy_of(swept[0], tmp_path)
+    figures = drawn_summaries(monkeypatch)
+    assert main(["sweep", "report", str(out)] + [a for m in metrics for a in ("--metric", m)]) == 0
+    (fig,) = figures
+    title = fig._suptitle
+    renderer = fig.canvas.get_renderer()
+    assert title.get_text().replace("\n", " ").replace("\xa0", " ") == (
+        "agentsim eval speech-sync: mean and 95 % bootstrap interval over seed")
+    assert inside(fig, title), (title.get_window_extent(renderer), fig.bbox)
+    below = title.get_window_extent(renderer).y0
+    assert all(ax.get_tightbbox(renderer).y1 <= below for ax in fig.axes if ax.get_visible())
+    (legend,) = fig.legends
+    assert inside(fig, legend)
+    assert (title.get_text().count("\n") == 1) == (len(fig.axes) == 1)  # the one-metric picture is 5.2 in wide
+
+
+def test_a_summary_of_many_lines_keeps_its_legend_inside_the_picture(tmp_path, monkeypatch):
+    import itertools
+    import json
+
+    grid = {"strategy": ["best", "chang-naive", "skip-70ms"], "channel": ["near-and-clean", "far-and-lossy",
+                                                                         "bursty-channel"],
+            "seed": [1, 2, 3], "jitter": [0.03, 0.1]}
+    rows = [dict(zip(grid, values), status="ok", error=None, **{"error_ms.p95": 10.0 + i % 7})
+            for i, values in enumerate(itertools.product(*grid.values()))]
+    pd.DataFrame(rows).to_csv(tmp_path / "results.csv", index=False)
+    (tmp_path / "sweep.json").write_text(json.dumps({"command": ["eval", "speech-sync"], "grid": grid, "report": {}}))
+    figures = drawn_summaries(monkeypatch)
+    assert main(["sweep", "report", str(tmp_path), "--metric", "error_ms.p95", "--axis", "jitter"]) == 0
+    (fig,) = figures
+    (legend,) = fig.legends
+    assert len(legend.get_texts()) == 9 and inside(fig, legend) and inside(fig, fig._suptitle)
+    renderer = fig.canvas.get_renderer()
+    above = legend.get_window_extent(renderer).y1
+    assert all(ax.get_tightbbox(renderer).y0 >= above for ax in fig.axes if ax.get_visible())

@@ -223,6 +223,23 @@ def markdown_table(summary: Summary) -> str:
     return "\n".join(lines)
 
 
+#: The part of the summary picture's width its title and legend may span.
+MARGIN = 0.96
+
+
+def fit_title(fig, text: str, room: float, fontsize: float = 11):
+    """``fig``'s suptitle ``text``, wrapped on as few lines as make it at most ``room`` pixels wide."""
+    import textwrap
+
+    title = fig.suptitle(text, fontsize=fontsize)
+    renderer = fig.canvas.get_renderer()
+    lines = 1
+    while title.get_window_extent(renderer).width > room and lines < len(text.split()):
+        lines += 1
+        title.set_text(textwrap.fill(text, width=math.ceil(len(text) / lines)))
+    return title
+
+
 def plot(summary: Summary, path: Path) -> Path:
     """Each metric against the axis, one line per strategy (and value of the other keys) with its band."""
     import matplotlib
@@ -279,13 +296,20 @@ def plot(summary: Summary, path: Path) -> Path:
         ax.grid(alpha=0.3)
     for index in range(len(metrics), rows * columns):
         axes[index // columns][index % columns].set_visible(False)
+    renderer = fig.canvas.get_renderer()
+    room = MARGIN * fig.bbox.width  # what a title or legend may span, in pixels
     handles, names = axes[0][0].get_legend_handles_labels()
+    bottom = 0.01
     if summary.axis and names:
-        fig.legend(handles, names, loc="lower center", ncol=min(len(names), 6), fontsize=8, frameon=False)
+        for ncol in range(min(len(names), 6), 0, -1):  # as many columns as fit across the figure
+            legend = fig.legend(handles, names, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+            if legend.get_window_extent(renderer).width <= room or ncol == 1:
+                break
+            legend.remove()
+        bottom += legend.get_window_extent(renderer).height / fig.bbox.height
     over = f" over {', '.join(summary.over)}" if summary.over else ""
-    fig.suptitle(f"agentsim {summary.command}: mean and 95 % bootstrap interval{over}", fontsize=11)
-    legend_rows = math.ceil(len(names) / 6) if summary.axis and names else 0
-    fig.tight_layout(rect=(0, 0.04 * legend_rows + 0.01, 1, 0.97))
+    fit_title(fig, f"agentsim {summary.command}: mean and 95\u00a0% bootstrap interval{over}", room)
+    fig.tight_layout(rect=(0, bottom, 1, 1))  # (it keeps the subplots below the title, however many lines)
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
