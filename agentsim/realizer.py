@@ -9,7 +9,7 @@ import simpy
 
 from agentsim.bml.parser import Refused, parse_document
 from agentsim.core.block import Block
-from agentsim.core.clock import make_environment
+from agentsim.core.clock import make_environment, run_until
 from agentsim.core.feedback import FeedbackLog
 from agentsim.core.pegboard import PegBoard
 from agentsim.core.recording import Recording
@@ -168,14 +168,15 @@ class Realizer:
                 return
             yield simpy.AllOf(self.env, pending)
 
-    def run(self, until: float | None = None) -> None:
+    def run(self, until: float | None = None, on_time=None) -> None:
         """Run until every submitted block has ended (preplanned blocks nothing activated stay pending), or
-        until simulated time ``until``."""
+        until simulated time ``until``. ``on_time``: called with the simulated time every simulated second
+        (for a progress bar; the run is the same without it)."""
         done = self.all_ended()
         if until is not None:
             done = done | self.env.timeout(max(0.0, until - self.env.now))
         try:
-            self.env.run(until=done)
+            run_until(self.env, done, on_time)
         except RuntimeError as exc:
             if "No scheduled events left" not in str(exc):
                 raise

@@ -22,3 +22,29 @@ def make_environment(realtime: bool = False, factor: float = 1.0, initial_time: 
     if realtime:
         return simpy.rt.RealtimeEnvironment(initial_time=initial_time, factor=factor, strict=False)
     return simpy.Environment(initial_time=initial_time)
+
+
+def run_until(env: simpy.Environment, until: simpy.Event, on_time=None, every: float = 1.0):
+    """``env.run(until=until)``, calling ``on_time(env.now)`` whenever another ``every`` simulated seconds
+    have passed (for a progress bar). The events are processed one by one in the same order as
+    ``env.run`` processes them, and nothing is scheduled, so the run is the same with or without it.
+    Returns the value of ``until``; raises ``RuntimeError`` as ``env.run`` does when no events are left
+    before ``until`` has happened."""
+    if on_time is None:
+        return env.run(until=until)
+    from simpy.core import EmptySchedule, StopSimulation
+
+    if until.callbacks is None:  # it has happened already
+        return until.value
+    until.callbacks.append(StopSimulation.callback)
+    step, due = env.step, env.now + every
+    try:
+        while True:
+            step()
+            if env.now >= due:
+                on_time(env.now)
+                due = env.now + every
+    except StopSimulation as exc:
+        return exc.args[0]
+    except EmptySchedule:
+        raise RuntimeError(f'No scheduled events left but "until" event was not triggered: {until}') from None
