@@ -339,21 +339,23 @@ def test_the_command_writes_every_output_and_repeats_itself(tmp_path, cache_dir,
         story_run.STORIES_DIR / f"{SHORT}.story").scene).gestures == read_story(
         story_run.STORIES_DIR / f"{SHORT}.story").gestures
     assert (first / "story.bvh").read_text().startswith("HIERARCHY")
-    # Again with --compare on the same seed: the same figures for best, and a table of every strategy; with
-    # --json that table goes to stderr and stdout is compare.json alone.
+    # Again with --compare on the same seed: the same figures for best (in its folder, beside every other
+    # strategy's), and a table of every strategy; with --json that table goes to stderr and stdout is
+    # compare.json alone.
     assert story_run.main(_args(second, cache_dir, compare=True, json=True)) == 0
     printed = capsys.readouterr()
     from speech_timing.animator_time import STRATEGIES
 
     assert all(f"\n{name} " in printed.err for name in STRATEGIES)
     assert json.loads(printed.out) == json.loads((second / "compare.json").read_text())
-    again = json.loads((second / "metrics.json").read_text())
+    assert sorted(p.name for p in second.iterdir()) == sorted([*STRATEGIES, "compare.json"])
+    again = json.loads((second / "best" / "metrics.json").read_text())
     timing = {"wall_seconds", "wall_fraction_of_story", "stages_seconds", "simulation_seconds", "synthesis_seconds",
               "cache_load_seconds", "compare_wall_seconds", "cached"}
     assert again["cached"] is True  # the story's speech came from the cache
     assert {k: v for k, v in again.items() if k not in timing} == {k: v for k, v in m.items() if k not in timing}
     for name in ("feedback.jsonl", "story.bvh", "story.TextGrid", "story.bml"):
-        assert (first / name).read_bytes() == (second / name).read_bytes(), name
+        assert (first / name).read_bytes() == (second / "best" / name).read_bytes(), name
     table = json.loads((second / "compare.json").read_text())["strategies"]
     assert table["best"]["p95_ms"] == m["sync_error_ms"]["p95"] < table["open-loop"]["p95_ms"]
 

@@ -111,8 +111,9 @@ def add_storytelling(scenarios) -> argparse.ArgumentParser:
     which = parser.add_mutually_exclusive_group()
     options.add_strategy(which)
     which.add_argument("--compare", action="store_true",
-                       help="tell the story with every strategy on the same seed, print a table and write "
-                            "compare.json (the other outputs are those of best)")
+                       help="tell the story with every strategy on the same seed, write each one's files into "
+                            "--out/<strategy>/ (all but the timeline pictures), print a table and write "
+                            "compare.json")
     options.add_seed(parser, "the playback start and event channel")
     options.add_out(parser, DEFAULT_OUT)
     parser.add_argument("--anchor", choices=ANCHORS, default="stress",

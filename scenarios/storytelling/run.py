@@ -20,6 +20,11 @@ animator-time strategy under an event-delivery condition, and writes to ``--out`
 ``compare.json``       with ``--compare``: the figures of every strategy on the same seed
 =====================  ==============================================================================
 
+With ``--compare`` each strategy's files (all but the timeline pictures) go to ``--out/<strategy>/`` and only
+``compare.json`` beside them. On a terminal, stderr says which stage is under way (synthesising speech,
+simulating, with a bar of simulated seconds, poses/BVH, audio, report, pictures; with ``--compare`` one bar
+of the strategies that names the stage); elsewhere nothing more is printed.
+
 With ``--json`` the figures written (``metrics.json``, or with ``--compare`` those of ``compare.json``) are
 printed as JSON on stdout, and what is otherwise printed goes to stderr.
 
@@ -45,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from agentsim.errors import AgentsimError
-from agentsim.core.progress import progress
+from agentsim.core.progress import Stages
 from agentsim.media import AXIS, GLOSSARY
 from scenarios.storytelling.markup import Story, StoryError, read_story
 from scenarios.storytelling.names import DEFAULT_OUT
@@ -126,51 +131,79 @@ def main(args: argparse.Namespace) -> int:
 
     check_writable(folders=[out])  # before anything is synthesised
     voice = make_voice(args.tts, cache_dir=args.cache, cache=not args.no_cache)
-    cache = voice.backend
 
-    strategies = list(STRATEGIES) if args.compare else [strategy]
+    as_json = getattr(args, "json", False)
+    printed = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
+    stages = Stages()
+    if not args.compare:
+        telling = tell(story, strategy=strategy, delivery=delivery, seed=args.seed, voice=voice, anchor=args.anchor,
+                       timing=args.timing, stages=stages)
+        stages_seconds = write_outputs(telling, out, fps=args.fps, window=args.window, seed=args.seed,
+                                       stages=stages)
+        wall = time.perf_counter() - started - voice.backend.synthesis_seconds
+        metrics = _metrics(telling, args, voice, stages_seconds, wall)
+        (out / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
+        print(_summary(story, metrics, voice, f"{out}/"), file=printed)
+        if as_json:
+            print(json.dumps(_clean(metrics)))
+        return 0
+    # --compare: each strategy's files in a folder of its own (as one run's, but for the timeline pictures),
+    # and beside them only compare.json
     tellings: dict[str, Telling] = {}
-    for name in progress(strategies, "strategies", unit="strategy"):
-        tellings[name] = tell(story, strategy=name, delivery=delivery, seed=args.seed, voice=voice,
-                              anchor=args.anchor, timing=args.timing)
-    telling = tellings[strategy]
-    stages = write_outputs(telling, out, fps=args.fps, window=args.window, seed=args.seed)
-    synthesis = cache.synthesis_seconds
-    wall = time.perf_counter() - started - synthesis
-    simulated_others = sum(t.wall_seconds for n, t in tellings.items() if n != strategy)
+    every: dict[str, OrderedDict] = {}
+    for name in stages.over(list(STRATEGIES), "strategies", unit="strategy"):
+        begun = time.perf_counter()
+        synthesis = voice.backend.synthesis_seconds
+        tellings[name] = t = tell(story, strategy=name, delivery=delivery, seed=args.seed, voice=voice,
+                                  anchor=args.anchor, timing=args.timing, stages=stages)
+        stages_seconds = write_outputs(t, out / name, fps=args.fps, window=args.window, seed=args.seed,
+                                       pictures=False, stages=stages)
+        every[name] = _metrics(t, args, voice, stages_seconds,
+                               time.perf_counter() - begun - (voice.backend.synthesis_seconds - synthesis))
+    wall = time.perf_counter() - started - voice.backend.synthesis_seconds
+    rows = OrderedDict((name, _row(t)) for name, t in tellings.items())
+    metrics = every[strategy]
+    compared = _clean(OrderedDict(story=story.title, seed=args.seed, anchor=args.anchor, timing=args.timing,
+                                  delivery=metrics["delivery"], strategies=rows))
+    for name, m in every.items():
+        m["compare_wall_seconds"] = wall
+        (out / name / "metrics.json").write_text(json.dumps(_clean(m), indent=2) + "\n")
+    (out / "compare.json").write_text(json.dumps(compared, indent=2) + "\n")
+    print(comparison_table(rows), file=printed)
+    print(_summary(story, metrics, voice, f"{out}/<strategy>/ and {out / 'compare.json'}"), file=printed)
+    if as_json:
+        print(json.dumps(compared))
+    return 0
 
+
+def _metrics(telling: Telling, args: argparse.Namespace, voice, stages: "OrderedDict[str, float]",
+             wall: float) -> "OrderedDict":
+    """What ``metrics.json`` holds for ``telling``, whose run took ``wall`` seconds (synthesis excluded)."""
+    cache = voice.backend
     metrics = telling.metrics()
-    metrics["wall_seconds"] = wall - simulated_others
+    metrics["wall_seconds"] = wall
     metrics["wall_fraction_of_story"] = metrics["wall_seconds"] / metrics["duration_s"]
-    metrics["synthesis_seconds"] = synthesis
-    metrics["cached"] = cache.key(story.text) not in cache.synthesised  # the story's speech came from the cache
+    metrics["synthesis_seconds"] = cache.synthesis_seconds
+    metrics["cached"] = cache.key(telling.story.text) not in cache.synthesised  # the speech came from the cache
     metrics["cache_load_seconds"] = cache.load_seconds
     metrics["stages_seconds"] = OrderedDict([("simulation", telling.wall_seconds)] + list(stages.items()))
     metrics["fps"] = args.fps
     metrics["time_axis"] = AXIS
     metrics["glossary"] = GLOSSARY
     metrics.update(telling.extra)
-    as_json = getattr(args, "json", False)
-    printed = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
-    compared = None
-    if args.compare:
-        rows = OrderedDict((name, _row(t)) for name, t in tellings.items())
-        compared = _clean(OrderedDict(story=story.title, seed=args.seed, anchor=args.anchor, timing=args.timing,
-                                      delivery=metrics["delivery"], strategies=rows))
-        (out / "compare.json").write_text(json.dumps(compared, indent=2) + "\n")
-        metrics["compare_wall_seconds"] = wall
-        print(comparison_table(rows), file=printed)
-    (out / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
+    return metrics
+
+
+def _summary(story: Story, metrics: dict, voice, written: str) -> str:
+    """The line a run prints: the story, the strategy's figures, the wall time and where the files went."""
     e = metrics["sync_error_ms"]
-    print(f"{story.title}: {metrics['words']} words, {metrics['gestures']} gestures, "
-          f"{metrics['duration_s']:.1f} s of speech; strategy {strategy}: sync error p50 {e['p50']:.2f} ms, "
-          f"p95 {e['p95']:.2f} ms, max {e['max']:.2f} ms; {metrics['snaps']} snaps, {metrics['warnings']} warnings, "
-          f"{metrics['missed']} missed; wall {metrics['wall_seconds']:.2f} s "
-          f"({100 * metrics['wall_fraction_of_story']:.2f} % of the story)"
-          + (f", first synthesis {synthesis:.2f} s" if synthesis else "") + f"; written to {out}/", file=printed)
-    if as_json:
-        print(json.dumps(compared if compared is not None else _clean(metrics)))
-    return 0
+    synthesis = voice.backend.synthesis_seconds
+    return (f"{story.title}: {metrics['words']} words, {metrics['gestures']} gestures, "
+            f"{metrics['duration_s']:.1f} s of speech; strategy {metrics['strategy']}: sync error p50 {e['p50']:.2f} ms, "
+            f"p95 {e['p95']:.2f} ms, max {e['max']:.2f} ms; {metrics['snaps']} snaps, {metrics['warnings']} warnings, "
+            f"{metrics['missed']} missed; wall {metrics['wall_seconds']:.2f} s "
+            f"({100 * metrics['wall_fraction_of_story']:.2f} % of the story)"
+            + (f", first synthesis {synthesis:.2f} s" if synthesis else "") + f"; written to {written}")
 
 
 def _row(t: Telling) -> "OrderedDict":
@@ -212,18 +245,21 @@ def _clean(value):
 
 
 def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float = 30.0,
-                  seed: int = 0, plots: bool = True) -> "OrderedDict[str, float]":
+                  seed: int = 0, plots: bool = True, pictures: bool = True,
+                  stages: Stages | None = None) -> "OrderedDict[str, float]":
     """Write a telling's files (all but ``metrics.json``) to ``out``; returns the wall seconds of each
-    stage. ``plots``: draw the timeline and sync-error pictures too."""
+    stage. ``plots``: draw the timeline and sync-error pictures too; ``pictures``: the timeline pictures
+    among them. ``stages``: where to say on a terminal which stage is under way."""
     out.mkdir(parents=True, exist_ok=True)
     # the poses are evaluated into files of a scratch folder (removed at the end) and read back a window
     # of frames at a time by everything that uses them: a long story's poses are never held whole
     with tempfile.TemporaryDirectory(dir=out, prefix=".poses-") as scratch:
-        return _write_outputs(telling, out, Path(scratch), fps, window, seed, plots)
+        return _write_outputs(telling, out, Path(scratch), fps, window, seed, plots, pictures,
+                              stages or Stages.off())
 
 
 def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, window: float, seed: int,
-                   plots: bool) -> "OrderedDict[str, float]":
+                   plots: bool, pictures: bool, say: Stages) -> "OrderedDict[str, float]":
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.media.audio import run_track_stream
     from agentsim.media.files import write_feedback, write_text, write_wav
@@ -248,31 +284,38 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
         # where the listener heard it: late by the playback latency, drifting
         wav = sound.submit(write_wav, out / "narration.wav", track) if track is not None else None
         ogg = start_audio(out / "report.html", track, sound)
-        write_text(out / "story.bml", telling.bml)
-        write_feedback(out / "feedback.jsonl", telling.recording.feedback)
-        t = stage("feedback", t)
-        stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene, folder=scratch)
-        t = stage("poses", t)
-        write_bvh(out / "story.bvh", stream)
-        t = stage("bvh", t)
-        telling.extra["motion_strokes"] = motion_strokes(telling, stream)
-        t = stage("motion check", t)
-        if wav is not None:
-            wav.result()
-        t = stage("wav", t)  # what was left of writing it
-        speech = telling.speech
-        _, planned, _ = syllable_times(telling.story, utterance)
-        export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, telling.passed, telling.ids,
-                        to_axis=speech.true_time, axis=AXIS)
-        gestures = gesture_rows(telling.recording)
-        write_csv(out / "gestures.csv", gestures)
-        t = stage("textgrid", t)
-        write_report(out / "report.html", recording=telling.recording, stream=stream, track=track,
-                     gestures=gestures, title=f"{telling.story.title} (strategy {telling.strategy})", audio=ogg)
+        with say("poses/BVH"):
+            write_text(out / "story.bml", telling.bml)
+            write_feedback(out / "feedback.jsonl", telling.recording.feedback)
+            t = stage("feedback", t)
+            stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene,
+                                    folder=scratch)
+            t = stage("poses", t)
+            write_bvh(out / "story.bvh", stream)
+            t = stage("bvh", t)
+            telling.extra["motion_strokes"] = motion_strokes(telling, stream)
+            t = stage("motion check", t)
+        with say("audio"):
+            if wav is not None:
+                wav.result()
+            t = stage("wav", t)  # what was left of writing it
+        with say("report"):
+            speech = telling.speech
+            _, planned, _ = syllable_times(telling.story, utterance)
+            export_textgrid(out / "story.TextGrid", telling.story, utterance, planned, telling.passed, telling.ids,
+                            to_axis=speech.true_time, axis=AXIS)
+            gestures = gesture_rows(telling.recording)
+            write_csv(out / "gestures.csv", gestures)
+            t = stage("textgrid", t)
+            write_report(out / "report.html", recording=telling.recording, stream=stream, track=track,
+                         gestures=gestures, title=f"{telling.story.title} (strategy {telling.strategy})", audio=ogg)
+            sound.shutdown(wait=True)  # the report's sound is encoded
     t = stage("report", t)
     if plots:
-        plot_window(telling, out / "timeline.png", stream, window)
-        plot_errors(telling, out / "sync_errors.png")
+        with say("pictures"):
+            if pictures:
+                plot_window(telling, out / "timeline.png", stream, window)
+            plot_errors(telling, out / "sync_errors.png")
         stage("plots", t)
     return stages
 

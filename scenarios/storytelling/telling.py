@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from agentsim.core.progress import Stages
 from agentsim.core.recording import Recording
 from agentsim.engines.speech import HeardSpeech, SpeechConfig
 from agentsim.errors import AgentsimError
@@ -201,7 +202,7 @@ class Telling:
 
 def tell(story: Story, strategy: str = "best", delivery: DeliveryModel = DEFAULT_DELIVERY, seed: int = 0,
          voice=None, anchor: str = "stress", timing: str = "tts", release: bool = True,
-         start: float = SPEECH_START) -> Telling:
+         start: float = SPEECH_START, stages: Stages | None = None) -> Telling:
     """Realize ``story`` and score its gestures.
 
     Parameters
@@ -225,23 +226,29 @@ def tell(story: Story, strategy: str = "best", delivery: DeliveryModel = DEFAULT
         Tie each gesture's end to the speech as well (see :func:`~scenarios.storytelling.markup.compile_bml`).
     start : float
         Start of the speech in the block (s).
+    stages : Stages, optional
+        Where to say on a terminal that the speech is synthesised and how far the simulation has come.
 
     Returns
     -------
     Telling
     """
     voice = voice if voice is not None else make_voice()
+    stages = stages or Stages.off()
     cache = _cache_of(voice)
     synthesis_before = cache.synthesis_seconds if cache is not None else 0.0
     fresh_before = cache is not None and cache.key(story.text) in cache.synthesised
     started = time.perf_counter()
     # The planned utterance (from the cache, or synthesised now: that time is not counted).
-    utterance = voice.synthesize(SpeechText(story.text))
+    with stages("synthesising speech"):
+        utterance = voice.synthesize(SpeechText(story.text))
     bml = compile_bml(story, timeline=utterance, anchor=anchor, release=release, block_id=BLOCK_ID, start=start)
     config = SpeechConfig(strategy=strategy, delivery=delivery, timing=timing, seed=seed, trace_frame=FRAME)
     realizer = Realizer(tts=voice, speech=config)
     realizer.submit(bml, source=story.source)
-    realizer.run()
+    # the bar's end: where the speech ends as planned (the run ends when it is heard and the gestures retract)
+    with stages("simulating", total=start + utterance.duration) as advance:
+        realizer.run(on_time=advance if stages.enabled else None)
     recording = realizer.recording()
     if not recording.speech:
         raise AgentsimError("the story's speech did not play: " + "; ".join(
