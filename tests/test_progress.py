@@ -23,6 +23,7 @@ from pathlib import Path
 from speech_timing.animator_time import STRATEGIES as SPEECH_STRATEGIES
 
 SHORT_STORY = "the_north_wind_and_the_sun"
+CONDUCTOR_STRATEGIES = ("follow", "target", "lead", "best")
 
 
 def command(*args) -> list[str]:
@@ -74,6 +75,7 @@ def without_figures(text: str) -> str:
 
 
 STORY_STAGES = ("synthesising speech", "simulating", "poses/BVH", "audio", "report", "pictures")
+CONDUCTOR_STAGES = ("simulating", "measuring", "audio", "poses/BVH", "report", "pictures")
 
 
 def test_run_storytelling_names_its_stages_on_a_terminal_and_nothing_in_a_pipe(tmp_path):
@@ -95,6 +97,23 @@ def test_run_storytelling_names_its_stages_on_a_terminal_and_nothing_in_a_pipe(t
     assert out.startswith("The North Wind and the Sun: 152 words")
     assert without_figures(out).replace("tty", "pipe") == without_figures(piped.stdout)
     for name in ("feedback.jsonl", "story.bvh", "gestures.csv", "story.TextGrid"):  # (the built-in voice: no audio)
+        assert (tmp_path / "tty" / name).read_bytes() == (tmp_path / "pipe" / name).read_bytes(), name
+
+
+def test_run_conductor_names_its_stages_on_a_terminal_and_nothing_in_a_pipe(tmp_path):
+    args = ("run", "conductor", "--bars", 4)
+    status, out, screen = on_terminal(command(*args, "--out", tmp_path / "tty"), tmp_path)
+    assert status == 0, screen
+    for name in CONDUCTOR_STAGES:
+        assert re.search(stage_line(name), screen), (name, screen)
+    # 0.5 s before the first beat, 16 beats at 120 BPM and 1 s of tail: a bar of 10 simulated seconds
+    assert re.search(r"simulating +\d+%\|.*\| \d+/10 s \[", screen), screen
+    piped = in_pipes(command(*args, "--json", "--out", tmp_path / "pipe"), tmp_path)
+    assert piped.returncode == 0, piped.stderr
+    assert not any(name in piped.stderr for name in CONDUCTOR_STAGES) and "\r" not in piped.stderr
+    assert json.loads(piped.stdout)["bars"] == 4  # stdout is the JSON alone
+    assert "written to" in out and not any(f"{name} ..." in out for name in CONDUCTOR_STAGES)
+    for name in ("feedback.jsonl", "conductor.bvh", "gestures.csv", "ensemble.wav"):
         assert (tmp_path / "tty" / name).read_bytes() == (tmp_path / "pipe" / name).read_bytes(), name
 
 
@@ -125,6 +144,26 @@ def test_storytelling_compare_is_one_bar_of_strategies_and_writes_only_their_fol
     assert without_figures(printed).replace("tty", "pipe") == without_figures(piped.stdout)
 
 
+def test_conductor_compare_is_one_bar_of_strategies_and_writes_only_their_folders(tmp_path):
+    args = ("run", "conductor", "--compare", "--bars", 4)
+    out = tmp_path / "tty"
+    status, printed, screen = on_terminal(command(*args, "--out", out), tmp_path)
+    assert status == 0, screen
+    assert "strategies 4/4 |" in screen
+    for name in CONDUCTOR_STRATEGIES:
+        assert f"{name}: simulating" in screen and f"{name}: pictures" in screen, name
+    assert sorted(p.name for p in out.iterdir()) == sorted([*CONDUCTOR_STRATEGIES, "compare.json"])
+    for name in CONDUCTOR_STRATEGIES:
+        files = {p.name for p in (out / name).iterdir()}
+        assert {"metrics.json", "feedback.jsonl", "conductor.bvh", "ensemble.wav", "tempo.png"} <= files, files
+        assert not any(f.startswith("timeline") for f in files), files
+    piped = in_pipes(command(*args, "--out", tmp_path / "pipe"), tmp_path)
+    assert piped.returncode == 0, piped.stderr
+    # in a pipe stderr keeps only each strategy's time, as it always has
+    assert re.fullmatch(r"(\w+: \d+\.\d s\n){4}", piped.stderr), piped.stderr
+    assert without_figures(printed).replace("tty", "pipe") == without_figures(piped.stdout)
+
+
 def test_a_telling_advanced_with_a_bar_is_the_same_run(capsys):
     """The bar of simulated seconds steps the clock itself: every event in the same order, none added."""
     from agentsim.core.progress import Stages
@@ -142,3 +181,15 @@ def test_a_telling_advanced_with_a_bar_is_the_same_run(capsys):
     assert re.search(r"simulating +100%\|.*\| (\d+)/\1 s", capsys.readouterr().err)  # full at the end
 
 
+def test_a_conductor_run_advanced_with_a_bar_is_the_same_run(capsys):
+    from agentsim.core.progress import Stages
+    from scenarios.conductor.config import load_config
+    from scenarios.conductor.scenario import simulate
+
+    config = load_config(None, {"piece": {"bars": 4}}, "--bars 4")
+    plain = simulate(config, "best", 1)
+    assert capsys.readouterr().err == ""
+    shown = simulate(config, "best", 1, stages=Stages(enabled=True))
+    assert shown.realizer.feedback.items == plain.realizer.feedback.items
+    assert shown.realizer.env.now == plain.realizer.env.now
+    assert re.search(r"simulating +100%\|.*\| (\d+)/\1 s", capsys.readouterr().err)

@@ -8,8 +8,10 @@ starts and drags 10 % below it) and writes ``metrics.json``, ``tempo.png``, ``ti
 configuration's strategy runs (``best`` unless it says otherwise). ``--compare`` runs every strategy on
 the same seed, writes each into ``--out/<strategy>/`` (all files but the timeline) and prints a table.
 ``--live`` conducts what an input device plays, in real time, instead of the simulated ensemble.
-``--json`` prints the figures written (``metrics.json``, or with ``--compare`` the list of ``compare.json``)
-as JSON on stdout, and the table on stderr instead.
+On a terminal, stderr says which stage is under way (simulating, with a bar of simulated seconds, measuring,
+audio, poses/BVH, report, pictures; with ``--compare`` one bar of the strategies that names the stage);
+elsewhere nothing more is printed. ``--json`` prints the figures written (``metrics.json``, or with
+``--compare`` the list of ``compare.json``) as JSON on stdout, and the table on stderr instead.
 Shipped configurations: ``configs/default.toml``, ``configs/waltz_3_4.toml``, ``configs/march_2_4.toml``
 and ``configs/falls_apart.toml`` (the conductor stops the piece).
 """
@@ -23,7 +25,7 @@ import time
 from pathlib import Path
 
 from agentsim.errors import AgentsimError
-from agentsim.core.progress import progress
+from agentsim.core.progress import Stages
 from agentsim.media import AXIS, GLOSSARY
 from scenarios.conductor.names import STRATEGIES
 
@@ -92,17 +94,19 @@ def main(args: argparse.Namespace) -> int:
         return 0
     strategies = STRATEGIES if args.compare else (args.strategy or config.conductor.strategy,)
     rows = []
-    for name in progress(strategies, "strategies", unit="strategy"):
+    stages = Stages()
+    for name in stages.over(list(strategies), "strategies", unit="strategy") if args.compare else strategies:
         started = time.perf_counter()
-        run = simulate(config, name, args.seed)
-        metrics = collect_metrics(run)
+        run = simulate(config, name, args.seed, stages=stages)
+        with stages("measuring"):
+            metrics = collect_metrics(run)
         folder = out / name if args.compare else out
-        write_outputs(run, metrics, folder, pictures=not args.compare)
+        write_outputs(run, metrics, folder, pictures=not args.compare, stages=stages)
         rows.append(metrics)
         if not args.compare:
             _report(metrics, folder, time.perf_counter() - started, table)
         else:
-            print(f"{name}: {time.perf_counter() - started:.1f} s", file=sys.stderr)
+            stages.write(f"{name}: {time.perf_counter() - started:.1f} s")
     if args.compare:
         print(f"{config.piece.title}: target {config.piece.tempo:g} BPM, ensemble starts at "
               f"{config.ensemble.start_bpm:g} BPM, seed {args.seed}", file=table)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import simpy
 
+from agentsim.core.progress import Stages
 from agentsim.errors import AgentsimError
 from agentsim.music.score import DYNAMICS_DB, velocity_scale
 from scenarios.conductor.config import Piece, ScenarioConfig
@@ -106,8 +107,10 @@ def sound_check(config: ScenarioConfig) -> dict[str, float]:
     return out
 
 
-def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int = 0) -> Run:
-    """Run the closed loop once, as fast as the computer allows; returns the finished :class:`Run`."""
+def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int = 0,
+             stages: Stages | None = None) -> Run:
+    """Run the closed loop once, as fast as the computer allows; returns the finished :class:`Run`.
+    ``stages``: where to say on a terminal how many seconds of the piece have been simulated."""
     started = time.perf_counter()
     name = strategy_name or config.conductor.strategy
     # FluidSynth renders without Python's lock: the sound check renders, and the renderer's onset offsets
@@ -121,7 +124,8 @@ def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int
     with ThreadPoolExecutor(max_workers=2) as pool:
         checked = pool.submit(sound_check, config)
         pool.submit(beat_onset_offset, config.audio.sample_rate, _soundfont(config))
-        return _simulate(config, name, seed, started, renderer=_renderer(config), reference=Later(checked))
+        return _simulate(config, name, seed, started, renderer=_renderer(config), reference=Later(checked),
+                         stages=stages or Stages.off())
 
 
 class Later(Mapping):
@@ -140,8 +144,9 @@ class Later(Mapping):
         return len(self.future.result())
 
 
-def _simulate(config: ScenarioConfig, name: str, seed: int, started: float, renderer, reference: Later) -> Run:
-    from agentsim.core.clock import make_environment
+def _simulate(config: ScenarioConfig, name: str, seed: int, started: float, renderer, reference: Later,
+              stages: Stages) -> Run:
+    from agentsim.core.clock import make_environment, run_until
     from agentsim.realizer import Realizer
     from scenarios.conductor.ensemble import Ensemble
 
@@ -176,8 +181,11 @@ def _simulate(config: ScenarioConfig, name: str, seed: int, started: float, rend
         yield env.process(hear())
         yield realizer.all_ended() | env.timeout(5.0)
 
+    # the bar's end: the score played at its tempo (an ensemble that drags takes longer: the bar grows)
+    length = ens_cfg.start_time + float(config.piece.score_offsets()[-1]) + TAIL_SECONDS
     try:
-        env.run(until=env.process(finish()))
+        with stages("simulating", total=length) as advance:
+            run_until(env, env.process(finish()), advance if stages.enabled else None)
     finally:
         renderer.close()
     run = Run(config, name, seed, realizer, ears, conductor, strategy, ensemble=ensemble)
@@ -390,9 +398,11 @@ def run_tempo_figure(run: Run, metrics: dict):
                         events, first_index=run.extra["first_index"], onsets=run.extra["onsets"])
 
 
-def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True) -> Path:
+def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True,
+                  stages: Stages | None = None) -> Path:
     """Write the run's files into the folder ``out`` (created if needed); ``pictures``: the timeline
-    pictures too, ``plots``: any picture at all (``tempo.png`` and the timeline)."""
+    pictures too, ``plots``: any picture at all (``tempo.png`` and the timeline). ``stages``: where to say
+    on a terminal which stage is under way."""
     import concurrent.futures
 
     from agentsim.animation import evaluate_poses, plot_timelines, write_bvh
@@ -402,6 +412,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     from agentsim.media.report.page import start_audio
     from agentsim.media.tables import gesture_rows, write_csv
 
+    say = stages or Stages.off()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     from agentsim.media import AXIS, GLOSSARY
@@ -409,24 +420,31 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     write_text(out / "metrics.json", json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}, indent=2) + "\n")
     recording = run.realizer.recording()
     write_feedback(out / "feedback.jsonl", recording.feedback)
-    # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the feedback's)
-    track = run_track(recording, [ensemble_source(run)])
     # the report's sound is encoded on a thread of its own (libsndfile does not hold the interpreter) while
     # the poses and the rest are made
     with concurrent.futures.ThreadPoolExecutor(1) as sound:
-        ogg = start_audio(out / "report.html", track, sound)
-        write_wav(out / "ensemble.wav", track)
-        stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
-        write_bvh(out / "conductor.bvh", stream)
-        write_csv(out / "beats.csv", beat_rows(run))
-        gestures = gesture_rows(recording, beat_sounded(run))
-        write_csv(out / "gestures.csv", gestures)
-        write_report(out / "report.html", recording=recording, stream=stream, track=track, gestures=gestures,
-                     title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})", audio=ogg)
+        with say("audio"):
+            # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the
+            # feedback's)
+            track = run_track(recording, [ensemble_source(run)])
+            ogg = start_audio(out / "report.html", track, sound)
+            write_wav(out / "ensemble.wav", track)
+        with say("poses/BVH"):
+            stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
+            write_bvh(out / "conductor.bvh", stream)
+        with say("report"):
+            write_csv(out / "beats.csv", beat_rows(run))
+            gestures = gesture_rows(recording, beat_sounded(run))
+            write_csv(out / "gestures.csv", gestures)
+            write_report(out / "report.html", recording=recording, stream=stream, track=track, gestures=gestures,
+                         title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})",
+                         audio=ogg)
+            sound.shutdown(wait=True)  # the report's sound is encoded
     if not plots:
         return out
-    run_tempo_figure(run, metrics).savefig(out / "tempo.png")
-    if pictures:
-        plot_timelines(recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW,
-                       threshold=TIMELINE_WINDOW, title=f"conductor ({run.strategy_name})")
+    with say("pictures"):
+        run_tempo_figure(run, metrics).savefig(out / "tempo.png")
+        if pictures:
+            plot_timelines(recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW,
+                           threshold=TIMELINE_WINDOW, title=f"conductor ({run.strategy_name})")
     return out
