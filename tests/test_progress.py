@@ -164,6 +164,43 @@ def test_conductor_compare_is_one_bar_of_strategies_and_writes_only_their_folder
     assert without_figures(printed).replace("tty", "pipe") == without_figures(piped.stdout)
 
 
+def test_eval_speech_sync_shows_the_strategy_under_way_on_a_terminal_only(tmp_path):
+    args = ("eval", "speech-sync", "--tts", "builtin")
+    status, out, screen = on_terminal(command(*args, "--strategy", "all"), tmp_path)
+    assert status == 0, screen
+    assert f"strategies {len(SPEECH_STRATEGIES)}/{len(SPEECH_STRATEGIES)} |" in screen
+    assert all(f"{name}: simulating" in screen for name in SPEECH_STRATEGIES)
+    piped = in_pipes(command(*args, "--strategy", "all"), tmp_path)
+    assert piped.returncode == 0
+    assert piped.stderr.startswith("251 strokes") and piped.stderr.count("\n") == 1 and "\r" not in piped.stderr
+    assert out == piped.stdout  # the same table: the built-in voice and the seed make it deterministic
+    status, out, screen = on_terminal(command(*args, "--strategy", "skip-70ms", "--json"), tmp_path)
+    assert status == 0 and re.search(stage_line("simulating skip-70ms"), screen), screen
+    assert json.loads(out)["strategy"] == "skip-70ms"
+    assert in_pipes(command(*args, "--strategy", "skip-70ms", "--json"), tmp_path).stderr == ""
+
+
+def test_demo_names_the_stages_of_both_scenarios_on_a_terminal_and_nothing_in_a_pipe(tmp_path):
+    # the demo takes no options to make it shorter: the two runs go side by side
+    piped = subprocess.Popen(command("demo", "--out", tmp_path / "pipe"), stdin=subprocess.DEVNULL,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        status, out, screen = on_terminal(command("demo", "--out", tmp_path / "tty"), tmp_path, timeout=600)
+        piped_out, piped_err = piped.communicate(timeout=600)
+    finally:
+        piped.kill()
+    assert status == 0, screen
+    conductor, _, storyteller = screen.partition("synthesising speech")
+    for name in CONDUCTOR_STAGES:
+        assert re.search(stage_line(name), conductor), name
+    for name in STORY_STAGES[1:]:
+        assert re.search(stage_line(name), storyteller), name
+    assert out.startswith(f"== agentsim run conductor --out {tmp_path / 'tty' / 'conductor'}\n")
+    assert piped.returncode == 0, piped_err
+    assert piped_err == ""
+    assert without_figures(out).replace("tty", "pipe") == without_figures(piped_out)
+
+
 def test_a_telling_advanced_with_a_bar_is_the_same_run(capsys):
     """The bar of simulated seconds steps the clock itself: every event in the same order, none added."""
     from agentsim.core.progress import Stages

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from agentsim.cli import options
 from agentsim.errors import AgentsimError, UsageError
-from agentsim.core.progress import progress
+from agentsim.core.progress import Stages
 
 DEFAULT_MODEL = Path("linear_model.json")
 
@@ -100,8 +100,10 @@ def speech_sync(args: argparse.Namespace) -> int:
         model = LinearModel.load(args.model)
     text, tts = read_text(args.text), options.backend(args.tts)
     results = []
-    for name in progress(names, "strategies", unit="strategy"):
-        result = run(text, tts, name, delivery, timing=args.timing, seed=args.seed, linear_model=model)
+    stages = Stages()  # on a terminal: which strategy is under way (with 'all', a bar of them)
+    for name in stages.over(names, "strategies", unit="strategy") if len(names) > 1 else names:
+        with stages(f"simulating {name}" if len(names) == 1 else "simulating"):
+            result = run(text, tts, name, delivery, timing=args.timing, seed=args.seed, linear_model=model)
         results.append(result)
     from dataclasses import asdict
 
