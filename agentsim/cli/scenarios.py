@@ -103,7 +103,9 @@ def add_storytelling(scenarios) -> argparse.ArgumentParser:
                     "narration.wav, story.TextGrid, story.bvh, story.bml (the BML the story compiles to), "
                     "gestures.csv, feedback.jsonl, timeline.png (an overview) with timeline_0000-0030s.png, ... "
                     "(each --window seconds in detail), sync_errors.png and report.html with its folder "
-                    "report_files/; with --compare, compare.json too.")
+                    "report_files/; with --compare, compare.json and a folder of those per strategy (open-loop/, "
+                    "linear-model/, chang-naive/, chang-smooth/, skip-70ms/, best/), without the timeline "
+                    "pictures.")
     parser.add_argument("--story", metavar="NAME|FILE",
                         help="a shipped story's name, a .story file or a TextGrid (default: the longest shipped story)")
     parser.add_argument("--scene", metavar="NAME|FILE",
