@@ -360,3 +360,14 @@ def test_a_summary_of_many_lines_keeps_its_legend_inside_the_picture(tmp_path, m
     renderer = fig.canvas.get_renderer()
     above = legend.get_window_extent(renderer).y1
     assert all(ax.get_tightbbox(renderer).y0 >= above for ax in fig.axes if ax.get_visible())
+
+
+def test_the_sweeps_help_names_everything_it_writes(swept, capsys):
+    out, _, _ = swept
+    with pytest.raises(SystemExit):
+        main(["sweep", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    written = sorted(p.name + ("/" if p.is_dir() else "") for p in out.iterdir() if p.name != "summary.png")
+    assert written == ["points/", "results.csv", "results.parquet", "sweep.json"]
+    assert [name for name in written if f"DIR/{name}" not in text] == []
+    assert "DIR/outputs/<its grid values>/" in text and "DIR/summary.png" in text

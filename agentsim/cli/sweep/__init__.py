@@ -32,8 +32,9 @@ def add_parsers(commands) -> None:
                     "conductor, run storytelling) at every point of the grid SPEC.toml names, each point a Dask "
                     "task, on a local cluster of --workers processes or through the scheduler at --scheduler. "
                     "Writes DIR/results.parquet and DIR/results.csv (one row per point, failures with their "
-                    "error) and keeps each finished point in DIR/points/, so that a rerun computes only what is "
-                    "missing. 'agentsim sweep report DIR' prints the means with 95 % bootstrap intervals per "
+                    "error) and DIR/sweep.json (the spec as read), keeps each finished point in DIR/points/, so that "
+                    "a rerun computes only what is missing, and with keep_outputs = true each point's --out "
+                    "folder in DIR/outputs/<its grid values>/. 'agentsim sweep report DIR' prints the means with 95 % bootstrap intervals per "
                     "strategy and draws DIR/summary.png.")
     parser.add_argument("spec", nargs="?", metavar="SPEC.toml",
                         help="the sweep's spec: a file, or a shipped spec by its short name (speech_sync, "
