@@ -11,6 +11,10 @@ Tables:
 ``storyteller-strategies``
     ``agentsim run storytelling --compare`` (the longest shipped story, every animator-time strategy, seed 0,
     espeak-ng): p50, p95 and max sync error, snaps and stall of each strategy, the best one in bold.
+``speech-sync``, ``conductor``
+    ``agentsim sweep NAME`` of the shipped sweep spec into a new folder (324 points of ``eval speech-sync``
+    with espeak-ng; 40 of ``run conductor``), then ``agentsim sweep report DIR --markdown``: the table as the
+    report prints it.
 """
 
 from __future__ import annotations
@@ -55,7 +59,21 @@ def storyteller_strategies() -> str:
     return "\n".join(lines)
 
 
-TABLES = {"storyteller-strategies": storyteller_strategies}
+def swept(spec: str) -> str:
+    """The Markdown table of ``agentsim sweep report`` for a fresh run of the shipped sweep ``spec``."""
+    with tempfile.TemporaryDirectory() as out:
+        for command in (["sweep", spec, "--out", out, "--quiet"], ["sweep", "report", out, "--markdown",
+                                                                    "--png", str(Path(out) / "summary.png")]):
+            proc = subprocess.run([sys.executable, "-m", "agentsim", *command], capture_output=True, text=True,
+                                  timeout=3600)
+            if proc.returncode != 0:
+                raise SystemExit(f"readme_figures: agentsim {' '.join(command[:2])} failed: {proc.stderr.strip()}")
+    return proc.stdout.strip()
+
+
+TABLES = {"storyteller-strategies": storyteller_strategies,
+          "speech-sync": lambda: swept("speech_sync"),
+          "conductor": lambda: swept("conductor")}
 
 
 def place(text: str, name: str, table: str) -> str:

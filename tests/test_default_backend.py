@@ -78,12 +78,10 @@ def without_espeak(monkeypatch):
     """espeak-ng's library as if it were not installed."""
     import speech_timing.espeak as espeak
 
-    load = espeak._load_library
+    def missing():  # the process-wide engine as the library's absence leaves it
+        return espeak._Engine("libespeak-ng-not-installed.so.1")
 
-    def missing(name=espeak.LIBRARY_NAME):
-        return load("libespeak-ng-not-installed.so.1")
-
-    monkeypatch.setattr(espeak, "_load_library", missing)
+    monkeypatch.setattr(espeak, "_engine", missing)
 
 
 def test_without_espeak_every_default_falls_back_to_the_builtin_model_and_says_what_to_install(

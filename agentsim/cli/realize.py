@@ -234,15 +234,16 @@ def plot_timeline(args: argparse.Namespace) -> int:
         raise UsageError(f"--to ({end:g} s) must come after --from ({start:g} s)")
     check_writable([args.out])
     tts = options.backend(args.tts)
-    print(f"speech: {options.describe_backend(tts)}", file=sys.stderr)
     realizer = Realizer(anticipators=options.anticipators(args), tts=tts)
     realizer.submit(read_document(args.file), source=str(resolve(args.file)))
     realizer.run()
     recording = realizer.recording()
     stream = evaluate_poses(recording)
     title = Path(args.file).name
+    said = f"speech: {options.describe_backend(tts)}"  # said with what was drawn: an error stays one line
     if start is None and end is None:
         written = plot_timelines(recording, args.out, stream=stream, title=title, width=12.0)
+        print(said, file=sys.stderr)
         if len(written) > 1:
             print(f"wrote {args.out}: the run lasts {run_duration(recording):.1f} s, so it is its overview, and "
                   f"{len(written) - 1} windows are next to it ({written[1].name}, ...)", file=sys.stderr)
@@ -255,6 +256,7 @@ def plot_timeline(args: argparse.Namespace) -> int:
         raise UsageError(f"--from {start:g} s is after the end of the run ({duration:.2f} s)")
     end = duration if end is None else end
     draw(recording, args.out, stream=stream, title=title, start=start, end=end)
+    print(said, file=sys.stderr)
     print(f"wrote {args.out} ({start:g} to {end:g} s of the run)", file=sys.stderr)
     return 0
 
