@@ -233,8 +233,7 @@ class _PcmBuffer:
         """A buffer holding the 16-bit samples ``pcm``."""
         buffer = cls()
         if pcm:
-            data = ctypes.create_string_buffer(pcm, len(pcm))
-            buffer.append(data, len(pcm) // 2)
+            buffer.append(ctypes.c_char_p(pcm), len(pcm) // 2)  # copied once, from the bytes themselves
         return buffer
 
     def samples(self):
@@ -491,12 +490,13 @@ def _serve_pristine() -> None:
             os._exit(0)
         os.close(write)
         with os.fdopen(read, "rb") as reply_stream:
-            try:
-                reply = _receive(reply_stream)
-            except EOFError:
-                reply = "the synthesising process died"
+            reply = reply_stream.read()  # passed on as it is, length and pickle
         os.waitpid(pid, 0)
-        _send(replies, reply)
+        if len(reply) < 8 or len(reply) != 8 + int.from_bytes(reply[:8], "little"):
+            _send(replies, "the synthesising process died")
+        else:
+            replies.write(reply)
+            replies.flush()
 
 
 def _engine() -> _Engine:
