@@ -52,3 +52,21 @@ def test_a_scenario_help_names_everything_it_writes(name, tmp_path):
 def test_the_demo_help_names_its_folders(tmp_path):
     text = help_text("demo", cwd=tmp_path)
     assert "conductor/" in text and "storytelling/" in text and "out/demo" in text
+
+
+def test_every_command_and_argument_has_a_help_text():
+    import argparse
+
+    from agentsim.cli import build_parser
+
+    def silent(parser, path):
+        if len(path) > 1 and not parser.description:
+            yield " ".join(path) + " (no description)"
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    yield from silent(sub, [*path, name])
+            elif not action.help and not isinstance(action, argparse._HelpAction):
+                yield f"{' '.join(path)} {action.dest}"
+
+    assert list(silent(build_parser(), ["agentsim"])) == []

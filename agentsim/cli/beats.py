@@ -10,7 +10,9 @@ from agentsim.errors import AgentsimError
 
 
 def add_parsers(commands) -> None:
-    anticipate = commands.add_parser("anticipate", help="run anticipators over recorded or live input")
+    anticipate = commands.add_parser("anticipate", help="run anticipators over recorded or live input",
+                                     description="Run an anticipator over recorded or live input and print what it "
+                                                 "predicts: 'anticipate beats' tracks the beats of audio.")
     kinds = anticipate.add_subparsers(dest="kind", required=True)
     beats = kinds.add_parser(
         "beats", help="predict beats from audio",

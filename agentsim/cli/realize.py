@@ -48,7 +48,7 @@ def add_parsers(commands) -> None:
                     "and the poses. --from/--to draw only that window of the run; without them a run longer "
                     "than 60 s is drawn as an overview in OUT.png plus one picture per 30 s next to it "
                     "(OUT_0000-0030s.png, ...).")
-    plot.add_argument("what", choices=["timeline"])
+    plot.add_argument("what", choices=["timeline"], help="what to draw: timeline")
     plot.add_argument("file", metavar="FILE", help="a BML file")
     options.add_out(plot, None, "the picture to write", metavar="OUT.png")
     plot.add_argument("--from", dest="start", metavar="SECONDS",
@@ -79,7 +79,8 @@ def add_parsers(commands) -> None:
                                    description="List the installed examples (a command given examples/NAME "
                                                "that is not where it runs reads the installed one), or copy "
                                                "them into DIR/examples.")
-    examples.add_argument("action", nargs="?", choices=["list", "copy"], default="list")
+    examples.add_argument("action", nargs="?", choices=["list", "copy"], default="list",
+                          help="list them with what each is (the default), or copy them into DIR/examples/")
     examples.add_argument("dir", nargs="?", default=".", help="where 'copy' puts the examples folder (here)")
     examples.set_defaults(handler=examples_command)
 

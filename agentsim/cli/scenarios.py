@@ -13,7 +13,9 @@ DEMO_OUT = "out/demo"
 
 
 def add_parsers(commands) -> None:
-    run = commands.add_parser("run", help="run a scenario (conductor, storytelling)")
+    run = commands.add_parser("run", help="run a scenario (conductor, storytelling)",
+                              description="Run a scenario end to end in simulated time and write its results: "
+                                          "'run conductor', 'run storytelling' (each with its own --help).")
     scenarios = run.add_subparsers(dest="scenario", required=True)
     add_conductor(scenarios)
     add_storytelling(scenarios)

@@ -24,7 +24,9 @@ SYNC_UNITS = {"error_ms": "ms (|stroke - the word's onset as heard|; signed_mean
 
 
 def add_parsers(commands) -> None:
-    evaluate = commands.add_parser("eval", help="measure synchronisation")
+    evaluate = commands.add_parser("eval", help="measure synchronisation",
+                                    description="Measure synchronisation: 'eval speech-sync' scores beat gestures "
+                                                "on every content word of a text against the speech as heard.")
     kinds = evaluate.add_subparsers(dest="kind", required=True)
     sync = kinds.add_parser(
         "speech-sync", help="beats on every content word: how far from their words do the strokes land?",
@@ -43,7 +45,9 @@ def add_parsers(commands) -> None:
     sync.add_argument("--plot", metavar="FILE.png", help="draw the error distribution of each strategy")
     sync.set_defaults(handler=speech_sync)
 
-    speech = commands.add_parser("speech", help="speech tools")
+    speech = commands.add_parser("speech", help="speech tools",
+                                  description="Speech tools: 'speech calibrate' fits Chang's linear model, "
+                                              "'speech export' writes a text's audio and Praat TextGrid.")
     tools = speech.add_subparsers(dest="tool", required=True)
     calibrate_parser = tools.add_parser("calibrate", help="fit Chang's linear characters-to-time model",
                                         description="Speak calibration texts and fit seconds = multiplier * "
