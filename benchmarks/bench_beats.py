@@ -2,17 +2,18 @@
 
 Each render is an ensemble (drums, bass, piano, strings) at 100 to 140 BPM in 4/4 or 3/4, with a tempo
 ramp of +10 % over 16 bars (from bar 4) and +-2 % smooth rubato, about 60 s long. Every tracker
-hears it block by block; predictions made at least 200 ms before each true beat are scored after the
-first 8 seconds (:func:`anticipators.beats.evaluation.evaluate_predictions`). The real-time factor is
-processing time over audio time; the target is at most 0.0015 for the causal tracker at every sample rate
+hears it block by block; the beats it committed 200 ms ahead (each beat as the update in force 200 ms
+before it predicted it, :func:`anticipators.beats.evaluation.committed_beats`) are scored after the first
+8 seconds and up to the last beat of the music (the render's ringing tail has no beats;
+:func:`anticipators.beats.evaluation.score_committed`). The real-time factor is CPU time over audio time; the target is at most 0.0015 for the causal tracker at every sample rate
 (22.05 and 44.1 kHz by default), with its F-measure and mean absolute error as they were. The causal
 tracker's time is that of ``track_file``, which lets the tracker record its updates
 (:meth:`~anticipators.beats.tracking.CausalBeatTracker.track`: the same updates as predicting after every
 block, without asking while they cannot have changed; a live caller asking after every block adds
 0.0001-0.0002 to the real-time factor). When aubio is
-importable (``pip install aubio``; a comparison here only, not a dependency of the package), its causal
-beat tracker runs beside it on the same renders, in the same process: its predictions are its last beat
-plus whole periods.
+importable (``pip install aubio``, the ``bench`` extra; a comparison, not a dependency of the package), its
+causal beat tracker (:class:`anticipators.beats.baselines.AubioTracker`) runs beside it on the same
+renders, in the same process: its predictions are its last beat plus whole periods.
 
 Usage::
 
@@ -32,8 +33,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from anticipators.beats.evaluation import evaluate_predictions, select_predictions, track_file  # noqa: E402
-from anticipators.beats.baselines import librosa_offline_beats  # noqa: E402
+from anticipators.beats.evaluation import committed_beats, score_committed, track_file  # noqa: E402
+from anticipators.beats.baselines import aubio_available, librosa_offline_beats  # noqa: E402
 from agentsim.music.ensemble import render_ensemble_full  # noqa: E402
 from agentsim.music.onsets import beat_onset_offset, measure_onset_offsets  # noqa: E402
 
@@ -55,31 +56,6 @@ TRACKERS = ("causal", "baseline", "librosa_offline")
 RTF_TARGET = 0.0015
 
 
-def aubio_run(audio: np.ndarray, sample_rate: int, block_size: int, horizon_beats: int = 4) -> dict | None:
-    """aubio's causal beat tracker over the audio, block by block, in the format of ``track_file`` (None
-    if aubio is not installed): after each block, its last beat plus 1 to ``horizon_beats`` periods."""
-    try:
-        import aubio
-    except ImportError:
-        return None
-    tracker = aubio.tempo("default", 2 * block_size, block_size, sample_rate)
-    x = np.ascontiguousarray(audio, dtype=np.float32)
-    updates, last = [], None
-    t0 = time.perf_counter()
-    for a in range(0, x.size - block_size + 1, block_size):
-        tracker(x[a : a + block_size])
-        period = float(tracker.get_period_s())
-        now = (a + block_size) / sample_rate
-        if period > 0:
-            beat = float(tracker.get_last_s())
-            k = max(int(np.ceil((now - beat) / period)), 0)
-            pred = (beat + period * np.arange(k, k + horizon_beats)).tolist()
-            if pred != last:  # compared as track_file compares the causal tracker's predictions
-                updates.append({"t": now, "beats": pred})
-                last = pred
-    wall = time.perf_counter() - t0
-    return {"tracker": "aubio", "audio_seconds": x.size / sample_rate, "wall_seconds": wall,
-            "sample_rate": sample_rate, "updates": updates}
 FIGURES = ("f_measure", "mae_ms", "mean_error_ms", "median_abs_error_ms", "mae_ms_lag_removed", "real_time_factor")
 
 
@@ -121,7 +97,7 @@ def run_at(sr: int, args) -> dict:
     librosa_offline_beats(np.zeros(sr * 5, np.float32), sr)
 
     renders = []
-    trackers = TRACKERS + (("aubio",) if aubio_run(np.zeros(sr, np.float32), sr, args.block_size) else ())
+    trackers = TRACKERS + (("aubio",) if aubio_available() else ())
     per_tracker: dict[str, list[dict]] = {name: [] for name in trackers}
     for bpm, meter, seed in configs:
         bpb = int(meter.split("/")[0])
@@ -138,16 +114,17 @@ def run_at(sr: int, args) -> dict:
             "results": {},
         }
         for name in trackers:
-            if name == "aubio":
-                run = aubio_run(r.audio, sr, args.block_size)
-            else:
-                run = track_file(r.audio, name, args.block_size, sample_rate=sr)
-            res = evaluate_predictions(run["updates"], r.beat_times, lookahead=args.lookahead, skip=8.0)
-            res["real_time_factor"] = run["wall_seconds"] / run["audio_seconds"]
-            # timing error left once a tracker's constant lag (its median signed error) is removed
+            run = track_file(r.audio, name, args.block_size, sample_rate=sr)
+            end = float(r.beat_times[-1]) + 0.07  # the music ends with its last beat
+            res = score_committed(run["updates"], r.beat_times, lookahead=args.lookahead, skip=8.0, end=end,
+                                  continuity=False)
+            res["real_time_factor"] = run["cpu_seconds"] / run["audio_seconds"]
+            # timing error left once a tracker's constant lag (its median signed error) is removed, over the
+            # committed beats within 70 ms of a true beat
             ref = r.beat_times[r.beat_times >= 8.0]
-            err = select_predictions(run["updates"], ref, args.lookahead) - ref
-            err = err[np.isfinite(err)]
+            est = committed_beats(run["updates"], args.lookahead, end)
+            err = np.array([est[np.argmin(np.abs(est - b))] - b for b in ref]) if est.size else np.zeros(0)
+            err = err[np.abs(err) <= 0.07]
             res["mae_ms_lag_removed"] = float(np.mean(np.abs(err - np.median(err))) * 1000) if err.size else float("nan")
             res["updates"] = len(run["updates"])
             entry["results"][name] = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in res.items()}

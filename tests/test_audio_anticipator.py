@@ -37,19 +37,46 @@ def test_bml_pegged_to_heard_beats_is_retimed_while_playing(ensemble):
     assert not realizer.feedback.warnings()
 
 
-def test_anticipate_beats_command_scores_predictions(ensemble):
-    folder, *_ = ensemble
-    out = subprocess.run([sys.executable, "-m", "agentsim.cli", "anticipate", "beats", str(folder / "ensemble.wav"),
-                          "--reference", str(folder / "beats.txt"), "--lookahead", "0.2", "--json"],
-                         capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    result = json.loads(out.stdout)
-    assert result["f_measure"] >= 0.98 and result["mae_ms"] < 15 and result["real_time_factor"] < 0.05
-    updates = subprocess.run([sys.executable, "-m", "agentsim.cli", "anticipate", "beats",
-                              str(folder / "ensemble.wav"), "--json"], capture_output=True, text=True, timeout=120)
-    run = json.loads(updates.stdout)
-    assert run["tracker"] == "causal" and run["audio_seconds"] == pytest.approx(41.0, abs=2)
-    assert all(all(b >= u["t"] for b in u["beats"]) for u in run["updates"])
+def test_anticipate_beats_command_commits_and_scores_beats(ensemble, tmp_path):
+    """The committed sequence the command writes is every beat the update in force ``--lookahead`` before it
+    predicted; ``--reference`` scores that sequence."""
+    from anticipators.beats.evaluation import score_beats
+
+    folder, _, _, beats = ensemble
+    wav = str(folder / "ensemble.wav")
+    for lookahead in ("0.2", "0"):
+        out = tmp_path / f"committed-{lookahead}.txt"
+        proc = subprocess.run([sys.executable, "-m", "agentsim.cli", "anticipate", "beats", wav, "--beats-out", str(out),
+                               "--lookahead", lookahead, "--json"], capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        run = json.loads(proc.stdout)
+        assert run["tracker"] == "causal" and run["audio_seconds"] == pytest.approx(41.0, abs=2)
+        assert run["lookahead"] == float(lookahead) and 0 < run["cpu_seconds"] < 0.05 * run["audio_seconds"]
+        written = np.loadtxt(out, ndmin=1)
+        np.testing.assert_allclose(written, run["committed"], atol=1e-6)
+        # the rule, beat by beat: predicted by the update at u with u <= b - L < u_next
+        updates, lead = run["updates"], float(lookahead)
+        expected = []
+        for i, update in enumerate(updates):
+            following = updates[i + 1]["t"] if i + 1 < len(updates) else float("inf")
+            expected += [b for b in update["beats"] if update["t"] <= b - lead < following and b <= run["audio_seconds"]]
+        assert run["committed"] == sorted(expected) and len(expected) > 60
+        # the music's beats, each once: 200 ms ahead as at lead 0
+        music = written[written <= beats[-1] + 0.07]
+        assert score_beats(beats, music)["f_measure"] >= 0.99
+        assert np.all(np.diff(music) > 0.3)  # no beat doubled (the tempo stays under 140 BPM)
+        scored = subprocess.run([sys.executable, "-m", "agentsim.cli", "anticipate", "beats", wav,
+                                 "--reference", str(folder / "beats.txt"), "--lookahead", lookahead, "--json"],
+                                capture_output=True, text=True, timeout=120)
+        assert scored.returncode == 0, scored.stderr
+        result = json.loads(scored.stdout)
+        # the whole committed sequence is scored, the beats committed in the ringing after the music too
+        want = score_beats(beats, written, skip=5.0)
+        for key in ("f_measure", "cmlt", "amlt", "p_score", "mae_ms", "n_estimated", "n_reference"):
+            assert result[key] == pytest.approx(want[key], abs=1e-3), key  # (the file holds microseconds)
+        assert result["committed"] == written.size and result["lookahead"] == float(lookahead)
+        assert result["mae_ms"] < 15 and result["real_time_factor"] < 0.05 and not result["silent"]
+        assert result["time_to_4"] < 6.0
 
 
 def test_silence_after_music_keeps_the_last_good_prediction(ensemble):

@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 from scipy.signal import resample_poly
 
-from anticipators.beats.evaluation import evaluate_predictions, select_predictions, track_and_evaluate, track_file
+from anticipators.beats.evaluation import (
+    committed_beats,
+    score_beats,
+    score_committed,
+    time_to_correct,
+    track_and_evaluate,
+    track_file,
+)
 from anticipators.beats.baselines import IOIBaselineTracker
 from anticipators.beats.envelope import SpectralFluxEnvelope
 from anticipators.beats.tracking import CausalBeatTracker, make_tracker
@@ -19,52 +26,76 @@ from agentsim.music.rendering import render_events
 SR = 22050
 
 
+def music_end(render) -> float:
+    """A render's music ends with its last beat: committed beats in the decaying tail after it are not scored."""
+    return float(render.beat_times[-1]) + 0.07
+
+
 # ------------------------------------------------------------------------------ evaluation by hand
 
-
-def test_select_predictions_uses_last_update_before_lookahead():
-    updates = [(0.0, [1.0, 2.0, 3.0]), (1.5, [2.01, 3.02]), (2.9, [3.5])]
-    pred = select_predictions(updates, [1.0, 2.0, 3.0], lookahead=0.2)
-    # beat 3.0: the update at 2.9 is too late (after 2.8), so the one at 1.5 counts
-    np.testing.assert_allclose(pred, [1.0, 2.01, 3.02])
-    # a beat with no update early enough has no prediction
-    assert np.isnan(select_predictions([(0.5, [1.0])], [0.6], lookahead=0.2)[0])
-    # dict-style updates are the same
-    dict_updates = [{"t": t, "beats": b} for t, b in updates]
-    np.testing.assert_allclose(select_predictions(dict_updates, [1.0, 2.0, 3.0]), pred)
+UPDATES = [(0.0, [0.5, 1.0, 1.5]), (0.9, [1.02, 1.52, 2.02]), (1.4, [1.5, 2.0, 2.5]), (2.0, [2.6, 3.1])]
 
 
-def test_evaluate_predictions_known_numbers():
-    true = np.array([9.0, 10.0, 11.0, 12.0])
-    updates = [(0.0, [9.0]), (9.5, [10.01, 11.0]), (10.7, [11.02, 12.1])]
-    res = evaluate_predictions(updates, true, lookahead=0.2, skip=8.0)
-    # predictions: 9.0 (0 ms), 10.01 (+10 ms), 11.02 (+20 ms), 12.1 (+100 ms, outside 70 ms)
-    assert res["n_beats"] == 4 and res["n_predicted"] == 4
-    assert res["mae_ms"] == pytest.approx((0 + 10 + 20 + 100) / 4)
-    assert res["mean_error_ms"] == pytest.approx((0 + 10 + 20 + 100) / 4)
-    assert res["median_abs_error_ms"] == pytest.approx(15.0)
-    assert res["f_measure"] == pytest.approx(0.75)  # precision 3/4, recall 3/4
-    assert res["within_window"] == pytest.approx(0.75)
+def test_committed_sequence_takes_each_beat_from_the_update_in_force_lookahead_before_it():
+    # 0.2 s ahead: update 0 commits [0.2, 1.1), update 1 [1.1, 1.6), update 2 [1.6, 2.2), update 3 from 2.2
+    assert committed_beats(UPDATES, 0.2).tolist() == [0.5, 1.0, 1.52, 2.0, 2.6, 3.1]
+    assert committed_beats(UPDATES, 0.2, end=3.0).tolist() == [0.5, 1.0, 1.52, 2.0, 2.6]
+    # at lead 0 the beat at 2.0 is lost: update 2 is replaced at 2.0, and update 3 no longer predicts it
+    assert committed_beats(UPDATES, 0.0).tolist() == [0.5, 1.02, 1.5, 2.6, 3.1]
+    # 0.6 s ahead: update 0 commits [0.6, 1.5), update 1 [1.5, 2.0), update 2 [2.0, 2.6), update 3 from 2.6;
+    # the performer plays both 2.5 (update 2) and 2.6 (update 3), as it would
+    assert committed_beats(UPDATES, 0.6).tolist() == [1.0, 1.52, 2.0, 2.5, 2.6, 3.1]
+    dict_updates = [{"t": t, "beats": b} for t, b in UPDATES]
+    assert committed_beats(dict_updates, 0.2).tolist() == [0.5, 1.0, 1.52, 2.0, 2.6, 3.1]
+    assert committed_beats([], 0.2).size == 0
+    with pytest.raises(ValueError):
+        committed_beats(UPDATES, -0.1)
 
 
-def test_evaluate_predictions_skip_missing_and_signs():
-    true = np.array([1.0, 9.0, 10.0, 11.0])
-    updates = [(8.5, [8.99, 9.98]), (10.5, [10.97])]
-    res = evaluate_predictions(updates, true, lookahead=0.2, skip=8.0)
-    # 1.0 is skipped; 9.0 -> 8.99? no: the update at 8.5 is at or before 8.8, so 8.99 (-10 ms);
-    # 10.0 -> 9.98 (-20 ms); 11.0 -> 10.97 (-30 ms)
-    assert res["n_beats"] == 3 and res["n_predicted"] == 3
-    assert res["mean_error_ms"] == pytest.approx(-20.0)
-    assert res["mae_ms"] == pytest.approx(20.0)
-    assert res["f_measure"] == pytest.approx(1.0)
-    # without any update in time: recall 2/3, precision 1 -> F = 0.8
-    res = evaluate_predictions([(8.5, [8.99, 9.98])], [9.0, 10.0, 11.0], skip=8.0)
-    assert res["n_predicted"] == 3  # 11.0 still uses the 8.5 update, nearest is 9.98 (a miss)
-    assert res["f_measure"] == pytest.approx(2 * (2 / 3) * (2 / 3) / (4 / 3))
-    res = evaluate_predictions([(10.5, [11.0])], [9.0, 10.0, 11.0], skip=8.0)
-    assert res["n_predicted"] == 1
-    assert res["f_measure"] == pytest.approx(2 * 1.0 * (1 / 3) / (1 + 1 / 3))
-    assert evaluate_predictions([], [9.0], skip=8.0)["f_measure"] == 0.0
+def test_score_beats_known_numbers():
+    ref = [4.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0]
+    est = [4.0, 6.01, 7.05, 8.1, 9.0, 9.5, 10.0]
+    res = score_beats(ref, est, skip=5.0)
+    # trimmed at 5 s: 6 reference beats, 6 estimated; hits 6.01, 7.05, 9.0, 10.0 (8.1 is 100 ms off)
+    assert res["n_reference"] == 6 and res["n_estimated"] == 6 and not res["silent"]
+    assert res["f_measure"] == pytest.approx(2 / 3)
+    assert res["mae_ms"] == pytest.approx(15.0) and res["mean_error_ms"] == pytest.approx(15.0)
+    assert res["median_abs_error_ms"] == pytest.approx(5.0)
+    ref = np.arange(5.0, 20.0, 0.5)
+    exact = score_beats(ref, ref)
+    assert (exact["f_measure"], exact["cmlt"], exact["amlt"], exact["p_score"]) == (1.0, 1.0, 1.0, 1.0)
+    # twice the tempo: every reference beat hit, half the estimates extra; the right phase, the wrong level
+    double = score_beats(ref, np.arange(5.0, 20.0, 0.25))
+    assert double["f_measure"] == pytest.approx(2 * 0.5 * 1.0 / 1.5)
+    assert double["cmlt"] == 0.0 and double["amlt"] > 0.95  # (mir_eval loses a beat at the end of a variant)
+    # off-beat: nothing within 70 ms, but the metrical level is right
+    off = score_beats(ref, ref + 0.25)
+    assert off["f_measure"] == 0.0 and off["cmlt"] == 0.0 and off["amlt"] > 0.95
+    silent = score_beats(ref, [1.0, 2.0])  # all trimmed away
+    assert silent["silent"] and silent["f_measure"] == 0.0 and silent["cmlt"] == 0.0 and silent["n_estimated"] == 0
+
+
+def test_time_to_correct_is_the_end_of_the_first_run_of_hits():
+    ref = np.arange(1.0, 11.0)
+    est = [1.0, 2.03, 3.2, 4.0, 5.0, 6.06, 7.0, 8.0]  # 3.0 missed: the run 4, 5, 6, 7 ends at 7
+    assert time_to_correct(ref, est, 4) == 7.0
+    assert time_to_correct(ref, est, 2) == 2.0
+    assert time_to_correct(ref, est[:6], 4) is None
+
+
+def test_score_committed_scores_the_committed_sequence_not_the_nearest_prediction():
+    ref = np.arange(5.0, 12.0, 1.0)
+    # every update predicts the beats and, between them, extra ones: a nearest-prediction score would not
+    # see them, the committed sequence plays them
+    updates = [(t, [t + 0.5, t + 1.0]) for t in np.arange(4.0, 12.0, 0.5)]
+    res = score_committed(updates, ref, lookahead=0.2, skip=5.0)
+    committed = committed_beats(updates, 0.2)
+    # each update commits its first beat; the last one, in force to the end, both
+    assert committed.tolist() == pytest.approx(np.arange(4.5, 13.0, 0.5).tolist())
+    assert res["n_reference"] == 7 and res["n_estimated"] == 16  # from 5 s
+    assert res["f_measure"] == pytest.approx(2 * (7 / 16) * 1.0 / (7 / 16 + 1.0))
+    assert res["time_to_4"] == 8.0 and res["lookahead"] == 0.2
+    assert score_committed([], ref)["silent"]
 
 
 # ---------------------------------------------------------------------------------- renders
@@ -85,7 +116,7 @@ def render_34():
 def test_tracker_predicts_beats_200ms_ahead(which, request):
     r = request.getfixturevalue(which)
     run = track_file(r.audio, "causal", 512, sample_rate=r.sample_rate)
-    res = evaluate_predictions(run["updates"], r.beat_times, lookahead=0.2, skip=8.0)
+    res = score_committed(run["updates"], r.beat_times, lookahead=0.2, skip=8.0, end=music_end(r))
     assert res["f_measure"] >= 0.98
     assert res["mae_ms"] < 15.0
     assert abs(res["mean_error_ms"]) < 5.0
@@ -116,7 +147,7 @@ def test_tracker_state_and_horizon(render_44):
 def test_block_size_does_not_matter_much(render_34):
     r = render_34
     for bs in (64, 4096):
-        res = track_and_evaluate(r.audio, r.beat_times, "causal", bs, sample_rate=r.sample_rate)
+        res = track_and_evaluate(r.audio, r.beat_times, "causal", bs, sample_rate=r.sample_rate, end=music_end(r))
         assert res["f_measure"] >= 0.98 and res["mae_ms"] < 15.0
 
 
@@ -167,17 +198,17 @@ def test_predict_until_holds_until_then(render_44):
 def test_other_sample_rates(render_44, rate):
     r = render_44
     y = resample_poly(r.audio, rate, r.sample_rate).astype(np.float32)
-    res = track_and_evaluate(y, r.beat_times, "causal", 1024, sample_rate=rate)
+    res = track_and_evaluate(y, r.beat_times, "causal", 1024, sample_rate=rate, end=music_end(r))
     assert res["f_measure"] >= 0.98 and res["mae_ms"] < 15.0
 
 
 def test_baselines_run_and_are_scored(render_44):
     r = render_44
-    base = track_and_evaluate(r.audio, r.beat_times, "baseline", 512, sample_rate=SR)
-    assert 0.0 <= base["f_measure"] <= 1.0 and base["n_beats"] > 0
+    base = track_and_evaluate(r.audio, r.beat_times, "baseline", 512, sample_rate=SR, end=music_end(r))
+    assert 0.0 <= base["f_measure"] <= 1.0 and base["n_reference"] > 0
     offline = track_file(r.audio, "librosa_offline", 512, sample_rate=SR)
     assert len(offline["updates"]) == 1 and offline["updates"][0]["t"] == 0.0
-    res = evaluate_predictions(offline["updates"], r.beat_times)
+    res = score_committed(offline["updates"], r.beat_times, end=music_end(r))
     assert res["f_measure"] > 0.9  # it sees the whole piece
     with pytest.raises(ValueError):
         make_tracker("nonsense", SR)
@@ -191,7 +222,7 @@ def test_track_file_reads_audio_files(tmp_path, render_34):
     run = track_file(path, "causal", 512)
     assert run["tracker"] == "causal" and run["sample_rate"] == SR
     assert run["audio_seconds"] == pytest.approx(render_34.audio.size / SR)
-    assert evaluate_predictions(run["updates"], render_34.beat_times)["f_measure"] >= 0.98
+    assert score_committed(run["updates"], render_34.beat_times, end=music_end(render_34))["f_measure"] >= 0.98
 
 
 # --------------------------------------------------------------------------------------- bad input
@@ -259,7 +290,7 @@ def test_nan_inf_clipped_and_odd_blocks(render_44):
     tr.process([0.0] * 10)  # list
     assert np.isfinite(tr.confidence)
     clipped = np.clip(r.audio * 3.0, -1.0, 1.0)
-    res = track_and_evaluate(clipped, r.beat_times, "causal", 512, sample_rate=SR)
+    res = track_and_evaluate(clipped, r.beat_times, "causal", 512, sample_rate=SR, end=music_end(r))
     assert res["f_measure"] >= 0.9
     base = IOIBaselineTracker(SR)
     _feed(base, x, block=1000)

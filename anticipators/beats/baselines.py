@@ -1,8 +1,10 @@
-"""Baseline beat trackers: extrapolating the last inter-onset interval, and librosa's offline beat tracker.
+"""Baseline beat trackers: extrapolating the last inter-onset interval, aubio's online tracker, and
+librosa's offline beat tracker.
 
 :class:`IOIBaselineTracker` extrapolates the last interval between the strongest recent onsets;
-:func:`librosa_offline_beats` runs librosa's offline dynamic-programming ``beat_track`` on the whole
-audio (it sees the future, so it is an upper bound on detection rather than a competitor).
+:class:`AubioTracker` wraps aubio's causal ``tempo`` (an optional package: ``pip install aubio``, in the
+``bench`` extra); :func:`librosa_offline_beats` runs librosa's offline dynamic-programming ``beat_track``
+on the whole audio (it sees the future, so it is an upper bound on detection rather than a competitor).
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import numpy as np
 
 from anticipators.beats.envelope import SpectralFluxEnvelope, mono_samples
 
-__all__ = ["IOIBaselineTracker", "librosa_offline_beats"]
+__all__ = ["IOIBaselineTracker", "AubioTracker", "aubio_available", "librosa_offline_beats"]
 
 
 class IOIBaselineTracker:
@@ -98,6 +100,74 @@ class IOIBaselineTracker:
             return np.zeros(0)
         k0 = max(math.ceil((self.time - self._anchor) / self._period - 1e-9), 1)
         return self._anchor + self._period * np.arange(k0, k0 + horizon_beats)
+
+
+def aubio_available() -> bool:
+    """Whether aubio can be imported."""
+    try:
+        import aubio  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class AubioTracker:
+    """aubio's causal beat tracker (``aubio.tempo("default", ...)``), heard block by block.
+
+    Its predictions are its last beat plus whole periods. The hop is 256 samples at up to 22.05 kHz and
+    512 above (about 11.6 ms), the window twice the hop, as aubio's command line tools use them.
+
+    Parameters
+    ----------
+    sample_rate : int
+        Sample rate in Hz.
+    hop : int, optional
+        Samples per aubio hop.
+
+    Raises
+    ------
+    ImportError
+        When aubio is not installed.
+    """
+
+    def __init__(self, sample_rate: int, hop: int | None = None) -> None:
+        import aubio
+
+        self.sample_rate = int(sample_rate)
+        self.hop = int(hop) if hop else (256 if self.sample_rate <= 22050 else 512)
+        self._tempo = aubio.tempo("default", 2 * self.hop, self.hop, self.sample_rate)
+        self._pending = np.zeros(0, np.float32)
+        self.n_samples = 0  # samples handed to aubio
+        self.tempo_bpm = float("nan")
+        self.confidence = 0.0
+
+    @property
+    def time(self) -> float:
+        """Seconds of audio heard (handed to aubio in whole hops)."""
+        return self.n_samples / self.sample_rate
+
+    def process(self, block) -> None:
+        """Hear the next block of audio."""
+        x = np.concatenate([self._pending, mono_samples(block)])
+        hop = self.hop
+        n = (x.size // hop) * hop
+        for a in range(0, n, hop):
+            self._tempo(x[a : a + hop])
+        self.n_samples += n
+        self._pending = x[n:].copy()
+        period = float(self._tempo.get_period_s())
+        if period > 0:
+            self.tempo_bpm = 60.0 / period
+            self.confidence = float(self._tempo.get_confidence())
+
+    def predict(self, horizon_beats: int = 4) -> np.ndarray:
+        """Its last beat plus whole periods: the next ``horizon_beats`` at or after :attr:`time`."""
+        period = float(self._tempo.get_period_s())
+        if period <= 0 or horizon_beats <= 0:
+            return np.zeros(0)
+        beat = float(self._tempo.get_last_s())
+        k = max(math.ceil((self.time - beat) / period - 1e-9), 0)
+        return beat + period * np.arange(k, k + horizon_beats)
 
 
 def librosa_offline_beats(audio: np.ndarray, sample_rate: int) -> np.ndarray:

@@ -48,7 +48,7 @@ import math
 
 import numpy as np
 
-from anticipators.beats.baselines import IOIBaselineTracker, librosa_offline_beats
+from anticipators.beats.baselines import AubioTracker, IOIBaselineTracker, librosa_offline_beats
 from anticipators.beats.envelope import EnvelopeSource, SpectralFluxEnvelope, mono_samples
 from anticipators.beats.follower import BeatFollower
 from anticipators.beats.onsets import WAVEFORM_AFTER, OnsetPicker
@@ -59,6 +59,7 @@ __all__ = [
     "SpectralFluxEnvelope",
     "CausalBeatTracker",
     "IOIBaselineTracker",
+    "AubioTracker",
     "librosa_offline_beats",
     "make_tracker",
     "TRACKER_NAMES",
@@ -448,15 +449,20 @@ class CausalBeatTracker:
             self._restart(lag_k, keep_period=period)
 
 
-TRACKER_NAMES = ("causal", "baseline", "librosa_offline")
-"""Tracker names accepted by :func:`anticipators.beats.evaluation.track_file` (the first two also by
-:func:`make_tracker`; ``"librosa_offline"`` needs the whole audio at once)."""
+TRACKER_NAMES = ("causal", "baseline", "aubio", "librosa_offline")
+"""Tracker names accepted by :func:`anticipators.beats.evaluation.track_file` (all but the last also by
+:func:`make_tracker`; ``"aubio"`` needs the optional aubio package; ``"librosa_offline"`` needs the
+whole audio at once)."""
 
 
 def make_tracker(name: str, sample_rate: int, **kwargs):
-    """Make a causal tracker by name: ``"causal"`` (:class:`CausalBeatTracker`) or ``"baseline"``."""
+    """Make a causal tracker by name: ``"causal"`` (:class:`CausalBeatTracker`), ``"baseline"``
+    (:class:`~anticipators.beats.baselines.IOIBaselineTracker`) or ``"aubio"``
+    (:class:`~anticipators.beats.baselines.AubioTracker`; ImportError without aubio)."""
     if name == "causal":
         return CausalBeatTracker(sample_rate, **kwargs)
     if name == "baseline":
         return IOIBaselineTracker(sample_rate, **kwargs)
-    raise ValueError(f"unknown causal tracker {name!r}; choose from 'causal', 'baseline'")
+    if name == "aubio":
+        return AubioTracker(sample_rate, **kwargs)
+    raise ValueError(f"unknown causal tracker {name!r}; choose from 'causal', 'baseline', 'aubio'")

@@ -76,16 +76,17 @@ def asynchrony(onsets: np.ndarray, ictus: dict[int, float]) -> dict:
 
 
 def anticipator_scores(updates, true_beats, lookahead: float = 0.2, skip: float = 8.0) -> dict:
-    """F-measure and errors of the tracker's predictions ``lookahead`` ahead (:func:`evaluate_predictions`)."""
-    from anticipators.beats.evaluation import evaluate_predictions
+    """F-measure and timing errors of the beats the tracker committed ``lookahead`` ahead
+    (:func:`anticipators.beats.evaluation.score_committed`; beats before ``skip`` seconds left out)."""
+    from anticipators.beats.evaluation import score_committed
 
     beats = np.asarray(true_beats, float)
     beats = beats[np.isfinite(beats)]
     if beats.size == 0 or not updates:
         return {"f_measure": None, "mae_ms": None, "n_beats": 0}
-    result = evaluate_predictions(updates, beats, lookahead=lookahead, skip=skip)
+    result = score_committed(updates, beats, lookahead=lookahead, skip=skip, continuity=False)
     out = {"f_measure": result["f_measure"], "mae_ms": result["mae_ms"], "mean_error_ms": result["mean_error_ms"],
-           "n_beats": result["n_beats"], "lookahead_s": lookahead}
+           "n_beats": result["n_reference"], "n_committed": result["n_estimated"], "lookahead_s": lookahead}
     return {k: (round(v, 4) if isinstance(v, float) and math.isfinite(v) else (None if isinstance(v, float) else v))
             for k, v in out.items()}
 
