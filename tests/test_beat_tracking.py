@@ -81,6 +81,7 @@ def test_time_to_correct_is_the_end_of_the_first_run_of_hits():
     assert time_to_correct(ref, est, 4) == 7.0
     assert time_to_correct(ref, est, 2) == 2.0
     assert time_to_correct(ref, est[:6], 4) is None
+    assert time_to_correct(ref, est, 4, consecutive=False) == 5.0 and time_to_correct(ref, est[:6], 5, consecutive=False) == 6.0
 
 
 def test_score_committed_scores_the_committed_sequence_not_the_nearest_prediction():

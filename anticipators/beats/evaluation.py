@@ -242,11 +242,12 @@ def score_committed(
 
 
 def time_to_correct(reference: Sequence[float], estimated: Sequence[float], count: int = 4,
-                    window: float = 0.07) -> float | None:
+                    window: float = 0.07, *, consecutive: bool = True) -> float | None:
     """When the tracker has first got ``count`` consecutive beats right.
 
     The time (s) of the last of the first ``count`` consecutive reference beats that each have an
-    estimated beat within ``window``; None if there is no such run.
+    estimated beat within ``window``; None if there is no such run. With ``consecutive=False``, the
+    time of the ``count``-th reference beat with an estimated beat within ``window``.
     """
     ref = np.sort(np.asarray(reference, float).reshape(-1))
     est = np.sort(np.asarray(estimated, float).reshape(-1))
@@ -258,7 +259,7 @@ def time_to_correct(reference: Sequence[float], estimated: Sequence[float], coun
     hit = np.minimum(lo, hi) <= window
     run = 0
     for i, h in enumerate(hit):
-        run = run + 1 if h else 0
+        run = run + 1 if h else (run if not consecutive else 0)
         if run >= count:
             return float(ref[i])
     return None
