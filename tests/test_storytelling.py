@@ -379,3 +379,16 @@ def test_the_default_story_is_the_longest_shipped_one_and_long_enough():
     counts = story.counts()
     assert all(counts.get(kind, 0) > 0 for kind in ("beat", "point", "icon", "nod", "shake", "gaze", "brows"))
     assert not any(math.isnan(x) for p in story.scene.values() for x in p)
+
+
+def test_a_story_without_gestures_runs_quietly(tmp_path):
+    import subprocess
+    import sys
+
+    story = tmp_path / "plain.story"
+    story.write_text("@title Plain\nThe wind and the sun were arguing which was the stronger.\n")
+    proc = subprocess.run([sys.executable, "-m", "agentsim", "run", "storytelling", "--story", str(story), "--tts",
+                           "builtin", "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr  # no legend warning from an empty plot
+    assert (tmp_path / "out" / "sync_errors.png").stat().st_size > 0
+    assert json.loads((tmp_path / "out" / "metrics.json").read_text())["gestures"] == 0
