@@ -24,6 +24,8 @@ AGENTSIM = [sys.executable, "-m", "agentsim"]
     (["run", "conductor", "--config", "nosuch"], "agentsim: no configuration file or shipped configuration named "
      "'nosuch' (shipped: default, falls_apart, march_2_4, waltz_3_4; 'agentsim run conductor --list-configs')"),
     (["sweep", "nosuch", "--out", "x"], "agentsim: no sweep spec 'nosuch'"),
+    (["serve", "--audio", "none", "--calibrate", "pulse"], "agentsim: --calibrate measures the sound device's "
+                                                              "delay: it needs --audio DEVICE, not --audio none"),
     (["speech", "export", "examples/story.txt"], "agentsim: say what to write: --wav FILE.wav and/or --textgrid "
                                                  "FILE.TextGrid"),
     (["speech", "export", "examples/story.txt", "--tts", "builtin", "--wav", "x.wav"],

@@ -42,6 +42,8 @@ def run_server(args: argparse.Namespace) -> int:
 
     if not 0 <= args.fps <= options.MAX_FPS:  # (0: no poses)
         raise UsageError(f"--fps must be between 0 and {options.MAX_FPS:g} poses per second, got {args.fps:g}")
+    if args.calibrate and args.audio == "none":
+        raise UsageError("--calibrate measures the sound device's delay: it needs --audio DEVICE, not --audio none")
     try:
         service = Service(host=args.host, port=args.port, audio=args.audio, tts=options.backend(args.tts),
                           strict=args.strict, fps=args.fps, calibrate=args.calibrate)
