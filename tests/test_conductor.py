@@ -259,3 +259,15 @@ def test_meters_and_shipped_pieces():
     assert waltz.tempo_at(waltz.first_beat(19)) == pytest.approx(126)
 
 
+
+
+def test_the_ears_score_ends_with_the_piece():
+    """Beats the ears commit after the piece's last beat (the ensemble has stopped) are not scored; an extra
+    beat inside the piece is."""
+    from scenarios.conductor.metrics import anticipator_scores
+
+    truth = [0.5 * k for k in range(1, 41)]  # 20 s at 120 BPM
+    late = [{"t": 0.0, "beats": [0.5 * k for k in range(1, 60)]}]  # right, and on for ten seconds more
+    assert anticipator_scores(late, truth, skip=5.0)["f_measure"] == 1.0
+    extra = [{"t": 0.0, "beats": sorted([0.5 * k for k in range(1, 41)] + [10.25, 12.25])}]
+    assert anticipator_scores(extra, truth, skip=5.0)["f_measure"] < 1.0

@@ -84,7 +84,10 @@ def anticipator_scores(updates, true_beats, lookahead: float = 0.2, skip: float 
     beats = beats[np.isfinite(beats)]
     if beats.size == 0 or not updates:
         return {"f_measure": None, "mae_ms": None, "n_beats": 0}
-    result = score_committed(updates, beats, lookahead=lookahead, skip=skip, continuity=False)
+    # the piece ends with its last beat: what the ears commit after it (the ensemble has stopped, the
+    # conductor too) is not scored, as beats beyond the audio are not in the real-music protocol
+    result = score_committed(updates, beats, lookahead=lookahead, skip=skip, continuity=False,
+                             end=float(beats[-1]) + 0.07)
     out = {"f_measure": result["f_measure"], "mae_ms": result["mae_ms"], "mean_error_ms": result["mean_error_ms"],
            "n_beats": result["n_reference"], "n_committed": result["n_estimated"], "lookahead_s": lookahead}
     return {k: (round(v, 4) if isinstance(v, float) and math.isfinite(v) else (None if isinstance(v, float) else v))
