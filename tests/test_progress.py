@@ -20,6 +20,8 @@ import termios
 import threading
 from pathlib import Path
 
+import pytest
+
 from speech_timing.animator_time import STRATEGIES as SPEECH_STRATEGIES
 
 SHORT_STORY = "the_north_wind_and_the_sun"
@@ -180,6 +182,7 @@ def test_eval_speech_sync_shows_the_strategy_under_way_on_a_terminal_only(tmp_pa
     assert in_pipes(command(*args, "--strategy", "skip-70ms", "--json"), tmp_path).stderr == ""
 
 
+@pytest.mark.system  # the whole demo, twice (about a minute): with the long system tests
 def test_demo_names_the_stages_of_both_scenarios_on_a_terminal_and_nothing_in_a_pipe(tmp_path):
     # the demo takes no options to make it shorter: the two runs go side by side
     piped = subprocess.Popen(command("demo", "--out", tmp_path / "pipe"), stdin=subprocess.DEVNULL,
