@@ -30,7 +30,7 @@ def test_the_check_fails_on_a_stale_figure(tmp_path, monkeypatch):
     readme = tmp_path / "README.md"
     readme.write_text("a\n<!-- figures:storyteller-strategies -->\n| stale |\n<!-- /figures:storyteller-strategies -->\n")
     monkeypatch.setattr(readme_figures, "README", readme)
-    monkeypatch.setitem(readme_figures.TABLES, "storyteller-strategies", lambda: "| fresh |")
+    monkeypatch.setattr(readme_figures, "TABLES", {"storyteller-strategies": lambda: "| fresh |"})
     assert readme_figures.main(["--check"]) == 1
     assert "| stale |" in readme.read_text()
     assert readme_figures.main([]) == 0
