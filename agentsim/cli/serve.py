@@ -14,8 +14,13 @@ def add_parsers(commands) -> None:
         "serve", help="a live realizer that programs send BML to over a WebSocket and people watch",
         description="Realize BML live on the real-time clock: each text message sent to ws://HOST:PORT/ is one "
                     "BML document; every feedback goes to every client as one JSON message (the objects "
-                    "'agentsim realize' prints). http://HOST:PORT/ shows the agent moving.")
-    serve.add_argument("--host", default="127.0.0.1", help="address to listen on (127.0.0.1)")
+                    "'agentsim realize' prints). http://HOST:PORT/ shows the agent moving. On 127.0.0.1 (the "
+                    "default) only programs on this machine and the viewer's page (or pages of --allow-origin) "
+                    "may connect; any other --host exposes the realizer to the network, and without --token "
+                    "a token is made up and printed in the URLs.")
+    serve.add_argument("--host", default="127.0.0.1",
+                       help="address to listen on (127.0.0.1: this machine only; another address, e.g. 0.0.0.0, "
+                            "lets the network drive the realizer and watch it, with a token)")
     serve.add_argument("--port", type=int, default=8765, help="port to listen on (8765; 0: any free port)")
     serve.add_argument("--audio", default="default", metavar="DEVICE|none",
                        help="where speech and sound files play: a sounddevice output device, or none (default: "
@@ -24,6 +29,12 @@ def add_parsers(commands) -> None:
                        help="before serving, play clicks and record them from this input device (the output's "
                             "loop back: a cable, or a PulseAudio monitor such as 'pulse' with PULSE_SOURCE set) "
                             "to measure what the device adds to its reported latency, and make up for it")
+    serve.add_argument("--token", metavar="TOKEN",
+                       help="clients must send ?token=TOKEN on the WebSocket URL and the viewer's URL (the page "
+                            "passes it on); made up when --host is not loopback and no token is given")
+    serve.add_argument("--allow-origin", action="append", default=[], metavar="URL", dest="allow_origins",
+                       help="a web page's origin (https://host[:port]) that may connect besides the viewer's own "
+                            "(repeatable); programs that send no Origin are always taken")
     options.add_tts(serve)
     serve.add_argument("--strict", action="store_true", help="read pure BML 1.0 only")
     serve.add_argument("--fps", type=float, default=30.0, help="poses per second streamed to viewers (30)")
@@ -42,11 +53,18 @@ def run_server(args: argparse.Namespace) -> int:
 
     if not 0 <= args.fps <= options.MAX_FPS:  # (0: no poses)
         raise UsageError(f"--fps must be between 0 and {options.MAX_FPS:g} poses per second, got {args.fps:g}")
+    from agentsim.live.server import origin_of
+
+    for origin in args.allow_origins:  # a usage error before anything starts
+        origin_of(origin)
+    if args.token is not None and not args.token.strip():
+        raise UsageError("--token must not be empty")
     if args.calibrate and args.audio == "none":
         raise UsageError("--calibrate measures the sound device's delay: it needs --audio DEVICE, not --audio none")
     try:
         service = Service(host=args.host, port=args.port, audio=args.audio, tts=options.backend(args.tts),
-                          strict=args.strict, fps=args.fps, calibrate=args.calibrate)
+                          strict=args.strict, fps=args.fps, calibrate=args.calibrate,
+                          token=args.token, allow_origins=args.allow_origins)
     except NoAudioDevice as exc:  # say which option chooses the device, and how to do without one
         if exc.kind == "input":
             raise Unavailable(f"{exc.problem}. Leave --calibrate out, or {GET_A_DEVICE} and name its input "

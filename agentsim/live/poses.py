@@ -86,6 +86,15 @@ BLINK = 0.3
 VIEWER = Path(__file__).resolve().parent / "viewer"
 
 
+def viewer_files() -> dict[str, Path]:
+    """The viewer's files by URL path: its page and the report's script, style and three.js."""
+    from agentsim.media.report.page import ASSETS, VENDOR
+
+    return {"index.html": VIEWER / "index.html", "report.js": ASSETS / "report.js",
+            "report.css": ASSETS / "report.css", "three.min.js": VENDOR / "three.min.js",
+            "LICENSE-three.txt": VENDOR / "LICENSE-three.txt"}
+
+
 def record_span(record) -> tuple[float, float] | None:
     """When a behaviour moves the body: from its first known time to its last (to where it was stopped if
     it was dropped or cut), ``inf`` while it waits for the world; None if it has no known time."""
@@ -270,12 +279,8 @@ class LivePoses:
 
     # ------------------------------------------------------------------------------------------- viewer
     def files(self) -> dict[str, Path]:
-        """The viewer's files by URL path: its page and the report's script, style and three.js."""
-        from agentsim.media.report.page import ASSETS, VENDOR
-
-        return {"index.html": VIEWER / "index.html", "report.js": ASSETS / "report.js",
-                "report.css": ASSETS / "report.css", "three.min.js": VENDOR / "three.min.js",
-                "LICENSE-three.txt": VENDOR / "LICENSE-three.txt"}
+        """The viewer's files by URL path (:func:`viewer_files`)."""
+        return viewer_files()
 
     def skeleton(self) -> dict:
         """The skeleton message (see the module's docstring)."""

@@ -17,14 +17,22 @@ Protocol, at ``ws://HOST:PORT/``:
 * a JSON message ``{"subscribe": "poses"}`` asks for the poses as well (see :mod:`agentsim.live.poses`).
 
 ``http://HOST:PORT/`` serves the viewer page (the report's viewer, connected live).
+
+Who may connect (:meth:`Server.admit`, in the ``process_request`` hook, before any handshake): a request with
+an ``Origin`` header (a browser's) only from the server's own origin (the viewer's page) or one named in
+``allow_origins``; requests without one (programs) are taken. With a ``token``, the WebSocket and the viewer's
+page need ``?token=TOKEN`` (the page passes it on to its WebSocket); a server bound to an address other than
+loopback without one makes one up. A refused request is answered ``403 Forbidden`` and nothing else.
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
 import gc
+import ipaddress
+import json
 import queue
+import secrets
 import threading
 import time
 from pathlib import Path
@@ -216,17 +224,65 @@ TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=u
          ".txt": "text/plain; charset=utf-8"}
 
 
+#: Host names that are loopback whatever the resolver says.
+LOOPBACK_NAMES = ("localhost",)
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (an address or ``localhost``) is reachable from this machine only."""
+    host = host.strip().strip("[]").lower()
+    if host in LOOPBACK_NAMES or host.endswith(".localhost"):
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def origin_of(url: str) -> str:
+    """``url`` as browsers write an ``Origin`` (``scheme://host[:port]``, lower case, no path);
+    :class:`UsageError` if it is not one."""
+    from urllib.parse import urlsplit
+
+    text = url.strip()
+    try:
+        parts = urlsplit(text)
+        port = parts.port
+    except ValueError:
+        parts, port = None, None
+    if (parts is None or parts.scheme.lower() not in ("http", "https") or not parts.hostname
+            or parts.path not in ("", "/") or parts.query or parts.fragment or parts.username):
+        raise UsageError(f"--allow-origin takes an origin such as https://example.org or http://localhost:8000 "
+                         f"(a scheme, a host and a port if any, no path), got {url!r}")
+    host = parts.hostname.lower()
+    if ":" in host:
+        host = f"[{host}]"
+    return f"{parts.scheme.lower()}://{host}" + (f":{port}" if port is not None else "")
+
+
 class Server:
     """The WebSocket endpoint (and the viewer page) in front of a :class:`LiveRealizer`.
 
     ``delay`` (s): feedback is sent this long after its ``globalTime`` on the realizer's clock (the
     loudspeaker's latency, when the server plays sound, so that feedback arrives when it is heard).
+    ``token``: what the WebSocket and the viewer's page need as ``?token=`` (None: nothing; made up when
+    ``host`` is not loopback, :attr:`token_made` then). ``allow_origins``: origins (``https://host[:port]``)
+    whose pages may connect besides the viewer's own.
     """
 
     def __init__(self, live: LiveRealizer, host: str = "127.0.0.1", port: int = 8765, delay: float = 0.0,
-                 files: dict[str, Path] | None = None):
+                 files: dict[str, Path] | None = None, token: str | None = None,
+                 allow_origins: tuple[str, ...] | list[str] = ()):
         self.live = live
         self.host, self.port = host, port
+        self.loopback = is_loopback(host)
+        if token is not None and not token.strip():
+            raise UsageError("--token must not be empty")
+        self.token_made = token is None and not self.loopback
+        self.token = secrets.token_urlsafe(24) if self.token_made else token
+        self.allow_origins = frozenset(origin_of(o) for o in allow_origins)
+        #: what went wrong or was refused, for ``{"status": true}``
+        self.counters = {"refused_origins": 0, "refused_tokens": 0}
         self.delay = delay
         self.clients: set = set()
         self.subscribers: dict[object, set[str]] = {}
@@ -323,8 +379,55 @@ class Server:
         """What a new subscriber is told first (set by whoever publishes what it subscribes to)."""
         return [self.hello[w] for w in sorted(wanted) if w in self.hello]
 
+    def own_origin(self, origin: str, host_header: str | None) -> bool:
+        """Whether ``origin`` is the viewer's page as the browser reached it: ``http://`` and the ``Host`` the
+        request names, when that host is this server's address, or a loopback name on a loopback server (a
+        page elsewhere that a name of its own resolves here, DNS rebinding, names its own host), or anything
+        on a server that needs a token (the page then had the token)."""
+        if not host_header or origin != f"http://{host_header.strip().lower()}":
+            return False
+        from urllib.parse import urlsplit
+
+        try:
+            parts = urlsplit(origin)
+            name, port = parts.hostname or "", parts.port or 80
+        except ValueError:
+            return False
+        if port != self.port:
+            return False
+        if self.token is not None:
+            return True
+        return is_loopback(name) if self.loopback else name == self.host.strip("[]").lower()
+
+    def admit(self, request) -> str | None:
+        """Why ``request`` is refused (None: it is not): a foreign ``Origin``, or no or a wrong token."""
+        from urllib.parse import parse_qs
+
+        from websockets.datastructures import MultipleValuesError
+
+        try:
+            origin = request.headers.get("Origin")
+        except MultipleValuesError:
+            origin = "several"
+        if origin is not None and origin.lower() not in self.allow_origins \
+                and not self.own_origin(origin.lower(), request.headers.get("Host")):
+            self.counters["refused_origins"] += 1
+            return "origin"
+        if self.token is not None:
+            path, _, query = request.path.partition("?")
+            upgrade = request.headers.get("Upgrade", "").lower() == "websocket"
+            if upgrade or path in ("", "/", "/index.html"):  # the page's scripts and style are the package's
+                given = parse_qs(query).get("token", [""])[-1]
+                if not secrets.compare_digest(given.encode(), self.token.encode()):
+                    self.counters["refused_tokens"] += 1
+                    return "token"
+        return None
+
     def request(self, connection, request):
-        """Plain HTTP requests get the viewer's files; WebSocket upgrades go on to :meth:`handler`."""
+        """Refused requests get 403; plain HTTP requests get the viewer's files; WebSocket upgrades go on to
+        :meth:`handler`."""
+        if self.admit(request) is not None:
+            return connection.respond(403, "Forbidden\n")
         if request.headers.get("Upgrade", "").lower() == "websocket":
             return None
         from websockets.datastructures import Headers
@@ -339,6 +442,12 @@ class Server:
         headers = Headers([("Content-Type", TYPES.get(file.suffix, "application/octet-stream")),
                            ("Content-Length", str(len(body))), ("Cache-Control", "no-store")])
         return Response(200, "OK", headers, body)
+
+    def url(self, scheme: str = "ws") -> str:
+        """The WebSocket's (``ws``) or the viewer's (``http``) address, with the token if there is one."""
+        host = f"[{self.host}]" if ":" in self.host and not self.host.startswith("[") else self.host
+        query = f"?token={self.token}" if self.token is not None else ""
+        return f"{scheme}://{host}:{self.port}/{query}"
 
     # ------------------------------------------------------------------------------------------- serving
     async def serve(self, ready: Callable[[], None] | None = None, stop: asyncio.Event | None = None) -> None:

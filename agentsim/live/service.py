@@ -37,7 +37,7 @@ class Service:
     its viewer (poses at ``fps``)."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, audio: str = "none", fps: float = 30.0,
-                 calibrate: str | None = None, **realizer_options):
+                 calibrate: str | None = None, token: str | None = None, allow_origins=(), **realizer_options):
         device = None
         if audio != "none":
             from agentsim.live.sound import open_device
@@ -57,7 +57,11 @@ class Service:
             self.poses = LivePoses(self.live, fps)
             self.poses.start_process()  # poses are evaluated on another core, never in the realizer's way
             files = self.poses.files()
-        self.server = Server(self.live, host, port, files=files)
+        try:
+            self.server = Server(self.live, host, port, files=files, token=token, allow_origins=allow_origins)
+        except BaseException:
+            self.close()
+            raise
         if self.poses is not None:
             self.poses.publish(self.server)
         self.live.start()
@@ -84,8 +88,15 @@ class Service:
             if self.loop_delay is not None:
                 sound += f"; the loop to the input measured {1000 * self.loop_delay:.1f} ms and made up for"
             sound += ")"
-        return (f"agentsim serve: ws://{self.server.host}:{self.server.port}/ for BML, "
-                f"http://{self.server.host}:{self.server.port}/ to watch; {sound}")
+        server = self.server
+        if server.token_made:
+            access = (f"; {server.host} is not loopback: clients need the token made up for this run, "
+                      "in the URLs above (choose one with --token)")
+        elif server.token is not None:
+            access = "; clients need the token, in the URLs above"
+        else:
+            access = ""
+        return f"agentsim serve: {server.url('ws')} for BML, {server.url('http')} to watch; {sound}{access}"
 
     async def serve(self, ready=None, stop: asyncio.Event | None = None) -> None:
         await self.server.serve(ready, stop)
@@ -131,7 +142,7 @@ class Background:
 
     @property
     def url(self) -> str:
-        return f"ws://{self.service.server.host}:{self.service.server.port}/"
+        return self.service.server.url("ws")
 
     def close(self) -> None:
         if self.stop_event is not None:

@@ -771,7 +771,8 @@
   /* ------------------------------------------------------------------------------------- live */
   /* The live viewer: the page agentsim serve serves at / (agentsim.live.poses has the messages).
 
-     It opens a WebSocket to options.url (by default the page's own host and port), sends
+     It opens a WebSocket to options.url (by default the page's own host and port, with the page's ?token=
+     if it has one), sends
      {"subscribe": "poses"}, builds the skeleton from the server's "skeleton" message and buffers the frames
      of its "poses" messages. A message comes when its last frame is due on the server's clock, a few frames
      at a time; the page plays the frames at a steady delay (hold) behind the newest time it can know, so
@@ -804,7 +805,9 @@
 
   function live(options) {
     var host = location.host || "127.0.0.1:8765";
-    var url = options.url || ((location.protocol === "https:" ? "wss://" : "ws://") + host + "/");
+    var token = new URLSearchParams(location.search).get("token");  // a server with a token: pass it on
+    var url = options.url || ((location.protocol === "https:" ? "wss://" : "ws://") + host + "/" +
+      (token ? "?token=" + encodeURIComponent(token) : ""));
     var NONE = 0, BETWEEN = 1, HELD = 2;
     var HOLD = 0.2, RETRY = [1, 2, 3, 5], LAGS = 50, KEEP = 3, WINDOW = 10, AHEAD = 2, FEED_ITEMS = 60, WATCH = 50000;
     var state = { url: url, state: "connecting", connected: false, skeleton: false, connections: 0, messages: 0,
