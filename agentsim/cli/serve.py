@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from agentsim.cli import options
 from agentsim.errors import Unavailable, UsageError
@@ -35,6 +36,9 @@ def add_parsers(commands) -> None:
     serve.add_argument("--allow-origin", action="append", default=[], metavar="URL", dest="allow_origins",
                        help="a web page's origin (https://host[:port]) that may connect besides the viewer's own "
                             "(repeatable); programs that send no Origin are always taken")
+    serve.add_argument("--media", metavar="DIR",
+                       help="the directory <bmlt:audiofile fileName> reads sound files from (relative paths "
+                            "inside it only); without it clients' audiofile behaviours are refused")
     options.add_tts(serve)
     serve.add_argument("--strict", action="store_true", help="read pure BML 1.0 only")
     serve.add_argument("--fps", type=float, default=30.0, help="poses per second streamed to viewers (30)")
@@ -59,12 +63,14 @@ def run_server(args: argparse.Namespace) -> int:
         origin_of(origin)
     if args.token is not None and not args.token.strip():
         raise UsageError("--token must not be empty")
+    if args.media is not None and not Path(args.media).is_dir():
+        raise UsageError(f"--media names the directory sound files are read from; {args.media!r} is not one")
     if args.calibrate and args.audio == "none":
         raise UsageError("--calibrate measures the sound device's delay: it needs --audio DEVICE, not --audio none")
     try:
         service = Service(host=args.host, port=args.port, audio=args.audio, tts=options.backend(args.tts),
                           strict=args.strict, fps=args.fps, calibrate=args.calibrate,
-                          token=args.token, allow_origins=args.allow_origins)
+                          token=args.token, allow_origins=args.allow_origins, media=args.media)
     except NoAudioDevice as exc:  # say which option chooses the device, and how to do without one
         if exc.kind == "input":
             raise Unavailable(f"{exc.problem}. Leave --calibrate out, or {GET_A_DEVICE} and name its input "

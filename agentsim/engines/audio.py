@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
@@ -54,6 +55,8 @@ class AudioPlanner(Planner):
     def __init__(self) -> None:
         super().__init__()
         self.durations: dict[int, tuple[Path, float]] = {}
+        #: where a behaviour's file is (a service confines it: :class:`agentsim.live.server.MediaDirectory`)
+        self.locate: Callable[[Behaviour], Path] = resolve_audio
 
     def sound(self, behaviour: Behaviour) -> tuple[Path, float]:
         """The file and its length (s); ScheduleError if it is missing or not audio."""
@@ -61,7 +64,7 @@ class AudioPlanner(Planner):
         if found is None:
             import soundfile
 
-            path = resolve_audio(behaviour)
+            path = self.locate(behaviour)
             try:
                 info = soundfile.info(str(path))
             except (RuntimeError, soundfile.LibsndfileError) as exc:

@@ -40,7 +40,7 @@ from typing import Callable
 
 from agentsim.core import feedback as fb
 from agentsim.core.clock import make_environment
-from agentsim.errors import UsageError
+from agentsim.errors import ScheduleError, UsageError
 
 #: How often the realizer's thread takes what clients sent (s): a block waits at most this long.
 POLL = 0.005
@@ -57,22 +57,63 @@ KEEP_FEEDBACK = 10_000
 KEEP_BLOCKS = 256
 
 
+class MediaDirectory:
+    """Where files that clients name (``<bmlt:audiofile fileName>``) are read: only in ``root`` and below it
+    (None: nowhere), by a relative path without ``..`` that stays inside once links are followed, and only
+    sound files. Every refusal is the same :class:`ScheduleError`, which says nothing of the file system (not
+    whether a file exists, nor where the server runs)."""
+
+    def __init__(self, root: str | Path | None):
+        self.root = Path(root).resolve() if root is not None else None
+
+    def refuse(self) -> ScheduleError:
+        if self.root is None:
+            return ScheduleError("audiofile refused: this server reads no sound files named by clients (it was "
+                                 "started without --media DIR)")
+        return ScheduleError("audiofile refused: fileName must name a sound file in the server's media "
+                             "directory, by a relative path without '..'")
+
+    def __call__(self, behaviour) -> Path:
+        name = behaviour.attributes.get("fileName", "").strip()
+        if self.root is None or not name:
+            raise self.refuse()
+        parts = name.replace("\\", "/").split("/")
+        if name.startswith(("/", "\\", "~")) or ".." in parts or ":" in parts[0] or "\0" in name:
+            raise self.refuse()
+        try:
+            path = (self.root / name).resolve()
+            path.relative_to(self.root)
+            if not path.is_file():
+                raise ValueError
+            import soundfile
+
+            info = soundfile.info(str(path))
+            if not info.frames or not info.samplerate:
+                raise ValueError
+        except Exception:  # whatever the reason (missing, outside, unreadable, not sound): the same refusal
+            raise self.refuse() from None
+        return path
+
+
 class LiveRealizer:
     """A :class:`~agentsim.realizer.Realizer` on the real-time clock, in a thread of its own.
 
     ``offer(text, reply)`` hands it a BML document from any thread (False if the queue is full); what
     cannot be read is answered through ``reply(feedback)`` (in the realizer's thread); every feedback goes
     to each function in :attr:`listeners` (in the realizer's thread: they must not block). ``every(period,
-    fn)`` calls ``fn(now)`` every ``period`` simulated seconds while it runs. Realizer options (``tts``,
-    ``strict``, ``speech``, ``anticipators``) are passed on.
+    fn)`` calls ``fn(now)`` every ``period`` simulated seconds while it runs. ``media``: the directory sound
+    files that clients name are read from (:class:`MediaDirectory`; None: none are). Realizer options
+    (``tts``, ``strict``, ``speech``, ``anticipators``) are passed on.
     """
 
-    def __init__(self, queue_size: int = QUEUE, poll: float = POLL, **realizer_options):
+    def __init__(self, queue_size: int = QUEUE, poll: float = POLL, media: str | Path | None = None,
+                 **realizer_options):
         from agentsim.realizer import Realizer
 
         self.env = make_environment(realtime=True)
         realizer_options.setdefault("keep", KEEP_BLOCKS)
         self.realizer = Realizer(env=self.env, **realizer_options)
+        self.realizer.audio.planner.locate = MediaDirectory(media)
         self.realizer.feedback.keep = KEEP_FEEDBACK
         #: documents as clients sent them, for the reader; blocks read and ready, for the realizer
         self.incoming: queue.Queue = queue.Queue(maxsize=queue_size)
