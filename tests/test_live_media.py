@@ -69,8 +69,9 @@ def test_files_in_the_media_directory_play(served):
             assert len(ends) == 1 and ends[0]["time"] == pytest.approx(0.1, abs=1e-6)
 
 
-def test_every_probe_is_one_warning_that_reveals_nothing(served, media):
-    with connect(served.url) as sender:
+def test_every_probe_is_one_warning_that_reveals_nothing_and_goes_to_the_sender_alone(served, media):
+    with connect(served.url) as sender, connect(served.url) as other:
+        other.send(json.dumps({"subscribe": "feedback"}))
         descriptions = set()
         for i, probe in enumerate(PROBES):
             name = probe.replace("{media}", str(media))
@@ -85,6 +86,10 @@ def test_every_probe_is_one_warning_that_reveals_nothing(served, media):
                 assert secret not in warning["description"], (name, warning["description"])
             descriptions.add(warning["description"])
         assert len(descriptions) == 1, descriptions  # nothing tells one probe from another
+        # the subscriber heard the probes' blocks run, and none of the warnings about them
+        heard = until_end(other, f"p{len(PROBES) - 1}")
+        assert "p0:end" in [f["id"] for f in heard]
+        assert not [f for f in heard if f["type"] == "warningFeedback"]
 
 
 def test_without_media_no_file_is_read():

@@ -1,5 +1,6 @@
 """``agentsim serve`` with a real WebSocket client: feedback on time, interruptions at once, bad input answered
-to its sender alone, two clients, a client that leaves, a storm of blocks, a port in use."""
+to its sender alone, two clients, a client that leaves, a storm of blocks, a port in use. Who hears what is
+tests/test_live_routing.py; who may connect, tests/test_live_access.py."""
 
 from __future__ import annotations
 
@@ -74,6 +75,7 @@ def test_an_interrupt_sent_while_a_speech_plays_ends_it_at_once(service):
 
 def test_a_malformed_message_is_answered_to_its_sender_and_the_next_block_runs(service):
     with connect(service.url) as sender, connect(service.url) as other:
+        other.send('{"subscribe": "feedback"}')
         sender.send("<bml id='x'><head id='h' lexeme='NOD'></bml>")  # mismatched tag
         ((_, warning),) = receive_until(sender, lambda f: f["type"] == "warningFeedback")
         assert warning["warningType"] == "PARSING_FAILURE" and "mismatched tag" in warning["description"]
@@ -84,7 +86,7 @@ def test_a_malformed_message_is_answered_to_its_sender_and_the_next_block_runs(s
         receive_until(sender, lambda f: f["type"] == "warningFeedback")
         sender.send(f'<bml {NS} id="ok"><head id="h" lexeme="NOD"/></bml>')
         receive_until(sender, lambda f: f["id"] == "ok:end")
-        # the other client heard the block that ran, not the sender's mistakes
+        # the other client (subscribed to the feedback) heard the block that ran, not the sender's mistakes
         heard = receive_until(other, lambda f: f["id"] == "ok:end")
         assert not [f for _, f in heard if f["type"] == "warningFeedback"]
 
@@ -92,6 +94,9 @@ def test_a_malformed_message_is_answered_to_its_sender_and_the_next_block_runs(s
 def test_two_clients_both_hear_and_one_that_leaves_disturbs_nothing(service):
     block = f'<bml {NS} id="b"><head id="h1" lexeme="NOD"/><head id="h2" lexeme="NOD" start="1"/></bml>'
     with connect(service.url) as a, connect(service.url) as b:
+        b.send('{"subscribe": "feedback"}')
+        a.send(f'<bml {NS} id="first"><head id="h" lexeme="NOD"/></bml>')  # b's subscription is in
+        receive_until(b, lambda f: f["id"] == "first:end")
         a.send(block)
         receive_until(b, lambda f: f["id"] == "b:h1:start")
         b.close()  # mid-block

@@ -14,8 +14,9 @@ def add_parsers(commands) -> None:
     serve = commands.add_parser(
         "serve", help="a live realizer that programs send BML to over a WebSocket and people watch",
         description="Realize BML live on the real-time clock: each text message sent to ws://HOST:PORT/ is one "
-                    "BML document; every feedback goes to every client as one JSON message (the objects "
-                    "'agentsim realize' prints). http://HOST:PORT/ shows the agent moving. On 127.0.0.1 (the "
+                    "BML document; its feedback goes to its sender (and to clients that sent {\"subscribe\": "
+                    "\"feedback\"}) as one JSON message each (the objects 'agentsim realize' prints), its "
+                    "warnings to its sender alone. http://HOST:PORT/ shows the agent moving. On 127.0.0.1 (the "
                     "default) only programs on this machine and the viewer's page (or pages of --allow-origin) "
                     "may connect; any other --host exposes the realizer to the network, and without --token "
                     "a token is made up and printed in the URLs.")

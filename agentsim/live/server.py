@@ -8,13 +8,16 @@ that parses them and has their speech synthesised, then to a SimPy process that 
 
 Protocol, at ``ws://HOST:PORT/``:
 
-* each text message a client sends is one BML document (any form ``agentsim realize`` reads); a message
-  that is not BML, or that the full queue cannot take, is answered to that client alone with a
-  ``warningFeedback``;
-* every feedback is sent to every client as one JSON text message, the objects ``agentsim realize`` prints,
+* each text message a client sends (a binary one: UTF-8 text) is one BML document (any form ``agentsim
+  realize`` reads); a message that is not BML, or that the full queue cannot take, is answered to that
+  client alone with a ``warningFeedback``;
+* each feedback about a block is sent as one JSON text message, the objects ``agentsim realize`` prints,
+  to the client that sent the block and to the clients that subscribed to ``"feedback"``,
   :attr:`Server.delay` seconds after its ``globalTime`` on the realizer's clock (so that it arrives when
-  its sound is heard, when the server plays sound);
-* a JSON message ``{"subscribe": "poses"}`` asks for the poses as well (see :mod:`agentsim.live.poses`).
+  its sound is heard, when the server plays sound); a warning about a block goes to its sender alone;
+* a JSON message ``{"subscribe": "poses"}`` asks for the poses as well (see :mod:`agentsim.live.poses`),
+  ``{"subscribe": "feedback"}`` for the feedback of every client's blocks (``{"subscribe": [...]}`` for
+  several); any other JSON is answered with a warning.
 
 ``http://HOST:PORT/`` serves the viewer page (the report's viewer, connected live).
 
@@ -28,6 +31,7 @@ loopback without one makes one up. A refused request is answered ``403 Forbidden
 from __future__ import annotations
 
 import asyncio
+import collections
 import gc
 import ipaddress
 import json
@@ -55,6 +59,8 @@ WARM_UP = ('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="warmup"><
 KEEP_FEEDBACK = 10_000
 #: How many ended blocks the realizer keeps (older ones are released with their pegs: memory stays flat).
 KEEP_BLOCKS = 256
+#: How many blocks' senders are remembered (to address their feedback; the oldest are forgotten first).
+KEEP_SENDERS = 4096
 
 
 class MediaDirectory:
@@ -98,9 +104,10 @@ class MediaDirectory:
 class LiveRealizer:
     """A :class:`~agentsim.realizer.Realizer` on the real-time clock, in a thread of its own.
 
-    ``offer(text, reply)`` hands it a BML document from any thread (False if the queue is full); what
-    cannot be read is answered through ``reply(feedback)`` (in the realizer's thread); every feedback goes
-    to each function in :attr:`listeners` (in the realizer's thread: they must not block). ``every(period,
+    ``offer(text, reply, sender)`` hands it a BML document from any thread (False if the queue is full);
+    what cannot be read is answered through ``reply(feedback)`` (in the reader's or the realizer's thread);
+    every feedback goes to each function in :attr:`listeners` as ``listener(feedback, sender)``, ``sender``
+    that of the block it is about (None if unknown; in the realizer's thread: they must not block). ``every(period,
     fn)`` calls ``fn(now)`` every ``period`` simulated seconds while it runs. ``media``: the directory sound
     files that clients name are read from (:class:`MediaDirectory`; None: none are). Realizer options
     (``tts``, ``strict``, ``speech``, ``anticipators``) are passed on.
@@ -120,7 +127,9 @@ class LiveRealizer:
         self.inbox: queue.Queue = queue.Queue()
         self.poll = poll
         self.reader = threading.Thread(target=self.read, name="agentsim-reader", daemon=True)
-        self.listeners: list[Callable[[dict], None]] = []
+        self.listeners: list[Callable[[dict, object], None]] = []
+        #: who sent each block (by block id, the latest KEEP_SENDERS), written and read in the realizer's thread
+        self.senders: collections.OrderedDict[str, object] = collections.OrderedDict()
         self.realizer.feedback.listen(self.emit)
         self.periodic: list[tuple[float, Callable[[float], None]]] = []
         self.closing = False
@@ -177,10 +186,10 @@ class LiveRealizer:
         while not self.closing:
             while True:
                 try:
-                    block, reply = self.inbox.get_nowait()
+                    block, reply, sender = self.inbox.get_nowait()
                 except queue.Empty:
                     break
-                self.submit(block, reply)
+                self.submit(block, reply, sender)
             yield self.env.timeout(self.poll)
 
     def tick(self, period: float, fn: Callable[[float], None]):
@@ -196,10 +205,10 @@ class LiveRealizer:
         self.periodic.append((period, fn))
 
     # ------------------------------------------------------------------------------------------- input
-    def offer(self, text: str | bytes, reply: Callable[[dict], None]) -> bool:
+    def offer(self, text: str | bytes, reply: Callable[[dict], None], sender: object = None) -> bool:
         """Hand a document to the realizer; False if the queue is full."""
         try:
-            self.incoming.put_nowait((text, reply))
+            self.incoming.put_nowait((text, reply, sender))
             return True
         except queue.Full:
             return False
@@ -214,7 +223,7 @@ class LiveRealizer:
             entry = self.incoming.get()
             if entry is None or self.closing:
                 return
-            text, reply = entry
+            text, reply, sender = entry
             try:
                 blocks = parse_document(text, strict=realizer.strict, name_block=realizer.name_block)
             except Exception as exc:  # the reader's own fault: the client hears of it, nothing else
@@ -228,7 +237,7 @@ class LiveRealizer:
                                      "agent", line=error.line, column=error.column))
                     continue
                 self.prepare(block)
-                self.inbox.put((block, reply))
+                self.inbox.put((block, reply, sender))
 
     def prepare(self, block) -> None:
         """Synthesise a block's speeches ahead (a backend that remembers what it said, as espeak-ng's does,
@@ -243,8 +252,12 @@ class LiveRealizer:
                 except Exception:  # the planner will meet the same problem, and report it
                     pass
 
-    def submit(self, block, reply: Callable[[dict], None]) -> None:
+    def submit(self, block, reply: Callable[[dict], None], sender: object = None) -> None:
         """Submit a block that was read (in the realizer's thread)."""
+        self.senders[block.id] = sender
+        self.senders.move_to_end(block.id)
+        while len(self.senders) > KEEP_SENDERS:
+            self.senders.popitem(last=False)
         try:
             self.realizer.submit(block)
         except Exception as exc:
@@ -252,8 +265,10 @@ class LiveRealizer:
                              f"({type(exc).__name__}: {exc})", self.env.now, block.character_id))
 
     def emit(self, item: dict) -> None:
+        block_id = str(item.get("id", "")).split(":", 1)[0]
+        sender = self.senders.get(block_id)
         for listener in self.listeners:
-            listener(item)
+            listener(item, sender)
 
     def wall_time(self, t: float) -> float:
         """The ``time.monotonic()`` time at which simulated time ``t`` happens."""
@@ -336,17 +351,30 @@ class Server:
         live.listeners.append(self.from_realizer)
 
     # ------------------------------------------------------------------------------------------- output
-    def from_realizer(self, item: dict) -> None:
-        """A feedback from the realizer's thread: send it to everyone when its time (plus the delay) comes."""
+    def from_realizer(self, item: dict, sender: object = None) -> None:
+        """A feedback from the realizer's thread: send it when its time (plus the delay) comes."""
         if self.loop is not None:
-            self.loop.call_soon_threadsafe(self.schedule, item)
+            self.loop.call_soon_threadsafe(self.schedule, item, sender)
 
-    def schedule(self, item: dict) -> None:
+    def schedule(self, item: dict, sender: object = None) -> None:
         when = self.live.wall_time(item.get("globalTime", 0.0)) + self.delay
         if when > self.loop.time() + 0.0005:
-            self.loop.call_at(when, self.broadcast, item)
+            self.loop.call_at(when, self.address, item, sender)
         else:
-            self.broadcast(item)
+            self.address(item, sender)
+
+    def address(self, item: dict, sender: object = None) -> None:
+        """Send a feedback to whom it concerns: a warning about a block to its sender alone; anything else to
+        its sender and the clients subscribed to ``"feedback"`` (a warning about no client's block, to them)."""
+        to = set()
+        if sender in self.clients:
+            to.add(sender)
+        if not (item.get("type") == "warningFeedback" and sender is not None):
+            to.update(c for c in self.clients if "feedback" in self.subscribers.get(c, ()))
+        if to:
+            message = fb.to_json(item)
+            for client in to:
+                self.send(client, message)
 
     def broadcast(self, item: dict, only: set[str] | None = None) -> None:
         message = fb.to_json(item)
@@ -390,28 +418,53 @@ class Server:
             self.clients.discard(client)
             self.subscribers.pop(client, None)
 
+    def warn(self, client, description: str) -> None:
+        """A ``warningFeedback`` about what ``client`` sent, to it alone."""
+        self.send(client, fb.to_json(fb.warning("", "PARSING_FAILURE", description, self.live.env.now, "agent")))
+
     def receive(self, client, message: str | bytes) -> None:
-        text = message.decode("utf-8", "replace") if isinstance(message, bytes) else message
+        if isinstance(message, bytes):
+            try:
+                text = message.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                self.warn(client, f"message refused: a binary message must be UTF-8 text (byte {exc.start} is "
+                                  "not); send BML as a text message")
+                return
+        else:
+            text = message
         if text.lstrip().startswith("{"):
             self.control(client, text)
             return
-        if not self.live.offer(text, self.reply_to(client)):
+        if not self.live.offer(text, self.reply_to(client), client):
             self.refused += 1
             self.send(client, fb.to_json(fb.warning(
                 "", "PARSING_FAILURE", f"document refused: {self.live.incoming.maxsize} documents are already "
                 "waiting for the realizer; send fewer at once", self.live.env.now, "agent")))
 
+    def kinds(self) -> list[str]:
+        """What a client may subscribe to here."""
+        return sorted({"feedback", *self.hello})
+
     def control(self, client, text: str) -> None:
+        """A JSON message: ``{"subscribe": KIND or [KIND, ...]}``; anything else is answered with a warning."""
+        usage = ('a JSON message must be {"subscribe": KIND} or {"subscribe": [KIND, ...]} with KIND one of '
+                 + ", ".join(f'"{k}"' for k in self.kinds()) + "; BML is sent as XML")
         try:
-            wanted = json.loads(text)["subscribe"]
-            wanted = {wanted} if isinstance(wanted, str) else set(wanted)
-            if not wanted or not all(isinstance(w, str) for w in wanted):
-                raise TypeError
-        except (ValueError, KeyError, TypeError):
-            self.send(client, fb.to_json(fb.warning(
-                "", "PARSING_FAILURE", "a JSON message must be {\"subscribe\": \"poses\"}; BML is sent as XML",
-                self.live.env.now, "agent")))
+            message = json.loads(text)
+        except ValueError as exc:
+            self.warn(client, f"message refused: not JSON ({exc}); {usage}")
             return
+        if not isinstance(message, dict) or set(message) != {"subscribe"}:
+            self.warn(client, f"message refused: not a control message this server knows; {usage}")
+            return
+        wanted = message["subscribe"]
+        wanted = [wanted] if isinstance(wanted, str) else wanted
+        kinds = self.kinds()
+        if not isinstance(wanted, list) or not wanted or not all(isinstance(w, str) and w in kinds for w in wanted):
+            self.warn(client, f"message refused: nothing here to subscribe to by {json.dumps(message['subscribe'])}; "
+                              f"{usage}")
+            return
+        wanted = set(wanted)
         self.subscribers.setdefault(client, set()).update(wanted)
         for hello in self.greetings(wanted):
             self.send(client, json.dumps(hello))

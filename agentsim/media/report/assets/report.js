@@ -773,13 +773,13 @@
 
      It opens a WebSocket to options.url (by default the page's own host and port, with the page's ?token=
      if it has one), sends
-     {"subscribe": "poses"}, builds the skeleton from the server's "skeleton" message and buffers the frames
+     {"subscribe": ["poses", "feedback"]}, builds the skeleton from the server's "skeleton" message and buffers the frames
      of its "poses" messages. A message comes when its last frame is due on the server's clock, a few frames
      at a time; the page plays the frames at a steady delay (hold) behind the newest time it can know, so
      that motion is smooth: the server's clock is read as the page's clock minus the smallest lag seen lately
      between a message's arrival and the time of what it carries. When frames come later than the hold
      allows for (the buffer runs dry: the last frame is held), the hold grows by 50 ms, up to 1 s; after
-     30 s without that it shrinks again by 50 ms, down to a period and 0.1 s. Feedback, which every client is sent, is
+     30 s without that it shrinks again by 50 ms, down to a period and 0.1 s. Feedback (every client's: it subscribes) is
      applied when the play time reaches its globalTime: a timeline of the behaviours (planned phases pale,
      passed ones solid), what plays now, and a list. When the server goes away the page says so, keeps the
      last pose and tries again every few seconds; a new connection starts afresh (a new server has a new
@@ -873,7 +873,7 @@
         state.state = "connected";
         state.closed = null;
         afresh();
-        ws.send(JSON.stringify({ subscribe: "poses" }));
+        ws.send(JSON.stringify({ subscribe: ["poses", "feedback"] }));  // every client's feedback
         status();
       };
       ws.onmessage = function (event) {
