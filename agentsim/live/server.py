@@ -37,6 +37,7 @@ import ipaddress
 import json
 import queue
 import secrets
+import sys
 import threading
 import time
 from pathlib import Path
@@ -44,7 +45,7 @@ from typing import Callable
 
 from agentsim.core import feedback as fb
 from agentsim.core.clock import make_environment
-from agentsim.errors import ScheduleError, UsageError
+from agentsim.errors import AgentsimError, ScheduleError, UsageError
 
 #: How often the realizer's thread takes what clients sent (s): a block waits at most this long.
 POLL = 0.005
@@ -61,6 +62,15 @@ KEEP_FEEDBACK = 10_000
 KEEP_BLOCKS = 256
 #: How many blocks' senders are remembered (to address their feedback; the oldest are forgotten first).
 KEEP_SENDERS = 4096
+
+
+class RealizerStopped(AgentsimError):
+    """The realizer's thread died: the service stops with it (exit status 1)."""
+
+
+def note(message: str) -> None:
+    """One line on stderr about a fault the service goes on after."""
+    print(f"agentsim serve: {message}", file=sys.stderr, flush=True)
 
 
 class MediaDirectory:
@@ -134,7 +144,12 @@ class LiveRealizer:
         self.periodic: list[tuple[float, Callable[[float], None]]] = []
         self.closing = False
         self.started = threading.Event()
+        #: what stopped the realizer's thread (None while it runs); each function in :attr:`on_failure` is
+        #: called with it, in that thread
         self.error: BaseException | None = None
+        self.on_failure: list[Callable[[BaseException], None]] = []
+        #: faults gone on after, by kind (reported in the server's status)
+        self.faults: collections.Counter[str] = collections.Counter()
         self.thread = threading.Thread(target=self.run, name="agentsim-realizer", daemon=True)
 
     # ------------------------------------------------------------------------------------------- threads
@@ -156,8 +171,9 @@ class LiveRealizer:
             rehearsal = Realizer(tts=backend, strict=self.realizer.strict)
             rehearsal.submit(WARM_UP)
             rehearsal.run()
-        except Exception:  # a backend that cannot speak will say so on the first real block
-            pass
+        except Exception as exc:  # a backend that cannot speak will say so again on the first real block
+            self.faults["warm_up"] += 1
+            note(f"warming up failed ({type(exc).__name__}: {exc}); the first blocks' feedback may come late")
         # What exists now (modules, the synthesiser, the rehearsal's leftovers collected first) lives as long
         # as the service: moved out of the collector's generations, a full collection no longer scans it.
         gc.collect()
@@ -178,8 +194,10 @@ class LiveRealizer:
         self.started.set()
         try:
             self.env.run()
-        except Exception as exc:  # reported by the server; the realizer's own faults are issue of their own
+        except BaseException as exc:  # the server stops, saying why
             self.error = exc
+            for fn in self.on_failure:
+                fn(exc)
 
     def pump(self):
         """Take what clients sent, every :attr:`poll` seconds."""
@@ -197,8 +215,11 @@ class LiveRealizer:
             yield self.env.timeout(period)
             try:
                 fn(self.env.now)
-            except Exception:  # a viewer's fault must not stop the realizer
-                pass
+            except Exception as exc:  # a viewer's fault must not stop the realizer: said once, counted
+                if not self.faults["periodic"]:
+                    note(f"a periodic task failed ({type(exc).__name__}: {exc}); it goes on, and further "
+                         "faults are only counted")
+                self.faults["periodic"] += 1
 
     def every(self, period: float, fn: Callable[[float], None]) -> None:
         """Call ``fn(now)`` every ``period`` seconds in the realizer's thread (set before :meth:`start`)."""
@@ -249,8 +270,8 @@ class LiveRealizer:
             if behaviour.type == "speech" and getattr(backend, "remembers", False):
                 try:
                     backend.synthesize(speech_text(behaviour))
-                except Exception:  # the planner will meet the same problem, and report it
-                    pass
+                except Exception:  # the planner meets the same problem, and warns the sender; counted here
+                    self.faults["synthesis_ahead"] += 1
 
     def submit(self, block, reply: Callable[[dict], None], sender: object = None) -> None:
         """Submit a block that was read (in the realizer's thread)."""
@@ -338,7 +359,11 @@ class Server:
         self.token = secrets.token_urlsafe(24) if self.token_made else token
         self.allow_origins = frozenset(origin_of(o) for o in allow_origins)
         #: what went wrong or was refused, for ``{"status": true}``
-        self.counters = {"refused_origins": 0, "refused_tokens": 0}
+        self.counters = {"refused_origins": 0, "refused_tokens": 0, "refused_documents": 0, "closed_clients": 0,
+                         "broken_connections": 0, "dropped_poses": 0, "unsent": 0, "faults": 0}
+        #: functions whose dicts are added to the status (the service's sound, for one)
+        self.status_sources: list[Callable[[], dict]] = []
+        self.failure: BaseException | None = None
         self.delay = delay
         self.clients: set = set()
         self.subscribers: dict[object, set[str]] = {}
@@ -347,7 +372,6 @@ class Server:
         #: what a new subscriber of each kind is sent first (set by whoever publishes it)
         self.hello: dict[str, dict] = {}
         self.sent = 0
-        self.refused = 0
         live.listeners.append(self.from_realizer)
 
     # ------------------------------------------------------------------------------------------- output
@@ -384,12 +408,16 @@ class Server:
             self.send(client, message)
 
     def send(self, client, message: str) -> None:
+        from websockets.exceptions import ConnectionClosed
+
         async def deliver():
             try:
                 await client.send(message)
                 self.sent += 1
-            except Exception:  # a client that went away: it is forgotten when its handler ends
-                pass
+            except ConnectionClosed:  # a client that went away: it is forgotten when its handler ends
+                self.counters["unsent"] += 1
+            except Exception as exc:
+                self.fault("sending to a client", exc)
 
         asyncio.ensure_future(deliver())
 
@@ -403,18 +431,26 @@ class Server:
         return reply
 
     # ------------------------------------------------------------------------------------------- input
+    def fault(self, where: str, exc: BaseException) -> None:
+        """A fault of the server's own that it goes on after: one line on stderr, counted."""
+        self.counters["faults"] += 1
+        note(f"{where} failed ({type(exc).__name__}: {exc}); serving goes on")
+
     async def handler(self, client) -> None:
+        from websockets.exceptions import ConnectionClosedError
+
         self.clients.add(client)
         try:
             async for message in client:
                 try:
                     self.receive(client, message)
                 except Exception as exc:  # whatever a message does, the connection goes on
-                    self.send(client, fb.to_json(fb.warning("", "PARSING_FAILURE", f"message refused: {exc}",
-                                                            self.live.env.now, "agent")))
-        except Exception:  # the connection broke: nothing else is disturbed
-            pass
+                    self.fault("taking a message", exc)
+                    self.warn(client, f"message refused: the server failed to take it ({type(exc).__name__})")
+        except ConnectionClosedError:  # the connection broke: nothing else is disturbed
+            self.counters["broken_connections"] += 1
         finally:
+            self.counters["closed_clients"] += 1
             self.clients.discard(client)
             self.subscribers.pop(client, None)
 
@@ -436,7 +472,7 @@ class Server:
             self.control(client, text)
             return
         if not self.live.offer(text, self.reply_to(client), client):
-            self.refused += 1
+            self.counters["refused_documents"] += 1
             self.send(client, fb.to_json(fb.warning(
                 "", "PARSING_FAILURE", f"document refused: {self.live.incoming.maxsize} documents are already "
                 "waiting for the realizer; send fewer at once", self.live.env.now, "agent")))
@@ -448,11 +484,14 @@ class Server:
     def control(self, client, text: str) -> None:
         """A JSON message: ``{"subscribe": KIND or [KIND, ...]}``; anything else is answered with a warning."""
         usage = ('a JSON message must be {"subscribe": KIND} or {"subscribe": [KIND, ...]} with KIND one of '
-                 + ", ".join(f'"{k}"' for k in self.kinds()) + "; BML is sent as XML")
+                 + ", ".join(f'"{k}"' for k in self.kinds()) + ', or {"status": true}; BML is sent as XML')
         try:
             message = json.loads(text)
         except ValueError as exc:
             self.warn(client, f"message refused: not JSON ({exc}); {usage}")
+            return
+        if message == {"status": True}:
+            self.send(client, json.dumps(self.status()))
             return
         if not isinstance(message, dict) or set(message) != {"subscribe"}:
             self.warn(client, f"message refused: not a control message this server knows; {usage}")
@@ -468,6 +507,14 @@ class Server:
         self.subscribers.setdefault(client, set()).update(wanted)
         for hello in self.greetings(wanted):
             self.send(client, json.dumps(hello))
+
+    def status(self) -> dict:
+        """The reply to ``{"status": true}``: clients, messages sent, and what was refused, dropped or failed."""
+        status = {"type": "status", "clients": len(self.clients), "sent": self.sent, **self.counters,
+                  "realizer_faults": dict(self.live.faults), "time": self.live.env.now}
+        for source in self.status_sources:
+            status.update(source())
+        return status
 
     def greetings(self, wanted: set[str]) -> list[dict]:
         """What a new subscriber is told first (set by whoever publishes what it subscribes to)."""
@@ -545,10 +592,21 @@ class Server:
 
     # ------------------------------------------------------------------------------------------- serving
     async def serve(self, ready: Callable[[], None] | None = None, stop: asyncio.Event | None = None) -> None:
-        """Serve until ``stop`` is set (or forever). Raises :class:`UsageError` if the port is taken."""
+        """Serve until ``stop`` is set (or forever). Raises :class:`UsageError` if the port is taken,
+        :class:`RealizerStopped` once the realizer's thread died."""
         from websockets.asyncio.server import serve
 
         self.loop = asyncio.get_running_loop()
+        stop = stop if stop is not None else asyncio.Event()
+        loop = self.loop
+
+        def failed(exc: BaseException) -> None:  # in the realizer's thread
+            self.failure = exc
+            loop.call_soon_threadsafe(stop.set)
+
+        self.live.on_failure.append(failed)
+        if self.live.error is not None:
+            failed(self.live.error)
         try:
             server = await serve(self.handler, self.host, self.port, process_request=self.request,
                                  max_size=2 ** 22, ping_interval=20)
@@ -559,10 +617,11 @@ class Server:
         if ready is not None:
             ready()
         async with server:
-            if stop is None:
-                await server.serve_forever()
-            else:
-                await stop.wait()
+            await stop.wait()
+        if self.failure is not None:
+            exc = self.failure
+            raise RealizerStopped(f"the realizer stopped ({type(exc).__name__}: {exc}); the service stopped "
+                                  "with it") from None
 
 
 def wait_for_port(host: str, port: int, timeout: float = 10.0) -> bool:

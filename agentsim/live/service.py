@@ -76,6 +76,8 @@ class Service:
                 self.close()
                 raise
             self.server.delay = self.sound.delay
+            self.server.status_sources.append(lambda: {"sound_errors": self.sound.errors,
+                                                       "sound_last_error": self.sound.last_error})
             speaker = Loudspeaker(self.sound)
             self.live.realizer.speech.listeners.append(speaker)
             self.live.realizer.audio.listeners.append(speaker)

@@ -625,8 +625,8 @@ class LiveSound:
             self.last_error = f"{type(exc).__name__}: {exc}"
             try:
                 outdata.fill(0)
-            except Exception:
-                pass
+            except Exception:  # not even silence: counted as well
+                self.errors += 1
 
     # -- measuring the loop -----------------------------------------------------------------------------
 

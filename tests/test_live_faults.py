@@ -1,0 +1,127 @@
+"""Faults of ``agentsim serve`` are reported, with real WebSocket clients: ``{"status": true}`` is answered
+(to the asker alone) with counters that follow what happened (refused documents, closed clients, refused
+origins and tokens); a dead realizer thread stops the server, and ``agentsim serve`` with exit status 1 and
+one line saying why."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+import pytest
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+from websockets.sync.client import connect
+
+from agentsim.live.server import RealizerStopped
+from agentsim.live.service import Background, Service
+from speech_timing.builtin import BuiltinBackend
+
+NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
+
+
+def status(ws) -> dict:
+    ws.send(json.dumps({"status": True}))
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        item = json.loads(ws.recv(timeout=deadline - time.monotonic()))
+        if item["type"] == "status":
+            return item
+    raise AssertionError("no status reply")
+
+
+def test_status_counts_what_was_refused_and_who_left():
+    with Background(Service(port=0, audio="none", fps=0, tts=BuiltinBackend(), queue_size=1)) as running:
+        with connect(running.url) as ws, connect(running.url) as other:
+            first = status(ws)
+            assert first["clients"] == 2 and first["refused_documents"] == 0 and first["closed_clients"] == 0
+            assert {"dropped_poses", "refused_origins", "refused_tokens", "realizer_faults"} <= set(first)
+            # a burst into a queue of one: some are refused, each with a warning, each counted
+            for i in range(200):
+                ws.send(f'<bml {NS} id="q{i}"><wait id="w" start="0" end="0.001"/></bml>')
+            refused = 0
+            after = None
+            ws.send(json.dumps({"status": True}))  # answered after the burst was taken
+            deadline = time.monotonic() + 30
+            while after is None and time.monotonic() < deadline:
+                item = json.loads(ws.recv(timeout=deadline - time.monotonic()))
+                if item["type"] == "warningFeedback" and "already waiting" in item["description"]:
+                    refused += 1
+                elif item["type"] == "status":
+                    after = item
+            assert refused >= 1 and after["refused_documents"] == refused
+            # the other client was sent no status and no warning of ws's
+            other.send(f'<bml {NS} id="mine"><head id="h" lexeme="NOD"/></bml>')
+            seen = []
+            while not seen or seen[-1]["id"] != "mine:end":
+                seen.append(json.loads(other.recv(timeout=10)))
+            assert all(f["id"].split(":")[0] == "mine" for f in seen), [f["id"] for f in seen]
+            # a foreign origin and a client that leaves are counted
+            with pytest.raises(InvalidStatus):
+                connect(running.url, origin="https://evil.example", open_timeout=5)
+            other.close()
+            deadline = time.monotonic() + 10
+            now = status(ws)
+            while now["closed_clients"] < 1 and time.monotonic() < deadline:
+                now = status(ws)
+            assert now["closed_clients"] == 1 and now["clients"] == 1
+            assert now["refused_origins"] == first["refused_origins"] + 1
+
+
+def test_a_dead_realizer_thread_stops_the_server(monkeypatch):
+    running = Background(Service(port=0, audio="none", fps=0, tts=BuiltinBackend()))
+    try:
+        live = running.service.live
+
+        def broken(block, reply, sender=None):
+            raise RuntimeError("injected fault")
+
+        monkeypatch.setattr(live, "submit", broken)
+        with connect(running.url) as ws:
+            ws.send(f'<bml {NS} id="b"><head id="h" lexeme="NOD"/></bml>')
+            with pytest.raises(ConnectionClosed):  # the server closes its connections as it stops
+                while True:
+                    ws.recv(timeout=10)
+        running.thread.join(10)
+        assert not running.thread.is_alive()
+        assert isinstance(running.error, RealizerStopped)
+        assert str(running.error) == ("the realizer stopped (RuntimeError: injected fault); the service stopped "
+                                      "with it")
+        assert isinstance(live.error, RuntimeError)
+    finally:
+        running.close()
+
+
+BROKEN_SERVE = """
+import sys
+from agentsim.cli import main
+from agentsim.live.server import LiveRealizer
+
+def broken(self, block, reply, sender=None):
+    raise RuntimeError("injected fault")
+
+LiveRealizer.submit = broken
+sys.exit(main(["serve", "--port", "0", "--audio", "none", "--fps", "0", "--tts", "builtin"]))
+"""
+
+
+def test_serve_with_a_dead_realizer_exits_1_with_one_line():
+    proc = subprocess.Popen([sys.executable, "-c", BROKEN_SERVE], stderr=subprocess.PIPE, text=True)
+    try:
+        lines = []
+        for line in proc.stderr:
+            lines.append(line)
+            if line.startswith("agentsim serve:"):
+                break
+        url = next(w for w in lines[-1].split() if w.startswith("ws://"))
+        with connect(url) as ws:
+            ws.send(f'<bml {NS} id="b"><head id="h" lexeme="NOD"/></bml>')
+            assert proc.wait(timeout=30) == 1
+        rest = [line for line in proc.stderr.read().splitlines() if line.strip()]
+        assert rest == ["agentsim: the realizer stopped (RuntimeError: injected fault); the service stopped "
+                        "with it"], rest
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
