@@ -79,10 +79,22 @@ def run_server(args: argparse.Namespace) -> int:
         raise Unavailable(f"{exc.problem}. Serve without sound with --audio none, or {GET_A_DEVICE} and name "
                           "its device with --audio DEVICE (e.g. --audio pulse)") from None
     print(f"speech: {options.describe_backend(service.live.realizer.speech.planner.backend)}", file=sys.stderr)
-    try:
-        import asyncio
+    import asyncio
 
-        asyncio.run(service.serve(ready=lambda: print(service.describe(), file=sys.stderr, flush=True)))
+    async def serve_until_a_signal() -> bool:
+        """Serve until SIGTERM or SIGINT, then close the server and its connections in order (a signal
+        raised as KeyboardInterrupt inside the loop could leave a connection's task hanging at exit);
+        whether a signal stopped it."""
+        stop, signalled = asyncio.Event(), []
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, lambda sig=sig: (signalled.append(sig), stop.set()))
+        await service.serve(ready=lambda: print(service.describe(), file=sys.stderr, flush=True), stop=stop)
+        return bool(signalled)
+
+    try:
+        if asyncio.run(serve_until_a_signal()):
+            raise KeyboardInterrupt  # stopped as asked: exit status 130, as with Ctrl-C
     finally:
         service.close()
     return 0
