@@ -53,7 +53,7 @@ sys.path.insert(0, str(ROOT))
 from anticipators.beats.baselines import aubio_available  # noqa: E402
 from anticipators.beats.evaluation import committed_beats, score_beats, time_to_correct, track_file  # noqa: E402
 
-TRACKERS = ("causal", "baseline", "aubio", "librosa_offline")
+TRACKERS = ("causal", "causal-comb", "baseline", "aubio", "librosa_offline")
 SKIP = 5.0
 WINDOW = 0.07
 ASAP_SECONDS = 30.0
@@ -131,8 +131,13 @@ def load_asap(folder: Path, jobs: int) -> list[dict]:
     return clips
 
 
+#: Keyword arguments for the trackers named ``causal`` (``--options``).
+CAUSAL_OPTIONS: dict = {}
+
+
 def run_clip(clip: dict, tracker: str, lookahead: float) -> dict:
-    run = track_file(clip["audio"], tracker, 512, sample_rate=clip["sample_rate"])
+    options = CAUSAL_OPTIONS if tracker == "causal" else None
+    run = track_file(clip["audio"], tracker, 512, sample_rate=clip["sample_rate"], tracker_options=options)
     end = run["audio_seconds"]
     committed = committed_beats(run["updates"], lookahead, end)
     res = score_beats(clip["beats"], committed, SKIP, WINDOW)
@@ -261,7 +266,12 @@ def main(argv=None) -> dict:
     ap.add_argument("--lookahead", type=float, default=0.2, help="lead of the committed sequence, s (0.2)")
     ap.add_argument("--per-clip", action="store_true", help="include every clip's figures")
     ap.add_argument("--jobs", type=int, default=2, help="FluidSynth renders at a time (2)")
+    ap.add_argument("--options", default="{}", help="JSON keyword arguments for the causal tracker (for trials)")
+    ap.add_argument("--quick", type=int, default=0, metavar="N",
+                    help="every N-th clip only, for iteration (0: every clip; report full-set figures)")
     args = ap.parse_args(argv)
+    CAUSAL_OPTIONS.clear()
+    CAUSAL_OPTIONS.update(json.loads(args.options))
     shared = shared_dir(args.shared)
     trackers = [t for t in args.trackers.split(",") if t]
     skipped = []
@@ -282,6 +292,8 @@ def main(argv=None) -> dict:
             continue
         t0 = time.perf_counter()
         clips = load_real(folder) if name == "real" else load_asap(folder, args.jobs)
+        if args.quick > 1:
+            clips = clips[:: args.quick]
         loaded = time.perf_counter() - t0
         sets[name] = {"available": True, "folder": str(folder), "load_seconds": round(loaded, 1),
                       **run_set(name, clips, trackers, args.lookahead, args.per_clip)}
@@ -290,6 +302,7 @@ def main(argv=None) -> dict:
         "benchmark": "beats_real",
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
         "load_average_1min": [round(x, 2) for x in load],
+        "causal_options": CAUSAL_OPTIONS, "quick": args.quick,
         "lookahead_s": args.lookahead, "skip_s": SKIP, "f_measure_window_s": WINDOW, "block_size": 512,
         "trackers": trackers, "trackers_left_out": skipped,
         "sets": sets,

@@ -8,12 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from anticipators.beats.dbn import BeatPointerFilter
 from anticipators.beats.envelope import ArrayEnvelope, SpectralFluxEnvelope
 from anticipators.beats.follower import BeatFollower
 from anticipators.beats.onsets import OnsetPicker, waveform_onset
 from anticipators.beats.phase import COMB_DECAY, comb_phase, comb_score
 from anticipators.beats.tempo import TempoEstimator, estimate_tempo
-from anticipators.beats.tracking import CausalBeatTracker
+from anticipators.beats.tracking import CausalBeatTracker, make_tracker
 
 FPS = 100.0  # frames per second of the hand-made envelopes
 
@@ -295,3 +296,54 @@ def test_beat_f_measure_is_mir_evals():
             warnings.simplefilter("ignore")
             expected = mir_eval.beat.f_measure(ref, est, 0.07)
         assert beat_f_measure(ref, est, 0.07) == expected
+
+
+# ------------------------------------------------------------------------------------------ joint tempo-phase filter
+
+
+def _click_activation(frames: np.ndarray, n: int) -> np.ndarray:
+    """A beat activation of 0.9, 0.6 and 0.3 from each of ``frames`` on (an onset's flux spreads over a few
+    frames) and 0.01 elsewhere."""
+    a = np.full(n, 0.01)
+    for k, v in enumerate((0.9, 0.6, 0.3)):
+        a[frames + k] = v
+    return a
+
+
+def test_beat_pointer_filter_locks_to_a_click_train_by_its_second_click():
+    """100 BPM clicks at 100 frames per second: from the second click on, the most probable state is an
+    interval of 60 frames, 4 frames after the click (the latest frame heard)."""
+    f = BeatPointerFilter(100.0, 60, 200, n_tempi=None)
+    clicks = np.arange(10, 1500, 60)
+    a = _click_activation(clicks, 1500)
+    for k, b in enumerate(clicks):
+        f.step(a[f.n_frames : b + 5])
+        assert f.p.sum() == pytest.approx(1.0)
+        if k >= 1:
+            assert f.best(marginal=True) == (60.0, 4.0), k
+        if k >= 2:  # the most probable single state a click later
+            assert f.best() == (60.0, 4.0), k
+
+
+def test_beat_pointer_filter_relocks_a_tempo_step_by_the_second_new_beat():
+    """100 BPM clicks, then 125 BPM from frame 1018: at the second click of the new tempo and after it, the
+    most probable interval is 48 frames and the phase that of the clicks."""
+    f = BeatPointerFilter(100.0, 60, 200, n_tempi=None)
+    clicks = np.concatenate([np.arange(10, 1000, 60), 970 + np.arange(1, 20) * 48])
+    a = _click_activation(clicks, 2000)
+    new = np.flatnonzero(clicks > 1000)
+    for k, b in enumerate(clicks):
+        f.step(a[f.n_frames : b + 5])
+        if k >= new[1]:
+            assert f.best(marginal=True) == (48.0, 4.0), k
+        elif 1 <= k < new[0]:
+            assert f.best(marginal=True) == (60.0, 4.0), k
+
+
+def test_default_tracker_is_the_joint_filter_and_the_comb_tracker_stays_available():
+    a = make_tracker("causal", 22050)
+    b = make_tracker("causal-comb", 22050)
+    assert a.sync == "dbn" and a.dbn is not None
+    assert b.sync == "comb" and b.dbn is None
+    with pytest.raises(ValueError):
+        CausalBeatTracker(22050, sync="other")

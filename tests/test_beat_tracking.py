@@ -310,21 +310,22 @@ def test_a_pulse_slower_than_the_range_is_committed_at_twice_its_tempo_unsure():
     np.testing.assert_allclose(np.diff(committed[committed > 5.0]), 0.75, atol=0.01)
 
 
-def test_a_pulse_faster_than_the_range_is_committed_at_a_level_within_it():
-    """The fast-pulse flag is off: 260 BPM clicks are followed every third click (86.7 BPM), confidently,
-    and never left silent."""
+@pytest.mark.parametrize("tracker, every", [("causal", 2), ("causal-comb", 3)])
+def test_a_pulse_faster_than_the_range_is_committed_at_a_level_within_it(tracker, every):
+    """The fast-pulse flag is off: 260 BPM clicks are followed confidently, and never left silent, every
+    other click (130 BPM) by the joint tempo-phase filter, every third (86.7 BPM) by the comb tracker."""
     x = _clicks(260, 20.0)
-    tr = CausalBeatTracker(SR, min_bpm=60, max_bpm=200)
+    tr = make_tracker(tracker, SR, min_bpm=60, max_bpm=200)
     conf = _feed(tr, x)
-    assert conf[-1] > 0.8 and tr.tempo_bpm == pytest.approx(260 / 3, rel=0.01)
-    run = track_file(x, "causal", 512, sample_rate=SR)
+    assert conf[-1] > 0.8 and tr.tempo_bpm == pytest.approx(260 / every, rel=0.01)
+    run = track_file(x, tracker, 512, sample_rate=SR)
     committed = committed_beats(run["updates"], 0.2, 20.0)
     clicks = np.arange(0.5, 19.5, 60 / 260)
     late = committed[(committed > 5.0) & (committed < 19.5)]  # (the clicks end at 19.5 s; the grid goes on)
     assert late.size > 15 and np.max(np.min(np.abs(late[:, None] - clicks[None, :]), axis=1)) < 0.01  # on clicks
-    np.testing.assert_allclose(np.diff(late), 3 * 60 / 260, atol=0.01)
+    np.testing.assert_allclose(np.diff(late), every * 60 / 260, atol=0.01)
     # with the flag on, the tracker stays silent
-    flagged = track_file(x, "causal", 512, sample_rate=SR, tracker_options={"fast_pulse_check": True})
+    flagged = track_file(x, tracker, 512, sample_rate=SR, tracker_options={"fast_pulse_check": True})
     assert committed_beats(flagged["updates"], 0.2, 20.0).size == 0
 
 

@@ -17,9 +17,20 @@ It combines the parts of this package:
        around an expected beat has been heard, by the salient onset there, timed on the waveform
        (:mod:`anticipators.beats.onsets`); it follows ramps and rubato, switches to a sudden tempo or
        phase change that two onsets agree on, and rates its confidence.
-    5. Resynchronisation: if the autocorrelation persistently prefers another period while the grid
-       misses its beats (or, over 2 s, another metrical level), or the comb persistently prefers
-       another phase, the filter restarts from them.
+    5. Tempo and phase (``sync="dbn"``, the default, tracker ``causal``): a joint tempo-phase filter
+       (:class:`~anticipators.beats.dbn.BeatPointerFilter`, a beat-pointer network filtered forward over
+       onset strength turned into a beat activation) holds the posterior over (beat interval, position
+       in the beat) from the first frame. From 1.5 s on its most probable interval and phase (with
+       hysteresis) set the beat grid; whenever the follower's grid differs from the filter's (tempo by
+       more than 2 %, phase by more than 5 % of a beat) the filter's grid is predicted, and the follower
+       restarts on it, unless the follower's last three beats hold ``follower_margin`` times the onset
+       strength of the filter's (a sudden change the follower found first). While the follower agrees,
+       its precisely timed grid is predicted. In silence (the last 2 s without onset strength) the
+       follower continues the grid the music left.
+    6. Resynchronisation (``sync="comb"``, tracker ``causal-comb``, the tracker before the joint filter):
+       if the autocorrelation persistently prefers another period while the grid misses its beats (or,
+       over 2 s, another metrical level), or the comb persistently prefers another phase, the filter
+       restarts from them; the first grid is set after ``init_seconds``.
 
 Prediction
     :meth:`CausalBeatTracker.predict` extrapolates the filter state: about one beat period ahead of
@@ -50,6 +61,7 @@ import math
 import numpy as np
 
 from anticipators.beats.baselines import AubioTracker, IOIBaselineTracker, librosa_offline_beats
+from anticipators.beats.dbn import BeatPointerFilter, FluxActivation
 from anticipators.beats.envelope import EnvelopeSource, SpectralFluxEnvelope, mono_samples
 from anticipators.beats.follower import BeatFollower
 from anticipators.beats.onsets import WAVEFORM_AFTER, OnsetPicker
@@ -140,6 +152,10 @@ class CausalBeatTracker:
     ODF_BIAS = 0.003
     #: Coarse (onset-strength peak) timing's standard deviation (seconds).
     COARSE_NOISE = 0.008
+    #: Another phase at the same tempo is taken when the onset strength of its last three beats is this
+    #: many times that of the grid held (the strength of equal clicks varies by 10 % with their alignment
+    #: to the frames).
+    PHASE_MARGIN = 1.3
 
     def __init__(
         self,
@@ -158,7 +174,20 @@ class CausalBeatTracker:
         observation_noise: float = 0.0015,
         envelope: EnvelopeSource | None = None,
         fast_pulse_check: bool = False,
+        sync: str = "dbn",
+        dbn_options: dict | None = None,
+        activation_options: dict | None = None,
+        dbn_init_seconds: float = 1.5,
+        dbn_patience: int = 1,
+        dbn_predict: bool = True,
+        agree_tempo: float = 0.02,
+        agree_phase: float = 0.05,
+        follower_margin: float = 1.5,
+        dbn_hysteresis: float = 2.0,
     ) -> None:
+        if sync not in ("dbn", "comb"):
+            raise ValueError(f"sync must be 'dbn' or 'comb', not {sync!r}")
+        self.sync = sync
         if not 0 < min_bpm < max_bpm:
             raise ValueError("need 0 < min_bpm < max_bpm")
         self.sample_rate = int(sample_rate)
@@ -195,6 +224,27 @@ class CausalBeatTracker:
         # resynchronisation state
         self._period_bad = 0
         self._phase_bad = 0
+        # the joint tempo-phase filter (sync="dbn")
+        self.dbn: BeatPointerFilter | None = None
+        if sync == "dbn":
+            options = {"min_bpm": self.min_bpm, "max_bpm": self.max_bpm, "n_tempi": None, "prior_bpm": 100.0,
+                       "prior_octaves": 1.0, **(dbn_options or {})}
+            self.dbn = BeatPointerFilter(fps, **options)
+            self.activation = FluxActivation(fps, **{"scale": 20.0, "floor": 0.01, **(activation_options or {})})
+            # with the fast-pulse flag on, the grid waits for init_seconds, as the flag needs some estimates
+            start = max(dbn_init_seconds, init_seconds) if self.fast_pulse_check else dbn_init_seconds
+            self._dbn_init_frames = int(round(start * fps))
+            self._dbn_patience = max(int(dbn_patience), 1)
+            self._dbn_bad = 0
+            self._dbn_cache = (-1, 0.0, 0.0)
+            self._dbn_active = False
+            self._wins_cache = (None, False)
+            self._dbn_held: tuple[int, float] | None = None  # interval index and latest beat chosen
+        self.dbn_predict = bool(dbn_predict) and self.dbn is not None
+        self.agree_tempo = float(agree_tempo)
+        self.agree_phase = float(agree_phase)
+        self.follower_margin = float(follower_margin)
+        self.dbn_hysteresis = float(dbn_hysteresis)
 
     # ------------------------------------------------------------------ public API
 
@@ -279,7 +329,23 @@ class CausalBeatTracker:
         numpy.ndarray
             Increasing beat times in seconds, all ``>= time``; empty before the first beat grid.
         """
+        if self.dbn_predict:
+            return self._predict_dbn(self.time, horizon_beats)
         return self.follower.predict(self.envelope.n_samples / self.sample_rate, horizon_beats)  # at self.time
+
+    def _predict_dbn(self, now: float, horizon_beats: int) -> np.ndarray:
+        """The beat follower's predictions unless the joint filter's grid is the better one
+        (:meth:`_dbn_wins`), then the filter's."""
+        follower = self.follower
+        if follower.out_of_range:
+            return np.zeros(0)  # a pulse faster than the range (fast_pulse_check): no grid
+        if not self._dbn_active:
+            return follower.predict(now, horizon_beats) if follower.locked else np.zeros(0)
+        if follower.locked and not self._dbn_wins():
+            return follower.predict(now, horizon_beats)
+        t_beat, period = self._dbn_beat()
+        k0 = math.ceil((now - t_beat) / period - 1e-9)
+        return t_beat + period * np.arange(k0, k0 + int(horizon_beats))
 
     def track(self, audio, block_size: int = 512, horizon_beats: int = 4) -> list[dict]:
         """Hear ``audio`` block by block, predicting after each block, and return the predictions that changed.
@@ -331,7 +397,10 @@ class CausalBeatTracker:
             now = envelope.n_samples / sample_rate
             if quiet and now <= until:
                 continue  # the same predictions as after the block before
-            beats, until = follower.predict_until(now, horizon_beats)
+            if self.dbn_predict:
+                beats, until = self._predict_dbn(now, horizon_beats), now
+            else:
+                beats, until = follower.predict_until(now, horizon_beats)
             beats = beats.tolist()
             if beats != last:
                 updates.append({"t": now, "beats": beats})
@@ -345,10 +414,15 @@ class CausalBeatTracker:
         envelope = self.envelope
         follower = self.follower
         envelope.update()
+        dbn = self.dbn
+        if dbn is not None and dbn.n_frames < envelope.n_frames:
+            dbn.step(self.activation(envelope.values(dbn.n_frames, envelope.n_frames)))
         if envelope.n_samples >= self._next_tempo_sample:
             self._next_tempo_sample = envelope.n_samples + self._tempo_every_samples
             self._estimate_tempo()
-            if not follower.locked:
+            if dbn is not None:
+                self._dbn_sync()
+            elif not follower.locked:
                 self._try_init()
             else:
                 self._check_sync()
@@ -419,6 +493,126 @@ class CausalBeatTracker:
         self._phase_bad = 0
         self.follower.restart(t_beat, period, periodicity=self._estimate.periodicity_at(lag))
 
+    def _dbn_beat(self) -> tuple[float, float]:
+        """The joint filter's latest beat (s) and period (s): its most probable interval and, within it, its
+        most probable position, with hysteresis against the grid chosen before. Another interval is taken
+        once it holds ``dbn_hysteresis`` times the posterior of the one before; another phase at the same
+        interval once the onset strength of its last three beats is clearly higher (two grids as strong,
+        such as every other click of a fast pulse, would otherwise take turns, as the posterior of each
+        rises at its own beats)."""
+        dbn = self.dbn
+        if self._dbn_cache[0] != dbn.n_frames:
+            tempo = dbn.tempo_posterior()
+            k = int(np.argmax(tempo))
+            held = self._dbn_held
+            if held is not None and held[0] != k and self.dbn_hysteresis * tempo[held[0]] > tempo[k]:
+                k = held[0]
+            interval = int(dbn.intervals[k])
+            a = int(dbn.starts[k])
+            position = int(np.argmax(dbn.p[a : a + interval]))
+            t, period = self._dbn_grid(interval, position)
+            if held is not None and held[0] == k:
+                t_old = held[1]
+                d = ((t - t_old) / period + 0.5) % 1.0 - 0.5
+                if abs(d) > 0.1 and self._grid_strength(t, period) <= self.PHASE_MARGIN * self._grid_strength(t_old, period):
+                    t = t_old
+            self._dbn_held = (k, t)
+            self._dbn_cache = (dbn.n_frames, t, period)
+        return self._dbn_cache[1], self._dbn_cache[2]
+
+    def _dbn_grid(self, interval: int, position: int) -> tuple[float, float]:
+        """Latest beat (s) and period (s) of the state ``(interval, position)`` of the joint filter."""
+        frame = int(self.dbn.n_frames - 1 - position)
+        # the beat lies in the beat states after the wrap: at the strongest onset among those heard
+        count = int(self.dbn.beat_width[int(np.searchsorted(self.dbn.intervals, interval))])
+        region = self.envelope.values(frame, min(frame + count, self.dbn.n_frames))
+        if region.size > 1:
+            frame += int(np.argmax(region))
+        return float(self.envelope.frame_time(float(frame))) - self.ODF_BIAS, interval / self._fps
+
+    def _dbn_hears(self) -> bool:
+        """Whether the joint filter has onsets to go by: the last 2 s hold some onset strength against the
+        long-term mean (in silence the grid the music left is continued by the beat follower)."""
+        if self.dbn.n_frames < self._dbn_init_frames or self.activation.mean <= 0.0:
+            return False
+        recent = self.envelope.values(self.envelope.n_frames - int(2.0 * self._fps), self.envelope.n_frames)
+        return recent.size > 0 and float(recent.mean()) > 0.05 * self.activation.mean
+
+    def _dbn_sync(self) -> None:
+        """Set or move the beat grid to the joint filter's most probable tempo and phase."""
+        follower = self.follower
+        self._dbn_active = self._dbn_hears()
+        if not self._dbn_active or follower.out_of_range:
+            return
+        t_dbn, period_dbn = self._dbn_beat()
+        if not follower.locked:
+            self._restart_at(t_dbn, period_dbn)
+            return
+        if self._dbn_wins() and not self._agrees(0.06, 0.2):
+            self._dbn_bad += 1
+        else:
+            self._dbn_bad = 0
+        if self._dbn_bad >= self._dbn_patience:
+            self._dbn_bad = 0
+            self._restart_at(t_dbn, period_dbn)
+
+    def _agrees(self, tempo: float, phase: float) -> bool:
+        """Whether the follower's grid is within ``tempo`` (log ratio) and ``phase`` (periods) of the filter's."""
+        t_dbn, period_dbn = self._dbn_beat()
+        t_latest, period = self.follower.state[0], self.follower.state[1]
+        d = ((t_dbn - t_latest) / period + 0.5) % 1.0 - 0.5
+        return abs(math.log(period / period_dbn)) < tempo and abs(d) < phase
+
+    def _grid_strength(self, t_beat: float, period: float, beats: int = 3) -> float:
+        """Mean onset strength at the latest ``beats`` beats heard of the grid through ``t_beat``, ``period`` apart."""
+        envelope = self.envelope
+        last = envelope.n_frames - 3  # (an onset's strength peaks a frame or two after it)
+        lag = period * self._fps
+        frame = float(envelope.frame_index(t_beat + self.ODF_BIAS))
+        frame += math.floor((last - frame) / lag) * lag  # the grid's latest beat heard
+        teeth = np.rint(frame - lag * np.arange(beats)).astype(np.intp)
+        a = max(int(teeth[-1]) - 1, envelope.first_kept)
+        values = envelope.values(a, last + 2)
+        if values.size < 3:
+            return 0.0
+        # the strongest frame within one of each tooth (a peak is one frame wide)
+        near = np.maximum(np.maximum(values[:-2], values[1:-1]), values[2:])  # near[i]: frames a+i .. a+i+2
+        idx = teeth - a - 1
+        idx = idx[(idx >= 0) & (idx < near.size)]
+        return float(near[idx].sum() / beats)
+
+    def _dbn_wins(self) -> bool:
+        """Whether the joint filter's grid is to be followed rather than the follower's: it agrees with it
+        (tempo within ``agree_tempo``, phase within ``agree_phase``), or it is not, and the onset strength of
+        its last three beats is higher (so a sudden change the follower found before the filter stands)."""
+        key = (self.dbn.n_frames, self.follower.state[0], self.follower.state[1])
+        if self._wins_cache[0] != key:
+            if self._agrees(self.agree_tempo, self.agree_phase):
+                wins = False
+            else:
+                t_dbn, period_dbn = self._dbn_beat()
+                s_dbn = self._grid_strength(t_dbn, period_dbn)
+                s_follower = self._grid_strength(*self.follower.state[:2])
+                if abs(math.log(self.follower.state[1] / period_dbn)) < 0.04:
+                    # the same tempo at another phase: only clearly stronger beats move the grid (two
+                    # grids as strong, such as every other click of a fast pulse, would take turns)
+                    wins = s_dbn > self.PHASE_MARGIN * s_follower
+                else:
+                    wins = self.follower_margin * s_dbn > s_follower
+            self._wins_cache = (key, wins)
+        return self._wins_cache[1]
+
+    def _restart_at(self, t_beat: float, period: float) -> None:
+        """Set a new beat grid through ``t_beat`` seconds, ``period`` seconds apart."""
+        while t_beat > self.time - 0.06 - self.envelope.latency:
+            t_beat -= period
+        fine = self.picker.onset_near(t_beat)
+        if math.isfinite(fine) and abs(fine - t_beat) < 0.04:
+            t_beat = fine
+        lag = period * self._fps
+        periodicity = self._estimate.periodicity_at(lag) if self._estimate is not None else 0.5
+        self.follower.restart(t_beat, period, periodicity=periodicity)
+
     def _check_sync(self) -> None:
         """Restart the grid when the autocorrelation or the comb persistently disagree with it."""
         estimate = self._estimate
@@ -460,7 +654,7 @@ class CausalBeatTracker:
             self._restart(lag_k, keep_period=period)
 
 
-TRACKER_NAMES = ("causal", "baseline", "aubio", "librosa_offline")
+TRACKER_NAMES = ("causal", "causal-comb", "baseline", "aubio", "librosa_offline")
 """Tracker names accepted by :func:`anticipators.beats.evaluation.track_file` (all but the last also by
 :func:`make_tracker`; ``"aubio"`` needs the optional aubio package; ``"librosa_offline"`` needs the
 whole audio at once)."""
@@ -472,6 +666,8 @@ def make_tracker(name: str, sample_rate: int, **kwargs):
     (:class:`~anticipators.beats.baselines.AubioTracker`; ImportError without aubio)."""
     if name == "causal":
         return CausalBeatTracker(sample_rate, **kwargs)
+    if name == "causal-comb":
+        return CausalBeatTracker(sample_rate, **{"sync": "comb", **kwargs})
     if name == "baseline":
         return IOIBaselineTracker(sample_rate, **kwargs)
     if name == "aubio":
