@@ -12,8 +12,10 @@ DBN, as madmom's online beat tracker uses it). Only the forward recursion runs (
 posterior over states given the frames heard so far, one frame at a time, in numpy over a flat array
 holding every interval's positions back to back.
 
-Prediction reads the posterior: :meth:`BeatPointerFilter.best` is the most probable state, so the next
-beat is ``intervals[k] - j`` frames ahead and the following ones an interval apart. The filter never
+Prediction reads the posterior: :meth:`BeatPointerFilter.best` is the most probable state (or, with
+``marginal``, the most probable position within the most probable interval), so the next beat is
+``intervals[k] - j`` frames ahead and the following ones an interval apart. The tracker
+(:class:`anticipators.beats.tracking.CausalBeatTracker`) adds hysteresis between equally good grids. The filter never
 stops committing: it holds a best state from the first frame, and it switches between tempo and phase
 hypotheses as soon as the posterior mass moves, without waiting for repeated evidence.
 """
@@ -43,7 +45,14 @@ class BeatPointerFilter:
     observation_lambda : float
         The first ``1 / observation_lambda`` of each beat interval counts as beat states.
     prior_bpm, prior_octaves : float or None
-        A log-normal preference over the interval taken at each beat (None: no preference).
+        A log-normal preference over the interval taken at each beat (None: no preference), applied as a
+        weight at every beat (not renormalised: a tempo far from ``prior_bpm`` pays at each of its beats).
+    beat_cost : float
+        A further weight ``exp(-beat_cost)`` at every beat (0: none; it favours slower tempi).
+    jump_probability : float
+        Probability at each beat of a jump to any interval (0: tempo changes only as the transition allows).
+    beat_width : int or None
+        Beat states per interval; None: ``intervals / observation_lambda`` (at least one).
     """
 
     def __init__(
@@ -112,13 +121,17 @@ class BeatPointerFilter:
         lam1 = self.observation_lambda - 1.0
         p, q = self.p, self._q
         starts, ends, beats, trans = self.starts, self.ends, self.beat_states, self.transition
-        for a in acts.tolist():
+        # (the posterior is renormalised every 8 frames and at the end: in between it shrinks by at most
+        # a factor 1e-6 * 15 a frame, far from float64's range)
+        for i, a in enumerate(acts.tolist()):
             q[1:] = p[:-1]
             q[starts] = p[ends] @ trans
             a = min(max(a, 1e-6), 1.0 - 1e-6)
             q[beats] *= a * lam1 / (1.0 - a)
-            q *= 1.0 / q.sum()
+            if i & 7 == 7:
+                q *= 1.0 / q.sum()
             p, q = q, p
+        p *= 1.0 / p.sum()
         self.p, self._q = p, q
         self.n_frames += acts.size
 

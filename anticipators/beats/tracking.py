@@ -36,7 +36,9 @@ Prediction
     :meth:`CausalBeatTracker.predict` extrapolates the filter state: about one beat period ahead of
     the latest observed beat at any time. The observation of a beat completes ``0.2 * period``
     (at most 100 ms) plus about 34 ms after it, so the next beat is predicted at least 200 ms ahead
-    from its predecessor's onset alone for periods above about 0.29 s (tempi up to about 200 BPM).
+    from its predecessor's onset alone for periods above about 0.29 s (tempi up to about 200 BPM). While
+    the joint filter's grid is followed (``sync="dbn"``, it and the follower disagree), the predictions
+    are the filter's latest beat plus whole periods, asked for after every block.
 
 Baselines
     :class:`~anticipators.beats.baselines.IOIBaselineTracker` and
@@ -47,9 +49,10 @@ Baselines
 Measured (``benchmarks/bench_beats.py``; FluidSynth ensembles of drums, bass, piano and strings,
 100-140 BPM, 4/4 and 3/4, +10 % ramp over 16 bars, +-2 % rubato, predictions 200 ms ahead scored after
 8 s): F-measure 1.0, mean absolute error 2.2 ms at 22.05 kHz and 1.5 ms at 44.1 kHz, mean signed error
-within +-0.3 ms, real-time factor about 0.0015 at 22.05 kHz and 0.0017 at 44.1 kHz in CPU time on one
-core of a busy machine (:meth:`CausalBeatTracker.track`, as ``track_file`` runs it; asking for predictions
-after every block adds 0.0001-0.0002).
+within +-0.3 ms, real-time factor 0.0027 at 22.05 kHz and 0.0030 at 44.1 kHz in CPU time on one core of a
+busy machine (load 2.8-3.6; :meth:`CausalBeatTracker.track`, as ``track_file`` runs it), of which the joint
+filter's forward step is about 0.0005. ``benchmarks/bench_beats_real.py`` (real recordings and ASAP
+renders, committed 200 ms ahead): F 0.760 and 0.329 (``causal-comb``: 0.725 and 0.285).
 
 All times are seconds from the first sample heard.
 """
@@ -117,6 +120,31 @@ class CausalBeatTracker:
         range (no confidence, no grid). Off by default: eighth-note hi-hats trip it on steady pop, disco and
         hip-hop, whose beat the tracker has right (real recordings: 4 silent clips with it, none without;
         F 0.65 to 0.73).
+    sync : {"dbn", "comb"}
+        How the beat grid is set and moved: by the joint tempo-phase filter (``"dbn"``, the default; the
+        tracker ``causal``) or by autocorrelation tempo and comb phase (``"comb"``, ``causal-comb``).
+    dbn_options : dict, optional
+        Keyword arguments for :class:`~anticipators.beats.dbn.BeatPointerFilter` (by default the tempo
+        range of the tracker, every whole interval in frames, a preference for 100 BPM one octave wide).
+    activation_options : dict, optional
+        Keyword arguments for :class:`~anticipators.beats.dbn.FluxActivation` (scale 20, floor 0.01).
+    dbn_init_seconds : float
+        Audio heard before the joint filter's grid is used (with ``fast_pulse_check``, at least
+        ``init_seconds``).
+    dbn_patience : int
+        Tempo estimates (every ``tempo_interval``) on which the filter's grid must be the better one before
+        the follower restarts on it.
+    dbn_predict : bool
+        Whether predictions are the filter's grid while it and the follower disagree (True), or always the
+        follower's, the filter only restarting it (False; real recordings F 0.711 against 0.744 when the
+        choice was made).
+    agree_tempo, agree_phase : float
+        The follower agrees with the filter within this log tempo ratio and this fraction of a beat.
+    follower_margin : float
+        A follower's grid at another tempo than the filter's is kept while the onset strength of its last
+        three beats is at least this many times that of the filter's (a sudden change found first).
+    dbn_hysteresis : float
+        The filter's chosen interval changes once another holds this many times its posterior.
     envelope : anticipators.beats.envelope.EnvelopeSource, optional
         The onset-envelope front end the blocks are fed to (for instance an
         :class:`~anticipators.beats.envelope.ArrayEnvelope` of hand-made onset strength); its sample rate
