@@ -30,10 +30,16 @@ AGREEMENT = 0.030
 
 
 @pytest.fixture(scope="module")
-def served(pulse_null_sink):
+def media(tmp_path_factory):
+    """The folder the service reads clients' sound files from (--media)."""
+    return tmp_path_factory.mktemp("media")
+
+
+@pytest.fixture(scope="module")
+def served(pulse_null_sink, media):
     from agentsim.live.sound import Recorder
 
-    service = Service(port=0, audio="pulse", fps=0, calibrate="pulse", tts=EspeakBackend())
+    service = Service(port=0, audio="pulse", fps=0, calibrate="pulse", tts=EspeakBackend(), media=str(media))
     with Background(service) as running:
         with Recorder("pulse", samplerate=service.sound.samplerate, seconds=60.0) as recorder:
             recorder.wait_steady()
@@ -108,17 +114,16 @@ def test_an_interrupted_speech_falls_silent_when_its_end_feedback_arrives(served
     assert after.max() < 1e-3, after.max()  # and silent from just after it
 
 
-def test_a_sound_file_plays_at_its_planned_time(served, tmp_path):
+def test_a_sound_file_plays_at_its_planned_time(served, media):
     running, recorder = served
     service = running.service
     rate = 16000
     rng = np.random.default_rng(7)
     noise = (0.3 * rng.standard_normal(int(0.25 * rate))).clip(-1, 1).astype(np.float32)
-    path = tmp_path / "burst.wav"
-    soundfile.write(path, noise, rate)
+    soundfile.write(media / "burst.wav", noise, rate)  # a client names files in the --media folder
     with connect(running.url) as ws:
         ws.send(f'<bml {NS} id="f"><wait id="w" start="0" end="0.4"/>'
-                f'<bmlt:audiofile id="a" fileName="{path}" start="w:end"/></bml>')
+                f'<bmlt:audiofile id="a" fileName="burst.wav" start="w:end"/></bml>')
         got = receive_until(ws, lambda f: f["id"] == "f:end")
     time.sleep(0.3)
     arrival, start = got["f:a:start"]
