@@ -447,9 +447,9 @@ class LivePoses:
         def schedule() -> None:
             when = self.live.wall_time(last) + server.delay
             if when > loop.time() + 0.0005:
-                loop.call_at(when, server.broadcast, message, {"poses"})
+                loop.call_at(when, server.broadcast, message, {"poses"}, True)
             else:
-                server.broadcast(message, {"poses"})
+                server.broadcast(message, {"poses"}, True)
 
         try:
             loop.call_soon_threadsafe(schedule)

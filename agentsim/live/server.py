@@ -19,6 +19,10 @@ Protocol, at ``ws://HOST:PORT/``:
   ``{"subscribe": "feedback"}`` for the feedback of every client's blocks (``{"subscribe": [...]}`` for
   several); any other JSON is answered with a warning.
 
+Each client has one bounded :class:`Outbox`: a client that falls behind loses poses first (counted), never
+feedback, and one that takes nothing for :data:`STALL_SECONDS` while messages wait is closed with
+:data:`CLOSE_CODE` and a reason.
+
 ``http://HOST:PORT/`` serves the viewer page (the report's viewer, connected live).
 
 Who may connect (:meth:`Server.admit`, in the ``process_request`` hook, before any handshake): a request with
@@ -62,6 +66,23 @@ KEEP_FEEDBACK = 10_000
 KEEP_BLOCKS = 256
 #: How many blocks' senders are remembered (to address their feedback; the oldest are forgotten first).
 KEEP_SENDERS = 4096
+
+#: How many poses messages (a tenth of a second each) may wait for one client; past it the oldest waiting one
+#: is dropped (counted in ``dropped_poses``): a client that falls behind loses poses first.
+BACKLOG_POSES = 8
+#: How many other messages (feedback, warnings, replies) may wait for one client; past it the client is closed
+#: (it is not dropped: feedback is never lost while a client stays connected).
+BACKLOG_MESSAGES = 2048
+#: How long (s) a client may take nothing while messages wait for it before it is closed (:data:`CLOSE_CODE`).
+STALL_SECONDS = 5.0
+#: How long (s) a client being closed is given to take its close frame before its connection is cut.
+CLOSE_GRACE = 2.0
+#: The close code for a client that did not read (1008, policy violation).
+CLOSE_CODE = 1008
+#: Bytes the transport holds for one client (websockets' ``write_limit``): past it, sending to it waits.
+WRITE_LIMIT = 2 ** 15
+#: The kernel's send buffer per connection (bytes; ``SO_SNDBUF``), which otherwise grows to megabytes.
+SEND_BUFFER = 2 ** 15
 
 
 class RealizerStopped(AgentsimError):
@@ -337,6 +358,85 @@ def origin_of(url: str) -> str:
     return f"{parts.scheme.lower()}://{host}" + (f":{port}" if port is not None else "")
 
 
+class Outbox:
+    """What waits to be sent to one client, and the one task that sends it, in order (in the server's loop).
+
+    Poses messages (``droppable``) wait at most :data:`BACKLOG_POSES` at a time: past it the oldest waiting
+    one is dropped. Other messages are kept, up to :data:`BACKLOG_MESSAGES`, past which the client is closed.
+    The transport holds at most :data:`WRITE_LIMIT` bytes besides (``send`` waits while it is full), so what a
+    client that does not read costs the server is bounded; :meth:`Server.watch` closes it once it has taken
+    nothing for :data:`STALL_SECONDS` while messages waited.
+    """
+
+    def __init__(self, server: "Server", client):
+        self.server, self.client = server, client
+        self.messages: collections.deque[tuple[str, bool]] = collections.deque()
+        self.poses = 0
+        self.ready = asyncio.Event()
+        #: since when (``loop.time()``) the message being sent waits for the client to take what it was sent
+        self.waiting_since: float | None = None
+        self.closing = False
+        self.task = asyncio.ensure_future(self.run())
+
+    def put(self, message: str, droppable: bool = False) -> None:
+        counters = self.server.counters
+        if self.closing:
+            counters["unsent"] += 1
+            return
+        if droppable:
+            if self.poses >= BACKLOG_POSES:
+                for i, (_, kind) in enumerate(self.messages):
+                    if kind:
+                        del self.messages[i]
+                        break
+                self.poses -= 1
+                counters["dropped_poses"] += 1
+            self.poses += 1
+        elif len(self.messages) - self.poses >= BACKLOG_MESSAGES:
+            counters["unsent"] += 1
+            self.server.close_slow(self.client, f"{BACKLOG_MESSAGES} messages were waiting for it")
+            return
+        self.messages.append((message, droppable))
+        self.ready.set()
+
+    def stalled(self, now: float) -> bool:
+        """Whether the client took nothing for :data:`STALL_SECONDS` while more messages waited for it."""
+        return (not self.closing and self.waiting_since is not None and bool(self.messages)
+                and now - self.waiting_since >= STALL_SECONDS)
+
+    async def run(self) -> None:
+        from websockets.exceptions import ConnectionClosed
+
+        loop = asyncio.get_running_loop()
+        while True:
+            while not self.messages:
+                self.ready.clear()
+                await self.ready.wait()
+            message, droppable = self.messages.popleft()
+            if droppable:
+                self.poses -= 1
+            self.waiting_since = loop.time()
+            try:
+                await self.client.send(message)
+                self.server.sent += 1
+            except ConnectionClosed:  # a client that went away: it is forgotten when its handler ends
+                self.server.counters["unsent"] += 1 + len(self.messages)
+                self.messages.clear()
+                self.poses = 0
+                self.closing = True
+            except Exception as exc:
+                self.server.fault("sending to a client", exc)
+            finally:
+                self.waiting_since = None
+
+    def stop(self) -> None:
+        """The client has gone: what still waits is counted as unsent, the sender stops."""
+        self.server.counters["unsent"] += len(self.messages)
+        self.messages.clear()
+        self.closing = True
+        self.task.cancel()
+
+
 class Server:
     """The WebSocket endpoint (and the viewer page) in front of a :class:`LiveRealizer`.
 
@@ -360,12 +460,14 @@ class Server:
         self.allow_origins = frozenset(origin_of(o) for o in allow_origins)
         #: what went wrong or was refused, for ``{"status": true}``
         self.counters = {"refused_origins": 0, "refused_tokens": 0, "refused_documents": 0, "closed_clients": 0,
-                         "broken_connections": 0, "dropped_poses": 0, "unsent": 0, "faults": 0}
+                         "closed_not_reading": 0, "broken_connections": 0, "dropped_poses": 0, "unsent": 0, "faults": 0}
         #: functions whose dicts are added to the status (the service's sound, for one)
         self.status_sources: list[Callable[[], dict]] = []
         self.failure: BaseException | None = None
         self.delay = delay
         self.clients: set = set()
+        #: each client's :class:`Outbox`
+        self.outboxes: dict[object, Outbox] = {}
         self.subscribers: dict[object, set[str]] = {}
         self.loop: asyncio.AbstractEventLoop | None = None
         self.files = files if files is not None else {}
@@ -400,26 +502,58 @@ class Server:
             for client in to:
                 self.send(client, message)
 
-    def broadcast(self, item: dict, only: set[str] | None = None) -> None:
+    def broadcast(self, item: dict, only: set[str] | None = None, droppable: bool = False) -> None:
+        """Send ``item`` to every client (subscribed to one of ``only``); ``droppable``: poses, which a client
+        that falls behind loses first."""
         message = fb.to_json(item)
         for client in list(self.clients):
             if only is not None and not only & self.subscribers.get(client, set()):
                 continue
-            self.send(client, message)
+            self.send(client, message, droppable)
 
-    def send(self, client, message: str) -> None:
-        from websockets.exceptions import ConnectionClosed
+    def send(self, client, message: str, droppable: bool = False) -> None:
+        """Queue ``message`` for ``client`` (see :class:`Outbox`; a client that has gone: counted as unsent)."""
+        outbox = self.outboxes.get(client)
+        if outbox is None:
+            self.counters["unsent"] += 1
+            return
+        outbox.put(message, droppable)
 
-        async def deliver():
+    def close_slow(self, client, why: str) -> None:
+        """Close a client that does not read what it is sent (:data:`CLOSE_CODE`), giving it
+        :data:`CLOSE_GRACE` s to take the close frame before its connection is cut."""
+        outbox = self.outboxes.get(client)
+        if outbox is None or outbox.closing:
+            return
+        outbox.closing = True
+        self.counters["closed_not_reading"] += 1
+        dropped = len(outbox.messages)
+        self.counters["unsent"] += dropped
+        outbox.messages.clear()
+        outbox.poses = 0
+        reason = f"the client did not read what it was sent ({why})"
+        note(f"closed the client at {peer(client)}: it did not read what it was sent ({why})")
+
+        async def close() -> None:
             try:
-                await client.send(message)
-                self.sent += 1
-            except ConnectionClosed:  # a client that went away: it is forgotten when its handler ends
-                self.counters["unsent"] += 1
+                await asyncio.wait_for(client.close(CLOSE_CODE, reason), CLOSE_GRACE)
+            except TimeoutError:  # it does not even take the close frame: the connection is cut
+                client.transport.abort()
             except Exception as exc:
-                self.fault("sending to a client", exc)
+                self.fault("closing a client that did not read", exc)
+                client.transport.abort()
 
-        asyncio.ensure_future(deliver())
+        asyncio.ensure_future(close())
+
+    async def watch(self) -> None:
+        """Close, every quarter of a second, the clients that took nothing for :data:`STALL_SECONDS` while
+        messages waited for them."""
+        while True:
+            await asyncio.sleep(0.25)
+            now = self.loop.time()
+            for client, outbox in list(self.outboxes.items()):
+                if outbox.stalled(now):
+                    self.close_slow(client, f"nothing taken for {STALL_SECONDS:g} s")
 
     def reply_to(self, client) -> Callable[[dict], None]:
         """A ``reply`` for the realizer's thread that reaches ``client`` alone."""
@@ -440,6 +574,15 @@ class Server:
         from websockets.exceptions import ConnectionClosedError
 
         self.clients.add(client)
+        self.outboxes[client] = Outbox(self, client)
+        try:
+            sock = client.transport.get_extra_info("socket")
+            if sock is not None:
+                import socket
+
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER)
+        except OSError as exc:
+            self.fault("bounding a client's send buffer", exc)
         try:
             async for message in client:
                 try:
@@ -447,11 +590,16 @@ class Server:
                 except Exception as exc:  # whatever a message does, the connection goes on
                     self.fault("taking a message", exc)
                     self.warn(client, f"message refused: the server failed to take it ({type(exc).__name__})")
-        except ConnectionClosedError:  # the connection broke: nothing else is disturbed
-            self.counters["broken_connections"] += 1
+        except ConnectionClosedError:  # the connection broke (or was cut): nothing else is disturbed
+            outbox = self.outboxes.get(client)
+            if outbox is None or not outbox.closing:
+                self.counters["broken_connections"] += 1
         finally:
             self.counters["closed_clients"] += 1
             self.clients.discard(client)
+            outbox = self.outboxes.pop(client, None)
+            if outbox is not None:
+                outbox.stop()
             self.subscribers.pop(client, None)
 
     def warn(self, client, description: str) -> None:
@@ -609,19 +757,31 @@ class Server:
             failed(self.live.error)
         try:
             server = await serve(self.handler, self.host, self.port, process_request=self.request,
-                                 max_size=2 ** 22, ping_interval=20)
+                                 max_size=2 ** 22, ping_interval=20, write_limit=WRITE_LIMIT)
         except OSError as exc:
             raise UsageError(f"cannot listen on {self.host}:{self.port}: {exc.strerror or exc} (is another "
                              f"server running there? choose another with --port)") from None
         self.port = server.sockets[0].getsockname()[1]
         if ready is not None:
             ready()
-        async with server:
-            await stop.wait()
+        watcher = asyncio.ensure_future(self.watch())
+        try:
+            async with server:
+                await stop.wait()
+        finally:
+            watcher.cancel()
         if self.failure is not None:
             exc = self.failure
             raise RealizerStopped(f"the realizer stopped ({type(exc).__name__}: {exc}); the service stopped "
                                   "with it") from None
+
+
+def peer(client) -> str:
+    """A client's address, as ``host:port``."""
+    address = getattr(client, "remote_address", None)
+    if isinstance(address, tuple) and len(address) >= 2:
+        return f"{address[0]}:{address[1]}"
+    return "an unknown address"
 
 
 def wait_for_port(host: str, port: int, timeout: float = 10.0) -> bool:
