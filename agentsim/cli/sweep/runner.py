@@ -93,7 +93,10 @@ def connect(workers: int | None, scheduler: str | None):
         else:
             cluster = stack.enter_context(dd.LocalCluster(
                 n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
-                dashboard_address=None, silence_logs=logging.ERROR))
+                # Dask's own log lines stay off the terminal: a worker's heartbeat that races the cluster's
+                # shutdown is logged as an error with its traceback although nothing is lost; what does go
+                # wrong reaches the sweep as a failed point or a lost worker, and is reported as such
+                dashboard_address=None, silence_logs=logging.CRITICAL))
             client = stack.enter_context(dd.Client(cluster))
         check_workers(client, scheduler or "the local cluster")
         yield client
