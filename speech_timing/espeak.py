@@ -480,8 +480,7 @@ def _serve_pristine() -> None:
         if pid == 0:  # the fork: synthesise once, reply, and go
             os.close(read)
             try:
-                engine.select(voice, rate)
-                buffer, events = engine.synth_here(ssml, voice, rate)
+                buffer, events = engine.synth_here(ssml, voice, rate)  # which selects the voice and rate
                 reply = (buffer.samples().tobytes(), events)
             except BaseException as exc:
                 reply = f"{type(exc).__name__}: {exc}"

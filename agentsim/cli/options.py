@@ -9,7 +9,7 @@ import sys
 import warnings
 
 from agentsim.errors import AgentsimError, UsageError
-from speech_timing.choice import NAMES, default_name, named
+from speech_timing.choice import NAMES, default_backend, named
 from speech_timing.delivery import CONDITIONS
 
 #: Speech backends by command-line name.
@@ -22,23 +22,23 @@ def add_tts(parser: argparse.ArgumentParser) -> None:
                              "one (default: espeak-ng when it is installed, as Realizer() in Python)")
 
 
-def tts_name(name: str | None) -> str:
-    """The backend the command line asks for: ``name``, or the default one (espeak-ng when it is installed;
-    otherwise the built-in one, with a line on stderr saying what to install)."""
+def backend(name: str | None):
+    """The speech backend named on the command line, or the default one (espeak-ng when it is installed;
+    otherwise the built-in one, with a line on stderr saying what to install); an
+    :class:`~agentsim.errors.Unavailable` if the one named cannot run here."""
     if name is not None:
-        return name
+        return named(name)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        name = default_name()
+        made = default_backend()
     for warning in caught:
         print(f"agentsim: {warning.message}", file=sys.stderr)
-    return name
+    return made
 
 
-def backend(name: str | None):
-    """The speech backend named on the command line, or the default one (see :func:`tts_name`); an
-    :class:`~agentsim.errors.Unavailable` if the one named cannot run here."""
-    return named(tts_name(name))
+def tts_name(name: str | None) -> str:
+    """The name of the backend :func:`backend` gives for ``name``."""
+    return name if name is not None else backend(None).name
 
 
 def describe_backend(tts) -> str:
