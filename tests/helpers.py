@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import time
 from pathlib import Path
 
 from agentsim.realizer import Realizer
@@ -189,3 +191,19 @@ def row_differences(row: dict, alone: dict, grid_keys) -> list[str]:
         elif row[column] != value:
             found.append(f"{column}: {row[column]!r} != {value!r}")
     return found
+
+
+def receive(ws, done, timeout: float = 10.0) -> list[tuple[float, dict]]:
+    """(arrival on time.monotonic(), message) on a websockets client until ``done(message)``, or an
+    AssertionError after ``timeout`` seconds."""
+    got = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            message = json.loads(ws.recv(timeout=0.2))
+        except TimeoutError:
+            continue
+        got.append((time.monotonic(), message))
+        if done(message):
+            return got
+    raise AssertionError(f"timed out after {len(got)} messages")

@@ -15,6 +15,7 @@ from websockets.sync.client import connect
 
 from agentsim.live.server import BACKLOG_POSES, CLOSE_CODE, STALL_SECONDS
 from agentsim.live.service import Background, Service
+from helpers import receive
 from rawws import RawClient
 from speech_timing.builtin import BuiltinBackend
 
@@ -50,18 +51,7 @@ def wait_for(condition, timeout: float, what: str) -> float:
 
 def feedback_until(ws, last: str, timeout: float = 20.0) -> list[tuple[float, dict]]:
     """(arrival, feedback) on a websockets client until the feedback ``last``; poses are skipped."""
-    got = []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            item = json.loads(ws.recv(timeout=0.2))
-        except TimeoutError:
-            continue
-        if "id" in item:
-            got.append((time.monotonic(), item))
-            if item["id"] == last:
-                return got
-    raise AssertionError(f"timed out; got {[f['id'] for _, f in got]}")
+    return [(t, m) for t, m in receive(ws, lambda m: m.get("id") == last, timeout) if "id" in m]
 
 
 def raw_messages_until(raw: RawClient, done, timeout: float) -> list[dict]:

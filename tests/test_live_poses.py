@@ -24,7 +24,7 @@ from agentsim.live.service import Background, Service
 from agentsim.media.report.data import FACE, body_points, point_names
 from agentsim.realizer import Realizer
 from speech_timing.builtin import BuiltinBackend
-from helpers import whole_run_points
+from helpers import receive, whole_run_points
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
 FPS = 30.0
@@ -150,21 +150,6 @@ def test_the_skeleton_message_names_the_points_the_frames_hold():
 def service():
     with Background(Service(port=0, audio="none", fps=FPS, tts=BuiltinBackend())) as running:
         yield running
-
-
-def receive(ws, done, timeout: float = 10.0) -> list[tuple[float, dict]]:
-    """(arrival on time.monotonic(), message) until ``done(message)`` or ``timeout``."""
-    got = []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            message = json.loads(ws.recv(timeout=0.2))
-        except TimeoutError:
-            continue
-        got.append((time.monotonic(), message))
-        if done(message):
-            return got
-    raise AssertionError(f"timed out after {len(got)} messages")
 
 
 def pose_messages(got):
