@@ -39,10 +39,16 @@ def a_moment_inside_a_gesture(realizer: Realizer, targets: list[int]) -> tuple[f
 
 
 def interrupted_ids(realizer) -> set[str]:
-    """The behaviours an interruption cut or removed, from the warnings, which must all say INTERRUPTED."""
-    warnings = realizer.feedback.warnings()
-    assert all(w["warningType"] == "INTERRUPTED" for w in warnings), warnings
-    return {w["id"] for w in warnings}
+    """The behaviours an interruption cut (their last syncPointProgress says ``"status": "INTERRUPTED"``) or
+    removed (``{"status": "removed"}`` in a prediction); an interruption asked for is no warning."""
+    assert realizer.feedback.warnings() == []
+    items = realizer.feedback.items
+    cut = {f["id"].rsplit(":", 1)[0] for f in items
+           if f["type"] == "syncPointProgress" and f.get("status") == "INTERRUPTED"}
+    removed = {f"{f['id']}:{b['id']}" for f in items if f["type"] == "predictionFeedback"
+               for b in f["behaviours"] if b.get("status") == "removed"}
+    assert not cut & removed
+    return cut | removed
 
 
 @pytest.mark.parametrize("config", [None, SpeechConfig("best", CONDITIONS["A"], seed=1)],
@@ -79,14 +85,16 @@ def test_a_long_speech_interrupted_mid_sentence(config, how):
     assert marks and not [m for m in syncs if m.startswith("sync:speech1:w") and syncs[m] > t]
     blocks = {f["id"]: f["globalTime"] for f in items if f["type"] == "blockProgress"}
     assert blocks["sync:end"] == max(syncs[e] for e in after)
-    # the later gestures never start; the prediction says they are gone, and an INTERRUPTED warning too
+    # the later gestures never start; the prediction says they are gone
     later = [j for j in targets if f"sync:g{j}:start" not in syncs]
     assert later and not [s for s in syncs if any(s.startswith(f"sync:g{j}:") for j in later)]
     gone = {b["id"] for f in items if f["type"] == "predictionFeedback" for b in f["behaviours"]
             if b.get("status") == "removed"}
     assert gone == {f"g{j}" for j in later} and min(later) > max(started)
-    # every behaviour cut or removed is said in an INTERRUPTED warning, and nothing else is
+    # every behaviour cut or removed is said so in the feedback, with no warning: it was asked for; the
+    # block's end says it was interrupted
     cut = interrupted_ids(realizer)
+    assert [f["id"] for f in items if f["type"] == "blockProgress" and f.get("status")] == ["sync:end"]
     assert {"sync:speech1", f"sync:g{k}"} | {f"sync:g{j}" for j in later} <= cut
     assert cut <= {"sync:speech1"} | {f"sync:g{j}" for j in started + later}
     # no peg of the board points into what was removed
@@ -234,12 +242,47 @@ def test_blocks_to_interrupt_and_activate_are_looked_up_when_the_block_starts():
                             '<head id="n" lexeme="NOD"/></bml>')
     realizer.run()
     warnings = [(w["id"], w["description"]) for w in realizer.feedback.warnings()]
-    assert warnings[0] == ("talk:s", "s: interrupted by late; what is left of it ends now")
-    assert warnings[1] == ("late", "interrupt: there is no block 'ghost'; ignored")
-    assert warnings[2][0] == "x" and warnings[2][1].startswith("onStart: cannot activate block 'ready': it is ")
-    assert len(warnings) == 3
+    assert warnings[0] == ("late", "interrupt: there is no block 'ghost'; ignored")
+    assert warnings[1][0] == "x" and warnings[1][1].startswith("onStart: cannot activate block 'ready': it is ")
+    assert len(warnings) == 2
     blocks = {f["id"]: f["globalTime"] for f in realizer.feedback.items if f["type"] == "blockProgress"}
     syncs = realizer.feedback.sync_times()
     assert blocks["talk:start"] == 0.5 and syncs["talk:s:end"] == 1.0  # cut short when "late" would start
     assert blocks["talk:end"] == blocks["late:start"] == blocks["ready:start"] == 1.0
     assert blocks["x:start"] == blocks["late:end"] == 1.5
+    statuses = [(f["id"], f["globalTime"]) for f in realizer.feedback.items if f.get("status") == "INTERRUPTED"]
+    assert statuses == [("talk:s:end", 1.0), ("talk:end", 1.0)]
+
+
+def test_an_interruption_warns_only_of_what_nobody_asked_for():
+    realizer = Realizer(tts=BuiltinBackend())
+    realizer.submit(f'<bml {NS} id="a"><head id="n" lexeme="NOD" start="2"/><head id="m" lexeme="NOD" start="0.5"/>'
+                    '<required><head id="r" lexeme="SHAKE" start="3"/></required></bml>')
+    # another block hangs a gesture from a:n's stroke, which the interruption means will never come
+    realizer.submit(f'<bml {NS} id="b"><gesture id="g" lexeme="BEAT" stroke="a:n:stroke"/>'
+                    '<wait id="w" start="0" end="4"/></bml>')
+    realizer.env.process((lambda: (yield realizer.env.timeout(1.0)) or realizer.interrupt("a"))())
+    realizer.run()
+    warnings = [(w["id"], w["warningType"], w["description"], w["globalTime"]) for w in realizer.feedback.warnings()]
+    assert warnings == [
+        ("b:g", "INTERRUPTED", "g: interrupted: it was tied to a:n; behaviour removed before it started", 1.0),
+        ("a:r", "INTERRUPTED", "r: required, but interrupted; behaviour removed before it started", 1.0)]
+    # a:n went as asked, quietly; a:m was retracting already (relax at 0.9) and ends as planned
+    ends = [(f["id"], f["globalTime"], f.get("status")) for f in realizer.feedback.items
+            if f["type"] == "blockProgress" and f["id"].endswith(":end")]
+    assert ends == [("a:end", 1.05, "INTERRUPTED"), ("b:end", 4.0, "INTERRUPTED")]
+    assert realizer.feedback.sync_times()["a:m:end"] == 1.05
+    assert not [s for s in realizer.feedback.sync_times() if s.startswith(("a:n:", "a:r:", "b:g:"))]
+
+
+def test_a_pending_block_interrupted_whole_starts_and_ends_at_once_and_says_so():
+    realizer = Realizer(tts=BuiltinBackend())
+    realizer.submit(f'<bml {NS} id="a"><wait id="w" start="0" end="2"/></bml>')
+    realizer.submit(f'<bml {NS} id="b" composition="APPEND"><head id="n" lexeme="NOD"/></bml>')
+    realizer.env.process((lambda: (yield realizer.env.timeout(0.5)) or realizer.interrupt("b"))())
+    realizer.run()
+    assert realizer.feedback.warnings() == []
+    blocks = [(f["id"], f["globalTime"], f.get("status")) for f in realizer.feedback.items
+              if f["type"] == "blockProgress"]
+    assert blocks == [("a:start", 0.0, None), ("b:start", 0.5, None), ("b:end", 0.5, "INTERRUPTED"),
+                      ("a:end", 2.0, None)]

@@ -71,6 +71,8 @@ def test_an_interrupt_sent_while_a_speech_plays_ends_it_at_once(service):
     arrival, end = got[-1]
     assert arrival - sent <= INTERRUPT_LATENCY, arrival - sent
     assert end["globalTime"] < 5.0  # long before the 20 sentences would have ended
+    # asked for: the speech's end says it was interrupted, and nothing is warned about
+    assert end["status"] == "INTERRUPTED" and not [f for _, f in got if f["type"] == "warningFeedback"]
 
 
 def test_a_malformed_message_is_answered_to_its_sender_and_the_next_block_runs(service):

@@ -25,15 +25,28 @@ WARNING_TYPES = (
 )
 
 
-def block_progress(block_id: str, which: str, global_time: float, character_id: str) -> Feedback:
-    return {"type": "blockProgress", "id": f"{block_id}:{which}", "globalTime": global_time,
-            "characterId": character_id}
+#: The ``status`` of the end blockProgress of a block an interruption cut short, and of the last
+#: syncPointProgress of each behaviour it cut (as BMLA's block progress carries a status): feedback, not a
+#: warning, since the interruption was asked for.
+INTERRUPTED = "INTERRUPTED"
+
+
+def block_progress(block_id: str, which: str, global_time: float, character_id: str,
+                   status: str | None = None) -> Feedback:
+    feedback = {"type": "blockProgress", "id": f"{block_id}:{which}", "globalTime": global_time,
+                "characterId": character_id}
+    if status is not None:
+        feedback["status"] = status
+    return feedback
 
 
 def sync_point_progress(block_id: str, behaviour_id: str, sync_id: str, time: float, global_time: float,
-                        character_id: str) -> Feedback:
-    return {"type": "syncPointProgress", "id": f"{block_id}:{behaviour_id}:{sync_id}", "time": time,
-            "globalTime": global_time, "characterId": character_id}
+                        character_id: str, status: str | None = None) -> Feedback:
+    feedback = {"type": "syncPointProgress", "id": f"{block_id}:{behaviour_id}:{sync_id}", "time": time,
+                "globalTime": global_time, "characterId": character_id}
+    if status is not None:
+        feedback["status"] = status
+    return feedback
 
 
 def warning(target_id: str, warning_type: str, description: str, global_time: float, character_id: str,

@@ -74,14 +74,22 @@ def hands(timed: TimedBehaviour) -> set[str]:
 
 class Interruption:
     """Graceful interruption for the scheduler (it provides ``env``, ``board``, ``log``, ``drops``, ``warn``,
-    ``wake``, ``live_behaviours`` and ``pegs_moved``)."""
+    ``wake``, ``live_behaviours`` and ``pegs_moved``).
+
+    An interruption that was asked for (a block's ``bmla:interrupt``, a ``<bmla:interrupt>``,
+    :meth:`~agentsim.realizer.Realizer.interrupt`) is feedback, not a fault: the last syncPointProgress of
+    each behaviour it cut and the end blockProgress of its block carry ``"status": "INTERRUPTED"``, and a
+    behaviour it removed before it started is ``{"status": "removed"}`` in the next prediction. A warning
+    (``INTERRUPTED``) is left for what nobody asked for: a ``required`` behaviour lost, and a behaviour of
+    another block that hung from a sync point that will now never come.
+    """
 
     def interrupt(self, run: BlockRun, include: Iterable[str] = (), exclude: Iterable[str] = (),
                   by: str = "") -> None:
-        """Interrupt a block now, gracefully: speech stops, gestures retract, what hung from what will never
-        come is removed; each behaviour cut or removed gets an INTERRUPTED warning. ``include``: only these behaviours; ``exclude``:
-        all but these. A block that has not started is not started at all (it still gets its start and end,
-        now); every behaviour of it goes."""
+        """Interrupt a block now, gracefully, as asked: speech stops, gestures retract, what hung from what
+        will never come is removed. ``include``: only these behaviours; ``exclude``: all but these. A block
+        that has not started is not started at all (it still gets its start and end, now); every behaviour
+        of it goes."""
         include, exclude = set(include), set(exclude)
         if run.state not in ("pending", "running"):
             return
@@ -89,22 +97,24 @@ class Interruption:
         scope = [t for t in run.live() if (not include or t.id in include) and t.id not in exclude]
         whole = len(scope) == len(run.live())
         for timed in scope:
-            self.interrupt_behaviour(timed, cause)
+            self.interrupt_behaviour(timed, cause, asked=True)
         if run.state == "pending" and whole:
             now = self.env.now
+            run.interrupted = True
             self.log.send(fb.block_progress(run.id, "start", now, run.block.character_id))
             run.state = "running"
             self.wake(run)
         self.pegs_moved()
 
-    def interrupt_behaviour(self, timed: TimedBehaviour, cause: str) -> None:
+    def interrupt_behaviour(self, timed: TimedBehaviour, cause: str, asked: bool = False) -> None:
         """Interrupt one behaviour now: a started one does what its engine says an interruption leaves of it,
-        one that has not started is removed; what hangs from the sync points that will not come goes too."""
+        one that has not started is removed; what hangs from the sync points that will not come goes too.
+        ``asked``: the interruption was asked for (no warning unless the behaviour was required)."""
         if not timed.live or timed.interrupted:
             return
         now = self.env.now
         if timed.state != "active" or timed.passed[0] is None:
-            self.remove(timed, cause)
+            self.remove(timed, cause, asked)
             return
         plan = timed.engine.interruption(timed, now)
         if plan is None:
@@ -112,6 +122,7 @@ class Interruption:
         skip, times = plan
         left = pegs_left_behind(timed, skip, self.board)
         timed.interrupted = True
+        timed.run.interrupted = True
         timed.stopped = now
         timed.skipped |= skip
         for i, t in times.items():
@@ -120,12 +131,14 @@ class Interruption:
             timed.next_index += 1
         timed.engine.stopped(timed, now)
         self.drops.append(DropRecord(timed.block_id, timed.id, now, "INTERRUPTED", cause))
-        self.warn(f"{timed.block_id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {cause}; what is left of it ends now",
-                  timed.run.block.character_id, [timed.id])
+        if not asked or timed.behaviour.required:
+            required = "required, but " if timed.behaviour.required else ""
+            self.warn(f"{timed.block_id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {required}{cause}; what is "
+                      "left of it ends now", timed.run.block.character_id, [timed.id])
         self.remove_dependants(left, timed, cause)
         timed.engine.plan.kick([timed])
 
-    def remove(self, timed: TimedBehaviour, cause: str) -> None:
+    def remove(self, timed: TimedBehaviour, cause: str, asked: bool = False) -> None:
         """Take out a behaviour that has not started: it will not happen; neither will what hangs from it."""
         if not timed.live:
             return
@@ -133,22 +146,24 @@ class Interruption:
         left = pegs_left_behind(timed, range(len(timed.sync_ids)), self.board)
         timed.state = "dropped"
         timed.stopped = self.env.now
+        run.interrupted = True
         timed.engine.remove(timed)
         self.board.forget_behaviour(run.id, timed.id)
         run.gone.append(timed)
         self.drops.append(DropRecord(run.id, timed.id, self.env.now, "INTERRUPTED", cause))
-        required = "required, but " if timed.behaviour.required else ""
-        self.warn(f"{run.id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {required}{cause}; behaviour removed before "
-                  "it started", run.block.character_id, [timed.id])
+        if not asked or timed.behaviour.required:
+            required = "required, but " if timed.behaviour.required else ""
+            self.warn(f"{run.id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {required}{cause}; behaviour removed "
+                      "before it started", run.block.character_id, [timed.id])
         self.remove_dependants(left, timed, cause)
 
     def remove_dependants(self, peg_ids: set[int], origin: TimedBehaviour, cause: str) -> None:
         """Every live behaviour that hangs from ``peg_ids`` (sync points that will not come) is interrupted if
-        it started, removed if it did not."""
+        it started, removed if it did not: as asked when it is of the origin's block (the block was asked to
+        stop there), with a warning when it is of another block (that block did not ask)."""
         if not peg_ids:
             return
         why = f"{cause}: it was tied to {origin.block_id}:{origin.id}"
         for timed in self.live_behaviours():
             if timed is not origin and timed.live and timed.hangs_from(peg_ids):
-                self.interrupt_behaviour(timed, why)
-
+                self.interrupt_behaviour(timed, why, asked=timed.run is origin.run)

@@ -268,9 +268,11 @@ class Scheduler(Composition, Interruption, Retiming):
         """Sync point ``index`` of ``timed`` was passed at ``time``: feedback, and the end of what is done."""
         run = timed.run
         sync_id = timed.sync_ids[index]
+        last = index == len(timed.sync_ids) - 1
         self.log.send(fb.sync_point_progress(run.id, timed.id, sync_id, time - run.block_peg.time, time,
-                                             run.block.character_id))
-        if index == len(timed.sync_ids) - 1:
+                                             run.block.character_id,
+                                             fb.INTERRUPTED if last and timed.interrupted else None))
+        if last:
             timed.state = "finished"
             timed.engine.planner.remove(timed)
             self.end_if_done(run, time)
@@ -282,7 +284,8 @@ class Scheduler(Composition, Interruption, Retiming):
     def end(self, run: BlockRun, time: float) -> None:
         run.state = "ended"
         run.ended_at = time
-        self.log.send(fb.block_progress(run.id, "end", time, run.block.character_id))
+        self.log.send(fb.block_progress(run.id, "end", time, run.block.character_id,
+                                        fb.INTERRUPTED if run.interrupted else None))
         if run in self.runs:
             self.runs.remove(run)
         run.ended.succeed()
@@ -328,7 +331,8 @@ class Scheduler(Composition, Interruption, Retiming):
     def cut(self, run: BlockRun, by: str = "") -> None:
         """End a block now (composition REPLACE): its behaviours stop where they are.
 
-        Every behaviour cut is said in an INTERRUPTED warning; one that had started also gets its end, now.
+        Every behaviour cut is said in an INTERRUPTED warning; one that had started also gets its end, now,
+        with ``"status": "INTERRUPTED"``, as the block's end has if it cut anything.
         """
         now = self.env.now
         character = run.block.character_id
@@ -350,7 +354,8 @@ class Scheduler(Composition, Interruption, Retiming):
                 last = len(timed.sync_ids) - 1
                 timed.passed[last] = now
                 self.log.send(fb.sync_point_progress(run.id, timed.id, timed.sync_ids[last], now - run.block_peg.time,
-                                                     now, character))
+                                                     now, character, fb.INTERRUPTED))
+            run.interrupted = True
         self.end(run, now)
 
     def drop(self, timed: TimedBehaviour, reason: str) -> None:

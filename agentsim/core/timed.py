@@ -285,6 +285,7 @@ class BlockRun:
     chunk_after: list["BlockRun"] = field(default_factory=list)
     activated: bool = False  # a preplanned run that has been told to start
     interrupting: bool = False  # it has interrupted the blocks its bmla:interrupt names
+    interrupted: bool = False  # an interruption (or a REPLACE) cut it short: its end says so
     #: behaviours removed since the last prediction (they are said to be gone in the next one)
     gone: list[TimedBehaviour] = field(default_factory=list)
     wake: simpy.Event | None = None  # succeeds when what this pending run waits for changes
