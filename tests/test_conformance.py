@@ -188,3 +188,31 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(tmp_path):
     _, err = proc.communicate(timeout=60)
     assert json.loads(first)["type"] == "predictionFeedback"
     assert proc.returncode == 0 and err.decode().splitlines() == ["speech: espeak-ng (voice en, 175 words per minute)"]
+
+
+NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
+
+
+def test_a_gesture_whose_preparation_would_start_before_its_block_is_shortened_to_fit():
+    # bml2 starts at 1 s; its beat's stroke is tied to 1.2 s (bml1's end less 0.8): its 0.45 s from start to
+    # stroke would begin at 0.75, before its block; it begins at 1.0, its stroke kept, its phases scaled
+    first = f'<bml {NS} id="bml1"><wait id="w" start="0" end="2"/></bml>'
+    later = f'<bml {NS} id="bml2"><gesture id="g" lexeme="BEAT" stroke="bml1:w:end-{{}}"/></bml>'
+    r = realize(first, later.format(0.8), at=[0.0, 1.0])
+    assert r.warnings == []
+    times = {s: r.glob[f"bml2:g:{s}"] for s in GESTURE}
+    scale = 0.2 / 0.45  # the part before the stroke: 0.2 s where 0.45 s were preferred
+    assert times == pytest.approx({"start": 1.0, "ready": 1.0 + 0.30 * scale, "strokeStart": 1.0 + 0.32 * scale,
+                                   "stroke": 1.2, "strokeEnd": 1.3, "relax": 1.4, "end": 1.7}, abs=1e-12)
+    assert r.glob["bml2:g:start"] == r.blocks[1]["globalTime"] == 1.0
+    # down to a third of it (0.15 s); at 0.1 s it is refused, and says why
+    r = realize(first, later.format(0.85), at=[0.0, 1.0])
+    assert r.warnings == [] and r.glob["bml2:g:stroke"] == pytest.approx(1.15, abs=1e-12)
+    assert r.glob["bml2:g:start"] == 1.0
+    r = realize(first, later.format(0.9), at=[0.0, 1.0])
+    (warning,) = r.warnings
+    assert (warning["id"], warning["warningType"]) == ("bml2:g", "IMPOSSIBLE_TO_SCHEDULE")
+    assert warning["description"] == ("g: it would start 0.350 s before the block start, and its preparation "
+                                      "(0.450 s to its stroke) cannot be shortened below 0.150 s to fit (0.100 s "
+                                      "are left); behaviour dropped")
+    assert not [s for s in r.glob if s.startswith("bml2:g:")]

@@ -24,6 +24,13 @@ from agentsim.core.timed import EPSILON, BlockRun, KeyRef, TimedBehaviour
 
 TOLERANCE = 1e-6
 
+#: Behaviours with a preparation before their stroke, which may be shortened to fit a block that starts later
+#: than their preparation would (see :meth:`BlockSolver.shorten_preparation`).
+PREPARED = ("gesture", "pointing")
+#: How short that preparation may become: this fraction of its preferred length (a beat's 0.45 s from its
+#: start to its stroke: 0.15 s).
+MIN_PREPARATION = 1 / 3
+
 
 class AnticipatorLookup(Protocol):
     """Finds ``anticipators:<id>:<sync>``; raises ScheduleError if there is no such peg."""
@@ -567,12 +574,36 @@ class BlockSolver:
             times = timed.times()
             start = times[0] - self.block_peg.time
             if start < -TOLERANCE:
-                self.drop(beh_id, f"it would start {-start:.3f} s before the block start")
-                continue
+                refused = self.shorten_preparation(timed, times)
+                if refused is not None:
+                    self.drop(beh_id, f"it would start {-start:.3f} s before the block start{refused}")
+                    continue
+                times = timed.times()
             try:
                 timed.engine.planner.check_times(timed.behaviour, timed.preferred, times)
             except ScheduleError as exc:
                 self.drop(beh_id, str(exc))
+
+    def shorten_preparation(self, timed: TimedBehaviour, times: list[float | None]) -> str | None:
+        """A gesture or pointing tied to a time (its stroke, say) whose preparation would begin before the
+        block starts begins at the block start instead, its preparation shortened and its stroke kept, down
+        to :data:`MIN_PREPARATION` of the preferred time from its start to the first sync point tied (at the
+        latest its stroke). None if it was shortened, else why not (the end of the drop's reason)."""
+        if timed.behaviour.type not in PREPARED or timed.tied[0] or "stroke" not in timed.sync_ids:
+            return ""
+        first = next((i for i in range(1, len(timed.keys)) if timed.keys[i] is not None), None)
+        if first is None or first > timed.sync_ids.index("stroke"):
+            return ""  # nothing before the stroke is tied: shortening would move the stroke
+        block_start = self.block_peg.time
+        available = times[first] - block_start
+        preferred = timed.preferred[first] - timed.preferred[0]
+        shortest = MIN_PREPARATION * preferred
+        if available < shortest - TOLERANCE:
+            return (f", and its preparation ({preferred:.3f} s to its {timed.sync_ids[first]}) cannot be shortened "
+                    f"below {shortest:.3f} s to fit ({max(available, 0.0):.3f} s are left)")
+        key = timed.keys[0]
+        timed.keys[0] = KeyRef(key.peg, key.offset + block_start - times[0])
+        return None
 
     def check_resources(self) -> None:
         """Two behaviours on one exclusive body resource (two gazes) may not overlap: drop the later one."""
