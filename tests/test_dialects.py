@@ -311,3 +311,21 @@ def test_the_strict_reader_adapts_nothing(name):
         assert strict_ends == lenient_ends
     else:
         assert strict_ends < lenient_ends and strict.warnings  # what is lost is said
+
+
+def test_an_adaptation_names_the_behaviours_it_touched_and_the_prediction_what_they_became():
+    realizer = Realizer(tts=BuiltinBackend())
+    realizer.submit('<bml id="b1"><head id="h1" rotation="SHAKE"/><head id="h2" lexeme="NOD" start="1"/>'
+                    '<gesture id="g1" lexeme="nod" start="2"/><gesture id="g2" lexeme="BEAT" start="3"/></bml>')
+    realizer.run()
+    (warning,) = realizer.feedback.warnings()
+    assert (warning["id"], warning["warningType"]) == ("b1", "NONSTANDARD_BML")
+    assert warning["adaptations"] == ["draft attribute rotation= read as the lexeme of the head movement",
+                                      "<gesture lexeme='nod'> (a head movement written as a gesture) read as <head>"]
+    assert warning["modifiedBehaviours"] == ["h1", "g1"]  # h2 and g2 were BML 1.0 as written
+    (prediction,) = realizer.feedback.of_type("predictionFeedback")
+    became = {b["id"]: (b["type"], b["lexeme"], round(b["globalEnd"], 9)) for b in prediction["behaviours"]}
+    # a shake lasts 0.65 s, a nod 0.55 s, a beat 0.95 s
+    assert became == {"h1": ("head", "SHAKE", 0.65), "h2": ("head", "NOD", 1.55), "g1": ("head", "NOD", 2.55),
+                      "g2": ("gesture", "BEAT", 3.95)}
+    assert realizer.feedback.sync_times()["b1:h1:end"] == 0.65

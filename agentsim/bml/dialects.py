@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
+from typing import Iterable
 
 # The body's lexicons (agentsim.animation.arms and .pose, with numpy) are imported where foreign vocabulary
 # is mapped or noted: reading BML 1.0 does without them.
@@ -87,12 +88,28 @@ _REF_SYNC = re.compile(r"^(?P<path>.*:)(?P<sync>[^:+\-\s]+)(?P<rest>\s*(?:[+-].*
 
 @dataclass
 class Notes:
-    """What was adapted, in order, each said once (with how many times it happened)."""
+    """What was adapted, in order, each said once (with how many times it happened), and the behaviour
+    elements the adaptations touched (:attr:`current`: the one being read, touched by what is noted
+    meanwhile)."""
 
     counts: dict[str, int] = field(default_factory=dict)
+    touched: dict[int, Node] = field(default_factory=dict)  # id() of an element -> it, in order
+    current: Node | None = None
 
-    def add(self, note: str) -> None:
+    def add(self, note: str, *nodes: Node) -> None:
         self.counts[note] = self.counts.get(note, 0) + 1
+        self.touch(*(nodes or ((self.current,) if self.current is not None else ())))
+
+    def touch(self, *nodes: Node) -> None:
+        """These behaviour elements were adapted."""
+        for node in nodes:
+            self.touched.setdefault(id(node), node)
+
+    def behaviour_ids(self, kept: Iterable[str]) -> list[str]:
+        """The ids (as named at the end) of the behaviours touched that are among ``kept``, in order."""
+        kept = set(kept)
+        ids = (node.attrs.get("id", "").strip() for node in self.touched.values())
+        return list(dict.fromkeys(i for i in ids if i in kept))
 
     def extend(self, notes) -> None:
         for note in notes:
@@ -301,7 +318,7 @@ class Adapter:
         for curves in self.curves:
             if speeches and not self.sync_keys(curves):
                 curves.attrs["start"] = f"{speeches[0].attrs['id']}:start"
-                self.notes.add("<curves> without a time start with the speech (their keys are times in it)")
+                self.notes.add("<curves> without a time start with the speech (their keys are times in it)", curves)
         self.move_prosody(speeches)
         if self.clips:
             shown = ", ".join(f"{name!r} as {lexeme}" for name, lexeme in list(self.clips.items())[:6])
@@ -319,6 +336,7 @@ class Adapter:
         instead."""
         found = lexemes.fallbacks((b.tag, b.attrs.get("id", ""), b.attrs) for b in behaviours)
         self.notes.extend(lexemes.describe(found))
+        self.notes.touch(*(b for b in behaviours if lexemes.fallback(b.tag, b.attrs) is not None))
 
     def read_namespaces(self, node: Node) -> None:
         """The draft namespace is read as BML 1.0 (in every element's declarations)."""
@@ -350,7 +368,9 @@ class Adapter:
                 continue
             uri = child.namespace
             self.written[id(child)] = child.local
+            self.notes.current = child  # what is noted while it is read touched it
             if child.local == "required" and is_bml_uri(uri):
+                self.notes.current = None
                 found.extend(self.behaviours(child))
                 kept.append(child)
             elif child.local == "constraint" and is_bml_uri(uri) and child.elements() and all(
@@ -376,6 +396,7 @@ class Adapter:
                 kept.append(child)
             else:
                 self.unmapped.setdefault(child.tag, []).append(child)
+        self.notes.current = None
         parent.children = kept
         return found
 
@@ -741,7 +762,7 @@ class Adapter:
                     first[bid].attrs.setdefault(key, value)
                 merged.append(b)
                 self.notes.add(f"repeated <{b.local} id={bid!r}> that only adds attributes merged into the first "
-                               "(Greta writes one attribute to an element)")
+                               "(Greta writes one attribute to an element)", first[bid])
                 continue
             elif bid in seen:
                 k = 2
@@ -751,7 +772,7 @@ class Adapter:
                 used.add(new)
                 b.attrs["id"] = new
                 self.notes.add(f"duplicate behaviour id {bid!r} renamed {new!r} (references to {bid!r} mean "
-                               "the first)")
+                               "the first)", b)
                 bid = new
             seen.add(bid)
             first.setdefault(bid, b)
@@ -759,6 +780,8 @@ class Adapter:
             gone = {id(n) for n in merged}
             behaviours[:] = [b for b in behaviours if id(b) not in gone]
             remove_nodes(self.node, gone)
+        named_ids = set(named)
+        self.notes.touch(*(b for b in behaviours if b.attrs.get("id") in named_ids))
         if named:
             shown = ", ".join(named[:8]) + (f" and {len(named) - 8} more" if len(named) > 8 else "")
             self.notes.add(f"{len(named)} behaviour{'s' if len(named) > 1 else ''} without id named by element and "
@@ -776,7 +799,7 @@ class Adapter:
                 value = b.attrs[key]
                 if key != "start" and _NUMBER.match(value) and float(value) < t0:
                     b.attrs[key] = seconds(t0 + float(value))
-                    self.notes.add(f"{key}= smaller than start=: read as seconds after the start (Greta)")
+                    self.notes.add(f"{key}= smaller than start=: read as seconds after the start (Greta)", b)
 
     def merges(self, first: Node, again: Node) -> bool:
         """Whether a repeated id is Greta's way of giving one more attribute: same element, no time of its
@@ -801,7 +824,7 @@ class Adapter:
             if not self.sync_keys(b) and b.local not in ("interrupt", "activate"):
                 b.attrs["start"] = seconds(shift)
         self.notes.add(f"times before the block start (the earliest behaviour would start at {earliest:.3f} s): "
-                       f"the whole block plays {shift:.3f} s later, its relative timing kept")
+                       f"the whole block plays {shift:.3f} s later, its relative timing kept", *behaviours)
 
     @staticmethod
     def sync_keys(node: Node) -> list[str]:

@@ -231,7 +231,8 @@ def _parse_document(text: str | bytes, strict: bool, name_block: Callable[[], st
             lines = envelope.notes.lines()
             block.warnings.insert(0, ParseWarning(
                 "NONSTANDARD_BML", f"read as BML 1.0 with {len(lines)} adaptation{'s' if len(lines) > 1 else ''}: "
-                + "; ".join(lines), [], envelope.node.line, envelope.node.column, details=lines))
+                + "; ".join(lines), envelope.notes.behaviour_ids(b.id for b in block.behaviours),
+                envelope.node.line, envelope.node.column, details=lines))
         for message, node in envelope.losses:
             block.warnings.append(ParseWarning("BEHAVIOR_TYPE_NOT_SUPPORTED", f"{message} ({node.where()})", [],
                                                node.line, node.column))

@@ -194,6 +194,7 @@ class Retiming:
                 indices, times = timed.window(until)
             if not (force or last is None or _moved(times, [last[i] for i in indices], tolerance)):
                 continue
+            first = last is None
             if last is None or len(indices) == len(last):
                 last = run.predicted[timed.id] = list(times)
             else:
@@ -204,8 +205,12 @@ class Retiming:
                 start, syncs = times[0], dict(zip(timed.sync_ids, times))
             else:
                 start, syncs = timed.start, {timed.sync_ids[i]: t for i, t in zip(indices, times)}
-            entries.append({"id": timed.id, "type": timed.behaviour.type, "globalStart": start,
-                            "globalEnd": last[-1], "syncs": syncs})
+            entry = {"id": timed.id, "type": timed.behaviour.type, "globalStart": start, "globalEnd": last[-1],
+                     "syncs": syncs}
+            lexeme = timed.behaviour.attributes.get("lexeme") if first else None
+            if lexeme:  # what it plays, as read (a draft's rotation="SHAKE" is lexeme SHAKE), said once
+                entry["lexeme"] = lexeme
+            entries.append(entry)
         for timed in run.gone:
             entries.append({"id": timed.id, "type": timed.behaviour.type, "status": "removed"})
         run.gone.clear()

@@ -156,7 +156,9 @@ class Scheduler(Composition, Interruption, Retiming):
         where = f" in {source}" if source else ""
         character = block.character_id
         for w in block.warnings:
-            target = f"{block.id}:{w.behaviours[0]}" if w.behaviours else block.id
+            # (an adaptation warning is about the block, and lists every behaviour it touched)
+            one = w.behaviours and w.warning_type != "NONSTANDARD_BML"
+            target = f"{block.id}:{w.behaviours[0]}" if one else block.id
             self.warn(target, w.warning_type, w.description, character, w.behaviours, w.line, w.column, w.details)
         if any(r.id == block.id for r in self.runs):
             self.warn(block.id, "PARSING_FAILURE", f"block refused{where}: a block with id {block.id!r} is "
