@@ -476,3 +476,22 @@ def test_an_empty_alsa_configuration_is_one_clear_line_not_an_abort(tmp_path):
     assert proc.returncode == 1
     assert proc.stderr.splitlines()[-1].startswith(f"agentsim: the ALSA configuration (ALSA_CONFIG_PATH="
                                                    f"{tmp_path / 'empty.conf'}) is missing or empty")
+
+
+@pytest.mark.parametrize("strict", [False, True], ids=["lenient", "strict"])
+def test_a_dtd_attribute_default_is_ignored_with_one_warning(strict):
+    text = ('<?xml version="1.0"?>\n<!DOCTYPE bml [<!ATTLIST gesture lexeme CDATA "POINT">'
+            '<!ATTLIST gesture stroke CDATA "5">]>\n'
+            f'<bml {NS} id="b"><gesture id="g" start="1"/><gesture id="w" lexeme="BEAT"/></bml>')
+    r = realize(text, strict=strict)
+    assert warnings_of(r) == [("b", "CUSTOM_ATTRIBUTE_NOT_SUPPORTED", "attribute defaults declared in the document "
+                               "type declaration ignored (gesture lexeme='POINT', gesture stroke='5'): every element "
+                               "has only the attributes written in it")]
+    # g has no lexeme (it is not made a POINT, nor a BEAT by the document: it plays the default beat) and
+    # no stroke at 5 s: its own start and its preferred timing
+    (prediction,) = r.realizer.feedback.of_type("predictionFeedback")
+    g = next(b for b in prediction["behaviours"] if b["id"] == "g")
+    assert "lexeme" not in g and r.realizer.scheduler.find_run("b").block.behaviour("g").attributes.get("lexeme") is None
+    assert (r.glob["b:g:start"], r.glob["b:g:stroke"], r.glob["b:g:end"]) == pytest.approx((1.0, 1.45, 1.95),
+                                                                                          abs=1e-12)
+    assert r.glob["b:w:stroke"] == 0.45

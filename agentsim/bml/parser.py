@@ -161,7 +161,20 @@ def _checked(text: str | bytes) -> bytes:
 def parse_bml(text: str | bytes) -> Block:
     """Parse one BML 1.0 block, strictly. Raises :class:`BMLError` if the block as a whole cannot be used."""
     with paused_collection():
-        return warn_lexemes(read_block(read_tree(_checked(text)), None))
+        defaults: list[str] = []
+        block = warn_lexemes(read_block(read_tree(_checked(text), defaults), None))
+        return warn_defaults(block, defaults)
+
+
+def warn_defaults(block: Block, defaults: list[str]) -> Block:
+    """One warning if the document's internal DTD declared attribute defaults: they are not applied (a
+    ``<!ATTLIST gesture lexeme CDATA "BEAT">`` gives no gesture a lexeme); the block itself."""
+    if defaults:
+        shown = ", ".join(defaults[:6]) + (f" and {len(defaults) - 6} more" if len(defaults) > 6 else "")
+        block.warnings.append(ParseWarning(
+            "CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"attribute defaults declared in the document type declaration "
+            f"ignored ({shown}): every element has only the attributes written in it"))
+    return block
 
 
 def warn_lexemes(block: Block) -> Block:
@@ -198,8 +211,9 @@ def _parse_document(text: str | bytes, strict: bool, name_block: Callable[[], st
     except BMLError as exc:
         return [Refused(guess_block_id(text), exc)]
     data, doctype = without_doctype(data)
+    defaults: list[str] = []
     try:
-        root, forest = read_forest(data)
+        root, forest = read_forest(data, defaults)
     except BMLError as exc:
         return [Refused(guess_block_id(text), exc)]
     folded = fold_case(root)
@@ -236,7 +250,7 @@ def _parse_document(text: str | bytes, strict: bool, name_block: Callable[[], st
         for message, node in envelope.losses:
             block.warnings.append(ParseWarning("BEHAVIOR_TYPE_NOT_SUPPORTED", f"{message} ({node.where()})", [],
                                                node.line, node.column))
-        results.append(block)
+        results.append(warn_defaults(block, defaults))
     return results
 
 

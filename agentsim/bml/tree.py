@@ -86,6 +86,13 @@ class _TreeBuilder:
         self.root: Node | None = None
         self.stack: list[Node] = []
         self.tags: dict[str, tuple[str, str | None]] = {}
+        #: the attribute defaults an internal DTD declares (``gesture lexeme="BEAT"``), which are not applied
+        self.defaults: list[str] = []
+
+    def attlist(self, element: str, attribute: str, kind: str | None, default: str | None, required: int) -> None:
+        if default is not None:
+            shown = default if len(default) <= 40 else default[:37] + "..."
+            self.defaults.append(f"{element} {attribute}={shown!r}")
 
     def start(self, name: str, attrs: dict[str, str]) -> None:
         stack = self.stack
@@ -140,7 +147,7 @@ class _TreeBuilder:
                 children.append(content)
 
 
-def _parse(data: bytes, shift: int = 0) -> Node:
+def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None) -> Node:
     # defusedxml's reader installs the handlers that refuse entity declarations and external
     # references on its expat parser; the tree is built straight from that parser's callbacks.
     reader = create_parser(forbid_dtd=False, forbid_entities=True, forbid_external=True)
@@ -155,6 +162,7 @@ def _parse(data: bytes, shift: int = 0) -> Node:
     # Only the attributes the document writes: defaults an internal DTD's ATTLIST declares are not applied
     # (they could give a block its id or put a time into every element of a kind).
     expat.specified_attributes = True
+    expat.AttlistDeclHandler = builder.attlist
     try:
         expat.Parse(data, True)
     except xml.parsers.expat.ExpatError as exc:
@@ -168,6 +176,8 @@ def _parse(data: bytes, shift: int = 0) -> Node:
                        "are not allowed in BML", expat.CurrentLineNumber, expat.CurrentColumnNumber + 1) from None
     if builder.root is None:
         raise BMLError("empty document: expected a <bml> element", 1, 1)
+    if defaults is not None:
+        defaults.extend(builder.defaults)
     return builder.root
 
 
@@ -185,9 +195,12 @@ def encode(text: str | bytes) -> bytes:
                        f"({text[exc.start:exc.end].encode('unicode_escape').decode('ascii')})", line, column) from None
 
 
-def read_tree(text: str | bytes) -> Node:
-    """The element tree of one XML document. Raises :class:`BMLError` (with line and column)."""
-    return _parse(encode(text))
+def read_tree(text: str | bytes, defaults: list[str] | None = None) -> Node:
+    """The element tree of one XML document. Raises :class:`BMLError` (with line and column).
+
+    ``defaults``: gets the attribute defaults the document's internal DTD declares (``gesture
+    lexeme='BEAT'``); they are never applied (an element has the attributes written in it, no more)."""
+    return _parse(encode(text), defaults=defaults)
 
 
 #: The element that :func:`read_forest` puts around several top-level elements.
@@ -197,15 +210,16 @@ _ENCODING = re.compile(rb"""encoding\s*=\s*["']([A-Za-z0-9._\-]+)["']""")
 _JUNK = xml.parsers.expat.errors.messages[xml.parsers.expat.errors.codes[xml.parsers.expat.errors.XML_ERROR_JUNK_AFTER_DOC_ELEMENT]]
 
 
-def read_forest(text: str | bytes) -> tuple[Node, bool]:
+def read_forest(text: str | bytes, defaults: list[str] | None = None) -> tuple[Node, bool]:
     """The element tree of a document that may hold several top-level elements.
 
     Returns the root, and whether it is a :data:`FOREST` element made here around several elements one
     after another (XML declarations among them are dropped; positions stay those of the text given).
+    ``defaults``: as for :func:`read_tree`.
     """
     data = encode(text)
     try:
-        return _parse(data), False
+        return _parse(data, defaults=defaults), False
     except BMLError as exc:
         if not exc.reason.endswith(_JUNK):
             raise
