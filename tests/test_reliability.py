@@ -495,3 +495,23 @@ def test_a_dtd_attribute_default_is_ignored_with_one_warning(strict):
     assert (r.glob["b:g:start"], r.glob["b:g:stroke"], r.glob["b:g:end"]) == pytest.approx((1.0, 1.45, 1.95),
                                                                                           abs=1e-12)
     assert r.glob["b:w:stroke"] == 0.45
+
+
+@pytest.mark.parametrize("value, kind, problem, end", [
+    ("1000000", "IMPOSSIBLE_TO_SCHEDULE", "repetition='1000000' is more than the 100 repetitions played; clamped to "
+     "100", 0.55 + 99 * 0.3),
+    ("inf", "PARSING_FAILURE", "repetition='inf' is not a finite number; played once", 0.55),
+    ("nan", "PARSING_FAILURE", "repetition='nan' is not a finite number; played once", 0.55),
+    ("-1", "PARSING_FAILURE", "repetition='-1' is less than 1; played once", 0.55),
+    ("abc", "PARSING_FAILURE", "repetition='abc' is not a number; played once", 0.55),
+    ("2.5", "PARSING_FAILURE", "repetition='2.5' is not a whole number; 2 repetitions played", 0.55 + 0.3),
+    ("3", None, None, 0.55 + 2 * 0.3),
+])
+def test_a_repetition_out_of_range_is_clamped_or_refused_with_a_warning_that_says_why(value, kind, problem, end):
+    # a nod lasts 0.55 s; each repetition after the first adds its 0.3 s of nodding (strokeStart to strokeEnd)
+    r = realize(doc(f'<head id="h" lexeme="NOD" repetition="{value}"/>'), GOOD)
+    column = len(doc("")) - len("</bml>") + 1  # where the <head> starts
+    expected = [] if kind is None else [("b:h", kind, f"h: {problem} (line 1, column {column})")]
+    assert warnings_of(r) == expected
+    assert r.glob["b:h:end"] == pytest.approx(end, abs=1e-9)
+    completes_good_after(r)

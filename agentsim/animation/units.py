@@ -7,6 +7,7 @@ motion between the keys by linear time warping.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from agentsim.core.block import Behaviour
@@ -102,11 +103,34 @@ def curves_duration(behaviour: Behaviour) -> float:
     return max((keys[-1][0] for keys in curve_keys(behaviour).values() if keys), default=0.0)
 
 
-def repetition(behaviour: Behaviour) -> int:
+#: The most repetitions a behaviour plays (``repetition="1000000"`` plays this many, with a warning).
+MAX_REPETITION = 100
+
+
+def read_repetition(text: str) -> tuple[int, str | None]:
+    """The repetitions a ``repetition`` attribute asks for, and what is wrong with it (None: nothing).
+
+    A whole number from 1 to :data:`MAX_REPETITION` is taken as it is; a larger one is clamped to
+    :data:`MAX_REPETITION`; a fraction is rounded down; anything else (``inf``, ``nan``, ``-1``, ``abc``)
+    is read as 1."""
     try:
-        return max(1, min(100, int(float(behaviour.attributes.get("repetition", "1")))))
+        value = float(text)
     except ValueError:
-        return 1
+        return 1, f"repetition={text!r} is not a number; played once"
+    if value != value or value in (math.inf, -math.inf):
+        return 1, f"repetition={text!r} is not a finite number; played once"
+    if value < 1:
+        return 1, f"repetition={text!r} is less than 1; played once"
+    if value > MAX_REPETITION:
+        return MAX_REPETITION, f"repetition={text!r} is more than the {MAX_REPETITION} repetitions played; " \
+                               f"clamped to {MAX_REPETITION}"
+    if not value.is_integer():
+        return int(value), f"repetition={text!r} is not a whole number; {int(value)} repetitions played"
+    return int(value), None
+
+
+def repetition(behaviour: Behaviour) -> int:
+    return read_repetition(behaviour.attributes.get("repetition", "1"))[0]
 
 
 PHASE_NAMES = {

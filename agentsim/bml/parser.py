@@ -385,6 +385,14 @@ class _Reader:
             elif key not in READ_ATTRIBUTES and key not in beh.sync_ids:
                 self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"attribute {key!r} of {bid} is not one this realizer "
                           "reads; ignored", node, [bid])
+        if "repetition" in beh.attributes:
+            from agentsim.animation.units import MAX_REPETITION, read_repetition  # (only when asked)
+
+            times, problem = read_repetition(beh.attributes["repetition"])
+            if problem is not None:
+                beh.attributes["repetition"] = str(times)
+                kind_of = "IMPOSSIBLE_TO_SCHEDULE" if times == MAX_REPETITION else "PARSING_FAILURE"
+                self.warn(kind_of, f"{bid}: {problem}", node, [bid])
         for child in node.elements():
             extension = child.namespace in EXTENSION_BEHAVIOURS
             if kind.name == "speech" and self.lenient:
