@@ -1008,14 +1008,18 @@ class EspeakBackend:
 
         mark_events = {event.name: event.sample for event in events if event.kind == _EVENT_MARK}
         word_starts = [word.char_start for word in words]
-        marks = []
-        for k, (offset, name) in enumerate(speech.marks):
-            following = bisect.bisect_left(word_starts, offset)
+        times = [0.0] * len(speech.marks)
+        latest = 0.0
+        # in text order: a mark is never before one that stands before it (espeak-ng's MARK events after the
+        # last word can come a few samples out of order when many follow one another)
+        for k in sorted(range(len(speech.marks)), key=lambda k: (speech.marks[k][0], k)):
+            following = bisect.bisect_left(word_starts, speech.marks[k][0])
             if following < len(words):
                 time = words[following].start
             else:  # after the last word
                 time = mark_events.get(_MARK_NAME.format(k), len(pcm)) / rate
-            marks.append(Mark(name, time))
+            latest = times[k] = max(time, latest)
+        marks = [Mark(name, t) for (_, name), t in zip(speech.marks, times)]
 
         sentences = []
         for i, event in enumerate(events):

@@ -194,6 +194,17 @@ def test_marks_equal_onset_of_following_word(backend):
     assert abs(utterance.mark_time("end") - utterance.words[-1].end) <= 0.01
 
 
+def test_many_marks_after_the_last_word_keep_their_order(backend):
+    # espeak-ng's MARK events after the last word come a few samples out of order when many follow one
+    # another; a mark never comes before one written before it, and none before the last word ends
+    text = " ".join(["word"] * 50)
+    marks = tuple((len(text), f"m{i}") for i in range(300))
+    utterance = backend.synthesize(SpeechText(text, marks))
+    times = [utterance.mark_time(f"m{i}") for i in range(300)]
+    assert times == sorted(times)
+    assert times[0] >= utterance.words[-1].start and times[-1] <= utterance.duration
+
+
 def test_words_inside_dictionary_pairs_get_their_own_timing(backend):
     # espeak reads "in the" and "of a" as single words; they are split back into written words.
     text = "Sing it in the hall of a king."

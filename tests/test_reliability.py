@@ -21,6 +21,7 @@ from agentsim.core.block import Block
 from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer
 from speech_timing.animator_time import STRATEGIES
+from speech_timing.builtin import BuiltinBackend
 
 from helpers import realize
 
@@ -515,3 +516,20 @@ def test_a_repetition_out_of_range_is_clamped_or_refused_with_a_warning_that_say
     assert warnings_of(r) == expected
     assert r.glob["b:h:end"] == pytest.approx(end, abs=1e-9)
     completes_good_after(r)
+
+
+def test_twelve_thousand_marks_in_one_speech_each_come_at_the_word_after_it():
+    # (its speed, linear in the marks, is benchmarks/bench_speech_marks.py's)
+    n = 12000
+    words = "the quick brown fox jumps over a lazy dog and then".split()
+    text = " ".join(f'{words[i % 11]}{"." if i % 11 == 10 else ""} <sync id="m{i}"/>' for i in range(n))
+    r = realize(doc(f'<speech id="s"><text>{text}</text></speech>'), tts=BuiltinBackend())
+    assert r.warnings == []
+    (heard,) = r.realizer.recording().speech
+    spoken = heard.utterance.words
+    assert len(spoken) == n
+    order = [f["id"] for f in r.syncs]
+    assert order == ["b:s:start"] + [f"b:s:m{i}" for i in range(n)] + ["b:s:end"]
+    # a mark between two words comes where the next word starts; the last one after the last word
+    assert [r.glob[f"b:s:m{i}"] for i in range(n - 1)] == [w.start for w in spoken[1:]]
+    assert spoken[-1].end <= r.glob[f"b:s:m{n - 1}"] <= r.glob["b:s:end"] == heard.utterance.duration
