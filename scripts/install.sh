@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Installs what agentsim needs: Debian packages (espeak-ng, FluidSynth with a General MIDI soundfont,
-# PortAudio, PulseAudio, and Chromium, which the system tests open run reports in) and the Python packages,
+# Installs what agentsim needs: Debian packages (espeak-ng, Festival with its HTS and diphone US voices,
+# FluidSynth with a General MIDI soundfont, PortAudio, PulseAudio, and Chromium, which the system tests open run reports in) and the Python packages,
 # in a virtual environment at .venv.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -9,6 +9,7 @@ SUDO=""
 export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq python3-venv python3-pip espeak-ng espeak-ng-data libespeak-ng1 \
+    festival festvox-us-slt-hts festvox-kallpc16k \
     fluidsynth libfluidsynth3 fluid-soundfont-gm libportaudio2 pulseaudio libasound2-plugins chromium >/dev/null
 [ -x .venv/bin/python ] || python3 -m venv --system-site-packages .venv
 .venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test]'

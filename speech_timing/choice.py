@@ -8,19 +8,27 @@ import warnings
 from speech_timing.backend import TTSBackend
 
 #: Speech backends by name (``--tts NAME``).
-NAMES = ("espeak", "builtin")
+NAMES = ("espeak", "festival", "builtin")
 
 
-def named(name: str) -> TTSBackend:
-    """The backend ``name`` (one of :data:`NAMES`); espeak-ng raises
-    :class:`~agentsim.errors.SpeechBackendUnavailable`, saying what to install, when it cannot run here."""
+def named(name: str, voice: str | None = None) -> TTSBackend:
+    """The backend ``name`` (one of :data:`NAMES`) speaking with ``voice`` (None: the backend's default;
+    the built-in one has none); espeak-ng and Festival raise
+    :class:`~agentsim.errors.SpeechBackendUnavailable`, saying what to install, when they cannot run here,
+    and ValueError for a voice they do not have."""
     if name == "espeak":
         from speech_timing.espeak import EspeakBackend
 
-        return EspeakBackend()
+        return EspeakBackend() if voice is None else EspeakBackend(voice=voice)
+    if name == "festival":
+        from speech_timing.festival import FestivalBackend
+
+        return FestivalBackend(voice=voice)
     if name == "builtin":
         from speech_timing.builtin import BuiltinBackend
 
+        if voice is not None:
+            raise ValueError("the built-in backend has no voices: --voice needs --tts espeak or --tts festival")
         return BuiltinBackend()
     raise ValueError(f"no speech backend {name!r}; there are {', '.join(NAMES)}")
 

@@ -18,22 +18,30 @@ TTS_NAMES = NAMES
 
 def add_tts(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tts", choices=TTS_NAMES, default=None,
-                        help="speech backend: espeak-ng through its C library, or the deterministic built-in "
-                             "one (default: espeak-ng when it is installed, as Realizer() in Python)")
+                        help="speech backend: espeak-ng through its C library, Festival (a long-lived festival "
+                             "process), or the deterministic built-in one (default: espeak-ng when it is "
+                             "installed, as Realizer() in Python)")
+    parser.add_argument("--voice", default=None, metavar="NAME",
+                        help="the backend's voice: espeak-ng's (en, en-us, de, ...; default en) or Festival's "
+                             "(us-slt-hts or kal; default us-slt-hts when it is installed)")
 
 
-def backend(name: str | None):
+def backend(name: str | None, voice: str | None = None):
     """The speech backend named on the command line, or the default one (espeak-ng when it is installed;
-    otherwise the built-in one, with a line on stderr saying what to install); an
-    :class:`~agentsim.errors.Unavailable` if the one named cannot run here."""
-    if name is not None:
-        return named(name)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        made = default_backend()
-    for warning in caught:
-        print(f"agentsim: {warning.message}", file=sys.stderr)
-    return made
+    otherwise the built-in one, with a line on stderr saying what to install), speaking with ``voice``
+    (None: the backend's own default); an :class:`~agentsim.errors.Unavailable` if the one named cannot
+    run here, a :class:`~agentsim.errors.UsageError` for a voice it does not have."""
+    try:
+        if name is not None:
+            return named(name, voice)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            made = default_backend()
+        for warning in caught:
+            print(f"agentsim: {warning.message}", file=sys.stderr)
+        return made if voice is None else named(made.name, voice)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def tts_name(name: str | None) -> str:
@@ -45,7 +53,9 @@ def describe_backend(tts) -> str:
     """One line saying which speech backend times (and voices) the run."""
     if getattr(tts, "name", "") == "espeak":
         return f"espeak-ng (voice {tts.voice}, {tts.rate} words per minute)"
-    return "the built-in timing model (no sound; --tts espeak speaks)"
+    if getattr(tts, "name", "") == "festival":
+        return f"Festival (voice {tts.voice}, {tts.festival_voice}, rate x{tts.rate:g})"
+    return "the built-in timing model (no sound; --tts espeak or --tts festival speaks)"
 
 
 def add_strategy(parser: argparse.ArgumentParser, extra: str = "") -> argparse.Action:

@@ -88,7 +88,7 @@ def add_parsers(commands) -> None:
 def add_outputs(parser: argparse.ArgumentParser) -> None:
     """The files a run can write, all on its time axis (simulated time 0 = WAV sample 0 = frame 0)."""
     parser.add_argument("--wav", metavar="OUT.wav", help="write what a listener of the run heard (needs a backend "
-                                                         "that makes sound: --tts espeak)")
+                                                         "that makes sound: --tts espeak or festival)")
     parser.add_argument("--bvh", metavar="OUT.bvh", help="write the motion as BVH")
     parser.add_argument("--poses", metavar="OUT.npz", help="write joint angles per frame (numpy .npz)")
     parser.add_argument("--textgrid", metavar="OUT.TextGrid", help="write words, phones, marks and strokes as a "
@@ -177,9 +177,9 @@ def realize_files(args: argparse.Namespace) -> int:
         raise UsageError("--until must be a non-negative number of seconds")
     options.check_fps(args)
     check_outputs(args)
-    tts = options.backend(args.tts)
+    tts = options.backend(args.tts, args.voice)
     if args.wav and tts.name == "builtin":
-        raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak")
+        raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak or --tts festival")
     print(f"speech: {options.describe_backend(tts)}", file=sys.stderr)
     out = sys.stdout
     if out is None:  # started with its standard output closed
@@ -234,7 +234,7 @@ def plot_timeline(args: argparse.Namespace) -> int:
     if start is not None and end is not None and not end > start:
         raise UsageError(f"--to ({end:g} s) must come after --from ({start:g} s)")
     check_writable([args.out])
-    tts = options.backend(args.tts)
+    tts = options.backend(args.tts, args.voice)
     realizer = Realizer(anticipators=options.anticipators(args), tts=tts)
     realizer.submit(read_document(args.file), source=str(resolve(args.file)))
     realizer.run()

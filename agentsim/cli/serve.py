@@ -69,7 +69,8 @@ def run_server(args: argparse.Namespace) -> int:
     if args.calibrate and args.audio == "none":
         raise UsageError("--calibrate measures the sound device's delay: it needs --audio DEVICE, not --audio none")
     try:
-        service = Service(host=args.host, port=args.port, audio=args.audio, tts=options.backend(args.tts),
+        tts = options.backend(args.tts, args.voice)
+        service = Service(host=args.host, port=args.port, audio=args.audio, tts=tts,
                           strict=args.strict, fps=args.fps, calibrate=args.calibrate,
                           token=args.token, allow_origins=args.allow_origins, media=args.media)
     except NoAudioDevice as exc:  # say which option chooses the device, and how to do without one

@@ -64,7 +64,7 @@ def add_parsers(commands) -> None:
     export_parser.add_argument("text", metavar="FILE", help="a plain UTF-8 text file (examples/story.txt is one)")
     options.add_tts(export_parser)
     export_parser.add_argument("--wav", metavar="FILE.wav",
-                               help="the audio, 16-bit PCM at the backend's sample rate (needs --tts espeak)")
+                               help="the audio, 16-bit PCM at the backend's sample rate (needs --tts espeak or --tts festival)")
     export_parser.add_argument("--textgrid", metavar="FILE.TextGrid",
                                help="the words and phonemes as Praat interval tiers, from the speech's start")
     export_parser.set_defaults(handler=export)
@@ -102,7 +102,7 @@ def speech_sync(args: argparse.Namespace) -> int:
         if not Path(args.model).is_file():
             raise AgentsimError(f"no linear model {args.model!r}: make one with 'agentsim speech calibrate'")
         model = LinearModel.load(args.model)
-    text, tts = read_text(args.text), options.backend(args.tts)
+    text, tts = read_text(args.text), options.backend(args.tts, args.voice)
     results = []
     stages = Stages()  # on a terminal: which strategy is under way (with 'all', a bar of them)
     for name in stages.over(names, "strategies", unit="strategy") if len(names) > 1 else names:
@@ -158,7 +158,7 @@ def calibrate(args: argparse.Namespace) -> int:
     if args.texts:
         texts = [line.strip() for line in read_text(args.texts).splitlines() if line.strip()]
     check_writable([args.out])
-    model = fit(options.backend(args.tts), texts)
+    model = fit(options.backend(args.tts, args.voice), texts)
     model.save(args.out)
     print(json.dumps({**json.loads(model.to_json()), "saved": args.out}))  # the keys it saved, as saved
     print(f"wrote {args.out}", file=sys.stderr)
@@ -174,9 +174,9 @@ def export(args: argparse.Namespace) -> int:
         raise UsageError("say what to write: --wav FILE.wav and/or --textgrid FILE.TextGrid")
     check_writable([args.wav, args.textgrid])
     text = " ".join(read_text(args.text).split())
-    tts = options.backend(args.tts)
+    tts = options.backend(args.tts, args.voice)
     if args.wav and tts.name == "builtin":
-        raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak")
+        raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak or --tts festival")
     utterance = tts.synthesize(SpeechText(text))
     written = []
     if args.wav:

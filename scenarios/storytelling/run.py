@@ -130,7 +130,7 @@ def main(args: argparse.Namespace) -> int:
     from agentsim.media.files import check_writable
 
     check_writable(folders=[out])  # before anything is synthesised
-    voice = make_voice(args.tts, cache_dir=args.cache, cache=not args.no_cache)
+    voice = make_voice(args.tts, cache_dir=args.cache, cache=not args.no_cache, voice=getattr(args, "voice", None))
 
     as_json = getattr(args, "json", False)
     printed = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone

@@ -42,9 +42,11 @@ SPEECH_START = 1.0
 BLOCK_ID = "story"
 
 
-def make_voice(tts: str | None = None, cache_dir=None, cache: bool = True, voice: str = "en", rate: int = 175):
-    """The storyteller's backend: ``tts`` ("espeak" or "builtin"; by default espeak-ng when it is installed,
-    as everywhere) behind the disk cache, with phoneme-level marks
+def make_voice(tts: str | None = None, cache_dir=None, cache: bool = True, voice: str | None = None,
+               rate: int = 175):
+    """The storyteller's backend: ``tts`` ("espeak", "festival" or "builtin"; by default espeak-ng when it
+    is installed, as everywhere) speaking with ``voice`` (None: the backend's default; espeak-ng at ``rate``
+    words per minute) behind the disk cache, with phoneme-level marks
     (:class:`~scenarios.storytelling.voice.PhonemeMarks`)."""
     if tts is None:
         from speech_timing.choice import default_name
@@ -53,13 +55,23 @@ def make_voice(tts: str | None = None, cache_dir=None, cache: bool = True, voice
     if tts == "espeak":
         from speech_timing.espeak import EspeakBackend
 
-        backend = EspeakBackend(voice=voice, rate=rate)
+        backend = EspeakBackend(voice=voice or "en", rate=rate)
+    elif tts == "festival":
+        from speech_timing.festival import FestivalBackend
+
+        try:
+            backend = FestivalBackend(voice=voice)
+        except ValueError as exc:
+            raise AgentsimError(str(exc)) from None
     elif tts == "builtin":
         from speech_timing.builtin import BuiltinBackend
 
+        if voice is not None:
+            raise AgentsimError("the built-in backend has no voices: --voice needs --tts espeak or --tts festival")
+
         backend = BuiltinBackend()
     else:
-        raise AgentsimError(f"unknown speech backend {tts!r}: use espeak or builtin")
+        raise AgentsimError(f"unknown speech backend {tts!r}: use espeak, festival or builtin")
     return PhonemeMarks(CachedBackend(backend, cache_dir=cache_dir, enabled=cache))
 
 
