@@ -75,7 +75,7 @@ DEFAULT_VOICES = ("us-slt-hts", "kal")
 
 #: Festival's US "radio" phones as IPA, written as espeak-ng's English voice writes them.
 PHONES = {
-    "aa": "ɑː", "ae": "a", "ah": "ʌ", "ao": "ɔː", "aw": "aʊ", "ax": "ə", "axr": "ɚ", "ay": "aɪ",
+    "aa": "ɑː", "ae": "a", "ah": "ʌ", "ao": "ɔː", "aw": "aʊ", "ax": "ə", "axr": "əɹ", "ay": "aɪ",
     "eh": "ɛ", "er": "ɜː", "ey": "eɪ", "ih": "ɪ", "iy": "iː", "ow": "əʊ", "oy": "ɔɪ", "uh": "ʊ", "uw": "uː",
     "b": "b", "ch": "tʃ", "d": "d", "dh": "ð", "dx": "ɾ", "el": "əl", "em": "əm", "en": "ən", "f": "f",
     "g": "ɡ", "hh": "h", "hv": "h", "jh": "dʒ", "k": "k", "l": "l", "m": "m", "n": "n", "ng": "ŋ",
@@ -96,6 +96,7 @@ RATE_RANGE = (0.25, 4.0)
 
 # Characters at the edges of a token that are not part of the word as spoken.
 _SILENT_EDGE = frozenset('.,;:!?"\'()[]{}<>«»“”„‘’‚‹›…–—¡¿*_-')
+_VOWEL_START = frozenset("aeiouɑɔəɛɜɪʊʌ")  # the first characters of the vowels of PHONES
 _SENTENCE_END = re.compile(r"[.!?…][\"'”’»)\]]*$")
 _END = "@@agentsim-end@@"
 _ERROR = "@@agentsim-error@@"
@@ -460,7 +461,7 @@ class FestivalBackend:
                               chunk.core_start, chunk.core_end))
             for name, start, end, stress in segments:
                 symbol = PHONES.get(name, name)
-                phonemes.append(Phoneme(symbol, start, end, index, stress and symbol[0] in "aeiouɑɔəɛɜɪʊʌɚ"))
+                phonemes.append(Phoneme(symbol, start, end, index, stress and symbol[0] in _VOWEL_START))
         return words, phonemes
 
 
@@ -468,8 +469,8 @@ class FestivalBackend:
 PAUSE = 0.03
 #: Frames (s) of the energy in which a word's sound is found rising out of the pause before it.
 ONSET_FRAME = 0.002
-#: The sound rises out of a pause where its energy is this many times (10 dB) the pause's, ...
-ONSET_OVER_PAUSE = 10.0
+#: The sound rises out of a pause where its energy is this many times (15 dB) the pause's, ...
+ONSET_OVER_PAUSE = 10 ** 1.5
 #: ... and above this fraction (-60 dB) of the utterance's loudest frame, for this many frames running.
 ONSET_FLOOR, ONSET_FRAMES = 1e-6, 3
 
