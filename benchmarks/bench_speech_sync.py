@@ -1,10 +1,14 @@
-"""Benchmark of animator-time strategies: beat gestures on content words of espeak-ng speech; prints JSON.
+"""Benchmark of animator-time strategies: beat gestures on content words of espeak-ng and Festival speech; prints JSON.
 
-Every strategy of :data:`speech_timing.animator_time.STRATEGIES` is run on the bundled texts
+Each backend (``--tts``, default both: espeak-ng and Festival with its default voice, us-slt-hts) speaks
+the same texts, and every strategy of :data:`speech_timing.animator_time.STRATEGIES` is run on the bundled texts
 (``speech_timing/texts/*.txt`` except ``calibration.txt``, about 420 words and two minutes each),
-under the delivery conditions A, B and C of :data:`speech_timing.delivery.CONDITIONS`, with the plan from espeak-ng's own timeline (``tts``) and from Chang's
-linear characters-to-time model calibrated on ``calibration.txt`` (``linear``). Each text is
-synthesised once; all strategies see the same delivered events (same seed per text). Errors of all
+under the delivery conditions A, B and C of :data:`speech_timing.delivery.CONDITIONS`, with the plan from the backend's own timeline (``tts``) and from Chang's
+linear characters-to-time model calibrated on ``calibration.txt`` with that backend (``linear``). Each
+text is synthesised once per backend; all strategies see the same delivered events (same seed per
+text). ``side_by_side`` puts the backends' figures next to each other, row by row, and ``speech`` gives
+each backend's speaking rate (words per minute of speech) and synthesis real-time factor (wall seconds
+of synthesis per second of speech, each text synthesised once in a process that had not spoken it). Errors of all
 texts are pooled before the percentiles are taken; snaps and stall time are summed over the texts.
 
 All conditions share a nominal latency of 80 ms with an unknown extra 0-40 ms and an audio clock
@@ -12,7 +16,8 @@ drift of +500 ppm; strategies know the nominal latency and the base delay only.
 
 Usage::
 
-    PYTHONPATH=. python benchmarks/bench_speech_sync.py [--quick] [--seeds 1] [--jitter-distribution exponential]
+    PYTHONPATH=. python benchmarks/bench_speech_sync.py [--quick] [--seeds 1] [--tts espeak,festival]
+        [--jitter-distribution exponential] [--table]
 """
 
 from __future__ import annotations
@@ -32,7 +37,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from speech_timing.animator_time import STRATEGIES  # noqa: E402
 from speech_timing.delivery import CONDITIONS, PLAYBACK  # noqa: E402
-from speech_timing.harness import TIMINGS, run_sync_eval  # noqa: E402
+from speech_timing.choice import named  # noqa: E402
+from speech_timing.harness import TIMINGS, run_sync_eval, synthesize_cached  # noqa: E402
 from speech_timing.linear_model import TEXTS_DIR, default_linear_model  # noqa: E402
 from speech_timing.metrics import error_summary  # noqa: E402
 
@@ -52,21 +58,14 @@ def bench_texts(quick: bool) -> OrderedDict:
     return OrderedDict((p.stem, p.read_text(encoding="utf-8")) for p in paths)
 
 
-def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="one text instead of all")
-    ap.add_argument("--seeds", type=int, default=1, help="delivery seeds per text (default 1)")
-    ap.add_argument("--jitter-distribution", default="exponential",
-                    choices=["exponential", "gamma", "half-normal"])
-    ap.add_argument("--stress", action="store_true", help="aim strokes at stressed vowels")
-    args = ap.parse_args(argv)
+#: Backends compared, by ``--tts`` name, with what the JSON calls them.
+BACKENDS = {"espeak": "espeak-ng", "festival": "festival"}
+#: The figures of a strategy row put side by side.
+SIDE_BY_SIDE = ("p50_ms", "p95_ms", "max_ms", "snaps", "stall_s")
 
-    from speech_timing.espeak import EspeakBackend  # the real backend; raises if espeak-ng is missing
 
-    backend = EspeakBackend()
-    texts = bench_texts(args.quick)
-    model = default_linear_model(backend)
-    started = time.perf_counter()
+def strategy_table(backend, texts: OrderedDict, model, args) -> OrderedDict:
+    """``{timing: {condition: {strategy: row}}}`` of one backend."""
     table: "OrderedDict[str, OrderedDict]" = OrderedDict()
     for timing in TIMINGS:
         table[timing] = OrderedDict()
@@ -98,33 +97,123 @@ def main(argv=None) -> dict:
                     p95_ms_per_text=per_text,
                 )
             table[timing][cond_name] = rows
+    return table
+
+
+def speech_figures(backend, texts: OrderedDict) -> OrderedDict:
+    """Speaking rate and synthesis real-time factor of ``backend`` on ``texts`` (each synthesised here, once,
+    and kept for the strategy runs)."""
+    words = seconds = wall = 0.0
+    sample_rate = 0
+    for text in texts.values():
+        started = time.perf_counter()
+        utterance = synthesize_cached(backend, text)
+        wall += time.perf_counter() - started
+        words += len(utterance.words)
+        seconds += utterance.duration
+        sample_rate = utterance.sample_rate
+    return OrderedDict(words=int(words), speech_s=round(seconds, 2), words_per_minute=round(60.0 * words / seconds, 1),
+                       synthesis_s=round(wall, 3), real_time_factor=round(wall / seconds, 4),
+                       sample_rate=sample_rate)
+
+
+def side_by_side(results: OrderedDict) -> list[OrderedDict]:
+    """One row per timing, condition and strategy: each backend's :data:`SIDE_BY_SIDE` figures."""
+    first = next(iter(results.values()))
+    rows = []
+    for timing, conditions in first.items():
+        for cond_name, strategies in conditions.items():
+            for strategy in strategies:
+                row = OrderedDict(timing=timing, condition=cond_name, strategy=strategy)
+                for backend, table in results.items():
+                    cell = table[timing][cond_name][strategy]
+                    row[backend] = OrderedDict((key, cell[key]) for key in SIDE_BY_SIDE)
+                rows.append(row)
+    return rows
+
+
+def markdown(result: dict) -> str:
+    """The side-by-side table (and the speech figures) as Markdown, for the README."""
+    backends = list(result["speech"])
+    head = ["timing", "condition", "strategy"] + [f"{b} {k}" for b in backends for k in ("p50 / p95 / max ms",
+                                                                                     "snaps", "stall s")]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for row in result["side_by_side"]:
+        cells = [row["timing"], row["condition"], row["strategy"]]
+        for b in backends:
+            c = row[b]
+            cells += [f"{c['p50_ms']:g} / {c['p95_ms']:g} / {c['max_ms']:g}", str(c["snaps"]), f"{c['stall_s']:g}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "| backend | voice | words | speech s | words per minute | synthesis s | real-time factor |",
+              "|---|---|---|---|---|---|---|"]
+    for b, sp in result["speech"].items():
+        lines.append(f"| {b} | {result['voices'][b]} | {sp['words']} | {sp['speech_s']:g} | {sp['words_per_minute']:g} | "
+                     f"{sp['synthesis_s']:g} | {sp['real_time_factor']:g} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="one text instead of all")
+    ap.add_argument("--seeds", type=int, default=1, help="delivery seeds per text (default 1)")
+    ap.add_argument("--tts", default="espeak,festival", help="backends, comma-separated (espeak,festival)")
+    ap.add_argument("--jitter-distribution", default="exponential",
+                    choices=["exponential", "gamma", "half-normal"])
+    ap.add_argument("--stress", action="store_true", help="aim strokes at stressed vowels")
+    ap.add_argument("--table", action="store_true", help="print the side-by-side table as Markdown after the JSON")
+    args = ap.parse_args(argv)
+    names = [name.strip() for name in args.tts.split(",") if name.strip()]
+    unknown = [name for name in names if name not in BACKENDS]
+    if unknown or not names:
+        ap.error(f"--tts takes {', '.join(BACKENDS)}, comma-separated; not {', '.join(unknown) or 'nothing'}")
+
+    texts = bench_texts(args.quick)
+    started = time.perf_counter()
+    results: "OrderedDict[str, OrderedDict]" = OrderedDict()
+    speech: "OrderedDict[str, OrderedDict]" = OrderedDict()
+    models: "OrderedDict[str, OrderedDict]" = OrderedDict()
+    voices: "OrderedDict[str, str]" = OrderedDict()
+    for name in names:
+        backend = named(name)  # the real backend; raises, saying what to install, if it is missing
+        label = BACKENDS[name]
+        voices[label] = str(getattr(backend, "voice", ""))
+        speech[label] = speech_figures(backend, texts)
+        model = default_linear_model(backend)
+        models[label] = OrderedDict(multiplier=model.multiplier, offset=model.offset,
+                                    phonemes_per_unit=model.phonemes_per_unit, rms=model.rms)
+        results[label] = strategy_table(backend, texts, model, args)
 
     targets = []
-    for timing, cond_name, strategy, limit, strict, no_snaps in TARGETS:
-        row = table[timing][cond_name][strategy]
-        ok = (row["p95_ms"] < limit if strict else row["p95_ms"] <= limit) and (row["snaps"] == 0 or not no_snaps)
-        targets.append(OrderedDict(timing=timing, condition=cond_name, strategy=strategy,
-                                   p95_limit_ms=limit, zero_snaps=no_snaps, p95_ms=row["p95_ms"],
-                                   snaps=row["snaps"], met=bool(ok)))
+    for label, table in results.items():
+        for timing, cond_name, strategy, limit, strict, no_snaps in TARGETS:
+            row = table[timing][cond_name][strategy]
+            ok = (row["p95_ms"] < limit if strict else row["p95_ms"] <= limit) and (row["snaps"] == 0 or not no_snaps)
+            targets.append(OrderedDict(backend=label, timing=timing, condition=cond_name, strategy=strategy,
+                                       p95_limit_ms=limit, zero_snaps=no_snaps, p95_ms=row["p95_ms"],
+                                       snaps=row["snaps"], met=bool(ok)))
 
     words = {name: len(text.split()) for name, text in texts.items()}
     result = OrderedDict(
         benchmark="speech_sync",
-        backend="espeak-ng",
+        backends=list(results),
+        voices=voices,
         texts=words,
         seeds_per_text=args.seeds,
         stroke_target="stressed vowel" if args.stress else "word onset",
         playback=PLAYBACK,
         conditions=OrderedDict((name, asdict(c)) for name, c in CONDITIONS.items()),
         jitter_distribution=args.jitter_distribution,
-        linear_model=OrderedDict(multiplier=model.multiplier, offset=model.offset,
-                                 phonemes_per_unit=model.phonemes_per_unit, rms=model.rms),
-        results=table,
+        speech=speech,
+        linear_model=models,
+        side_by_side=side_by_side(results),
+        results=results,
         targets=targets,
         seconds=round(time.perf_counter() - started, 1),
         python=platform.python_version(),
     )
     print(json.dumps(result, indent=2))
+    if args.table:
+        print(markdown(result))
     return result
 
 

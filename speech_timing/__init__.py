@@ -2,8 +2,9 @@
 
 Modules
 -------
-backend, builtin, espeak
-    The backend interface and two backends (a deterministic timing model; espeak-ng with exact times).
+backend, builtin, espeak, festival
+    The backend interface and three backends (a deterministic timing model; espeak-ng with exact times;
+    Festival, timed by its utterance structure, through a long-lived festival process).
 plan
     :class:`~speech_timing.plan.SpeechPlan`, what is known about an utterance before it is played.
 delivery

@@ -179,7 +179,7 @@ def realize_files(args: argparse.Namespace) -> int:
     check_outputs(args)
     tts = options.backend(args.tts, args.voice)
     if args.wav and tts.name == "builtin":
-        raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak or --tts festival")
+        raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak")
     print(f"speech: {options.describe_backend(tts)}", file=sys.stderr)
     out = sys.stdout
     if out is None:  # started with its standard output closed

@@ -176,7 +176,7 @@ def export(args: argparse.Namespace) -> int:
     text = " ".join(read_text(args.text).split())
     tts = options.backend(args.tts, args.voice)
     if args.wav and tts.name == "builtin":
-        raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak or --tts festival")
+        raise UsageError("--wav needs a backend that makes sound: the built-in one only times speech; use --tts espeak")
     utterance = tts.synthesize(SpeechText(text))
     written = []
     if args.wav:

@@ -188,6 +188,9 @@ def _metrics(telling: Telling, args: argparse.Namespace, voice, stages: "Ordered
     metrics["cache_load_seconds"] = cache.load_seconds
     metrics["stages_seconds"] = OrderedDict([("simulation", telling.wall_seconds)] + list(stages.items()))
     metrics["fps"] = args.fps
+    speaker = cache.backend  # what speaks behind the cache
+    metrics["speech_backend"] = OrderedDict(tts=getattr(speaker, "name", ""), voice=getattr(speaker, "voice", None),
+                                            sample_rate=telling.speech.utterance.sample_rate)
     metrics["time_axis"] = AXIS
     metrics["glossary"] = GLOSSARY
     metrics.update(telling.extra)
