@@ -8,7 +8,8 @@ linear characters-to-time model calibrated on ``calibration.txt`` with that back
 text is synthesised once per backend; all strategies see the same delivered events (same seed per
 text). ``side_by_side`` puts the backends' figures next to each other, row by row, and ``speech`` gives
 each backend's speaking rate (words per minute of speech) and synthesis real-time factor (wall seconds
-of synthesis per second of speech, each text synthesised once in a process that had not spoken it). Errors of all
+of synthesis per second of speech, each text synthesised once in a process that had not spoken it);
+``--storyteller`` adds each backend's storyteller run (the longest shipped story, ``best``). Errors of all
 texts are pooled before the percentiles are taken; snaps and stall time are summed over the texts.
 
 All conditions share a nominal latency of 80 ms with an unknown extra 0-40 ms and an audio clock
@@ -17,7 +18,7 @@ drift of +500 ppm; strategies know the nominal latency and the base delay only.
 Usage::
 
     PYTHONPATH=. python benchmarks/bench_speech_sync.py [--quick] [--seeds 1] [--tts espeak,festival]
-        [--jitter-distribution exponential] [--table]
+        [--jitter-distribution exponential] [--table] [--storyteller]
 """
 
 from __future__ import annotations
@@ -117,6 +118,21 @@ def speech_figures(backend, texts: OrderedDict) -> OrderedDict:
                        sample_rate=sample_rate)
 
 
+def storyteller(name: str) -> OrderedDict:
+    """The storyteller with backend ``name``: the longest shipped story told with ``best`` (condition A, seed
+    0, strokes on the stressed syllables, as ``agentsim run storytelling``), its sync error and snaps."""
+    from scenarios.storytelling.markup import read_story
+    from scenarios.storytelling.run import resolve_story
+    from scenarios.storytelling.telling import make_voice, tell
+
+    story = read_story(resolve_story(None))
+    m = tell(story, "best", seed=0, voice=make_voice(name, cache=False)).metrics()
+    e = m["sync_error_ms"]
+    return OrderedDict(story=story.title, gestures=m["gestures"], speech_s=round(m["duration_s"], 1),
+                       p50_ms=round(e["p50"], 2), p95_ms=round(e["p95"], 2), max_ms=round(e["max"], 2),
+                       snaps=m["snaps"], missed=m["missed"])
+
+
 def side_by_side(results: OrderedDict) -> list[OrderedDict]:
     """One row per timing, condition and strategy: each backend's :data:`SIDE_BY_SIDE` figures."""
     first = next(iter(results.values()))
@@ -149,6 +165,12 @@ def markdown(result: dict) -> str:
     for b, sp in result["speech"].items():
         lines.append(f"| {b} | {result['voices'][b]} | {sp['words']} | {sp['speech_s']:g} | {sp['words_per_minute']:g} | "
                      f"{sp['synthesis_s']:g} | {sp['real_time_factor']:g} |")
+    if result.get("storyteller"):
+        lines += ["", "| backend | story | gestures | speech s | p50 ms | p95 ms | max ms | snaps |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for b, st in result["storyteller"].items():
+            lines.append(f"| {b} | {st['story']} | {st['gestures']} | {st['speech_s']:g} | {st['p50_ms']:g} | "
+                         f"{st['p95_ms']:g} | {st['max_ms']:g} | {st['snaps']} |")
     return "\n".join(lines)
 
 
@@ -161,6 +183,8 @@ def main(argv=None) -> dict:
                     choices=["exponential", "gamma", "half-normal"])
     ap.add_argument("--stress", action="store_true", help="aim strokes at stressed vowels")
     ap.add_argument("--table", action="store_true", help="print the side-by-side table as Markdown after the JSON")
+    ap.add_argument("--storyteller", action="store_true",
+                    help="also tell the longest shipped story with each backend (best strategy, condition A)")
     args = ap.parse_args(argv)
     names = [name.strip() for name in args.tts.split(",") if name.strip()]
     unknown = [name for name in names if name not in BACKENDS]
@@ -173,6 +197,7 @@ def main(argv=None) -> dict:
     speech: "OrderedDict[str, OrderedDict]" = OrderedDict()
     models: "OrderedDict[str, OrderedDict]" = OrderedDict()
     voices: "OrderedDict[str, str]" = OrderedDict()
+    stories: "OrderedDict[str, OrderedDict]" = OrderedDict()
     for name in names:
         backend = named(name)  # the real backend; raises, saying what to install, if it is missing
         label = BACKENDS[name]
@@ -182,6 +207,8 @@ def main(argv=None) -> dict:
         models[label] = OrderedDict(multiplier=model.multiplier, offset=model.offset,
                                     phonemes_per_unit=model.phonemes_per_unit, rms=model.rms)
         results[label] = strategy_table(backend, texts, model, args)
+        if args.storyteller:
+            stories[label] = storyteller(name)
 
     targets = []
     for label, table in results.items():
@@ -206,6 +233,7 @@ def main(argv=None) -> dict:
         speech=speech,
         linear_model=models,
         side_by_side=side_by_side(results),
+        **({"storyteller": stories} if args.storyteller else {}),
         results=results,
         targets=targets,
         seconds=round(time.perf_counter() - started, 1),
