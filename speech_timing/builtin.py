@@ -50,12 +50,12 @@ BREAK_PAUSES = {"none": (0.0, 0.0), "x-weak": (0.5, 0.0), "weak": (1.0, 0.0), "m
                 "strong": (0.0, 1.0), "x-strong": (0.0, 2.0)}
 
 
-def rate_factor(value: str, enclosing: float = 1.0) -> float | None:
+def rate_factor(value: str, enclosing: float = 1.0, labels: dict[str, float] = RATE_LABELS) -> float | None:
     """The speed factor a ``prosody rate`` value gives inside a span of speed ``enclosing`` (see the
-    module's docstring); None for a value that is left out."""
+    module's docstring; ``labels``: the factor of each rate label); None for a value that is left out."""
     label = (value or "").strip().lower()
-    if label in RATE_LABELS:
-        return RATE_LABELS[label]
+    if label in labels:
+        return labels[label]
     number = parse_number(value)
     if number is None or number[2] not in ("", "%"):
         return None

@@ -706,14 +706,20 @@ def _tokens(text: str) -> list[_Token]:
     tokens = []
     for match in _WRITTEN_WORD.finditer(text):
         start, end = match.span()
-        core_start, core_end = start, end
-        while core_start < core_end and text[core_start] in _SILENT_EDGE:
-            core_start += 1
-        while core_end > core_start and text[core_end - 1] in _SILENT_EDGE:
-            core_end -= 1
+        core_start, core_end = core_span(text, start, end)
         if core_start < core_end:  # punctuation alone is not spoken
             tokens.append(_Token(start, end, core_start, core_end))
     return tokens
+
+
+def core_span(text: str, start: int, end: int) -> tuple[int, int]:
+    """``text[start:end]`` without the punctuation at its edges (:data:`_SILENT_EDGE`): the written word as
+    spoken (an empty span at the end of punctuation alone)."""
+    while start < end and text[start] in _SILENT_EDGE:
+        start += 1
+    while end > start and text[end - 1] in _SILENT_EDGE:
+        end -= 1
+    return start, end
 
 
 def _token_index(tokens: list[_Token], starts: list[int], offset: int) -> int | None:

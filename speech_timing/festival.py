@@ -21,8 +21,10 @@ primary lexical stress (Festival's syllable feature ``stress`` = 1).
 Words. Festival splits the text into tokens at whitespace (punctuation kept as token features) and
 each token into words (``1234`` into four, ``well-known`` into two); the words of one written token make
 one :class:`~speech_timing.backend.Word`, from the start of its first segment to the end of its last, on
-the token's characters with the punctuation at its edges left off. A sync mark is passed at the onset of
-the first word that starts at or after it (a mark after the last word: at the end of the audio).
+the token's characters with the punctuation at its edges left off. A token the voice says nothing for
+(punctuation alone, characters outside its language, such as 東京) is no word. A sync mark is passed at
+the onset of the first word that starts at or after it (a mark after the last word: at the end of the
+audio).
 
 Onsets. Festival's segment boundary after a pause comes before the sound: the HTS voice's energy climbs
 out of the silence over 5-30 ms of the first phone, and a stop's closure is silent. A word after a pause
@@ -54,6 +56,7 @@ What of SSML Festival applies here, and how:
 
 from __future__ import annotations
 
+import atexit
 import bisect
 import difflib
 import os
@@ -67,7 +70,9 @@ from dataclasses import dataclass
 
 from agentsim.errors import SpeechBackendUnavailable
 from speech_timing.backend import (Phoneme, Prosody, SpeechText, Utterance, Word, check_prosody,
-                                     mark_times_from_words, parse_number, parse_time)
+                                     mark_times_from_words, parse_time)
+from speech_timing.builtin import rate_factor
+from speech_timing.espeak import core_span
 
 __all__ = ["FestivalBackend", "INSTALL_HINT", "VOICES", "PHONES", "available_voices"]
 
@@ -103,8 +108,6 @@ RATE_LABELS = {"x-slow": 0.6, "slow": 0.8, "medium": 1.0, "default": 1.0, "fast"
 #: Rate factors the backend takes (the text's rate times a span's).
 RATE_RANGE = (0.25, 4.0)
 
-# Characters at the edges of a token that are not part of the word as spoken.
-_SILENT_EDGE = frozenset('.,;:!?"\'()[]{}<>«»“”„‘’‚‹›…–—¡¿*_-')
 _VOWEL_START = frozenset("aeiouɑɔəɛɜɪʊʌ")  # the first characters of the vowels of PHONES
 _SENTENCE_END = re.compile(r"[.!?…][\"'”’»)\]]*$")
 _END = "@@agentsim-end@@"
@@ -253,6 +256,7 @@ def _process() -> _Process:
         if _PROCESS is None or _PROCESS.pid != os.getpid() or _PROCESS.process.poll() is not None:
             try:
                 _PROCESS = _Process()
+                atexit.register(_PROCESS.close)  # the process ended and its folder removed, whatever happens
             except SpeechBackendUnavailable as exc:
                 _PROCESS_ERROR = exc
                 raise
@@ -302,30 +306,11 @@ def _chunks(text: str) -> list[_Chunk]:
     chunks = []
     for match in re.finditer(r"[^ \t\n\r]+", text):
         start, end = match.span()
-        core_start, core_end = start, end
-        while core_start < core_end and text[core_start] in _SILENT_EDGE:
-            core_start += 1
-        while core_end > core_start and text[core_end - 1] in _SILENT_EDGE:
-            core_end -= 1
+        core_start, core_end = core_span(text, start, end)
         if core_start == core_end:
             core_start, core_end = start, end
         chunks.append(_Chunk(start, end, core_start, core_end))
     return chunks
-
-
-def _rate_factor(value: str) -> float | None:
-    """A speaking-rate factor of an SSML ``rate`` value (a label, a percentage, a factor), or None."""
-    label = value.strip().lower()
-    if label in RATE_LABELS:
-        return RATE_LABELS[label]
-    number = parse_number(value)
-    if number is None or number[2] not in ("", "%"):
-        return None
-    sign, magnitude, unit = number
-    factor = magnitude / 100.0 if unit == "%" else magnitude
-    if sign:  # a change: "+20%" is 1.2, "-0.25" 0.75
-        factor = 1.0 + factor if sign == "+" else 1.0 - factor
-    return factor if factor > 0 else None
 
 
 def _break_seconds(span: Prosody) -> float | None:
@@ -426,7 +411,7 @@ class FestivalBackend:
         for span in spans:
             if span.kind != "prosody" or not span.attr("rate"):
                 continue
-            factor = _rate_factor(span.attr("rate"))
+            factor = rate_factor(span.attr("rate"), labels=RATE_LABELS)
             if factor is None:
                 continue
             for k in range(bisect.bisect_left(starts, span.start), len(chunks)):
