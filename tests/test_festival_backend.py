@@ -318,3 +318,17 @@ def test_the_storyteller_speaks_with_festival_and_its_report_plays_that_audio(tm
     assert len(after_pause) >= 5
     errors = [onset_after_pause(narration, rate, a) - a for a in after_pause]
     assert max(abs(e) for e in errors) <= ONSET_TOLERANCE, errors
+
+
+def test_eval_speech_sync_runs_on_festival(slt):
+    """``eval speech-sync --tts festival``: the strategy is scored on Festival's speech of the text (its length,
+    its words), with the event delivery of condition A, and best stays on the words."""
+    from agentsim.cli.speech import read_text
+
+    proc = cli("eval", "speech-sync", "--tts", "festival", "--strategy", "best", "--json")
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    utterance = slt.synthesize(SpeechText(read_text(None)))
+    assert report["speech_seconds"] == pytest.approx(utterance.duration, abs=1e-6)
+    assert report["words"] == len(utterance.words)
+    assert report["error_ms"]["p95"] < 15.0 and report["snaps"] == 0 and report["missed"] == 0
