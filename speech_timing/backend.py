@@ -183,6 +183,39 @@ class TTSBackend(Protocol):
         ...
 
 
+class Spoken:
+    """What a backend said, kept: the last ``size`` utterances by their :class:`SpeechText`, looked up and
+    added under a lock of their own (not the synthesiser's), so that a speech asked for again is answered
+    at once, as it was said."""
+
+    def __init__(self, size: int) -> None:
+        import threading
+        from collections import OrderedDict
+
+        self.size = size
+        self._kept: "OrderedDict[SpeechText, Utterance]" = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, speech: SpeechText) -> "Utterance | None":
+        with self._lock:
+            spoken = self._kept.get(speech)
+            if spoken is not None:
+                self._kept.move_to_end(speech)
+            return spoken
+
+    def keep(self, speech: SpeechText, utterance: "Utterance") -> "Utterance":
+        """Keep ``utterance`` as what ``speech`` was; returns what is kept (one kept before wins)."""
+        with self._lock:
+            utterance = self._kept.setdefault(speech, utterance)
+            if len(self._kept) > self.size:
+                self._kept.popitem(last=False)
+            return utterance
+
+    def forget(self, speech: SpeechText) -> None:
+        with self._lock:
+            self._kept.pop(speech, None)
+
+
 def check_prosody(speech: SpeechText) -> list[Prosody]:
     """The prosody spans of ``speech`` a backend can apply, properly nested, in the order they open.
 

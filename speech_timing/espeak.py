@@ -57,8 +57,6 @@ the values it reads (``docs/markup.md`` and ``ssml.c`` of espeak-ng; others are 
 
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import bisect
 import ctypes
 import difflib
@@ -72,7 +70,7 @@ from dataclasses import dataclass, field
 from xml.sax.saxutils import escape
 
 # numpy is imported where audio is made: loading the backend does without it
-from speech_timing.backend import (BREAK_STRENGTHS, Mark, Phoneme, Prosody, SpeechText, Utterance, Word,
+from speech_timing.backend import (BREAK_STRENGTHS, Mark, Phoneme, Prosody, SpeechText, Spoken, Utterance, Word,
                                      check_prosody, nest_spans, parse_number, parse_time)
 from agentsim.errors import SpeechBackendUnavailable
 
@@ -951,8 +949,7 @@ class EspeakBackend:
         self.rate = int(rate)
         # what was said, kept: the same text is said the same every time (each synthesis is a fresh
         # engine's, see _Pristine), and asked for again it is not synthesised again
-        self._spoken: OrderedDict[SpeechText, Utterance] = OrderedDict()
-        self._remembered = threading.Lock()
+        self._spoken = Spoken(REMEMBERED)
 
     @property
     def sample_rate(self) -> int:
@@ -973,23 +970,15 @@ class EspeakBackend:
             Times in seconds from the start of ``audio`` (float32 mono in [-1, 1]). The same ``speech``
             asked for again gets the same utterance (the last :data:`REMEMBERED` are kept).
         """
-        with self._remembered:  # what it said is looked up without waiting for the engine
-            spoken = self._spoken.get(speech)
-            if spoken is not None:
-                self._spoken.move_to_end(speech)
-                return spoken
-        utterance = self._synthesize(speech)  # under the engine's lock: one engine for every thread
-        with self._remembered:
-            utterance = self._spoken.setdefault(speech, utterance)
-            if len(self._spoken) > REMEMBERED:
-                self._spoken.popitem(last=False)
-        return utterance
+        spoken = self._spoken.get(speech)  # what it said is looked up without waiting for the engine
+        if spoken is not None:
+            return spoken
+        return self._spoken.keep(speech, self._synthesize(speech))  # under the engine's lock: one for all threads
 
     def forget(self, speech: SpeechText) -> None:
         """Stop remembering what ``speech`` was (whoever asked keeps it, in a form of its own: the speech
         cache reads its samples from its file); asked for again, it is synthesised again."""
-        with self._remembered:
-            self._spoken.pop(speech, None)
+        self._spoken.forget(speech)
 
     def _synthesize(self, speech: SpeechText) -> Utterance:
         text = speech.text

@@ -69,7 +69,7 @@ import wave
 from dataclasses import dataclass
 
 from agentsim.errors import SpeechBackendUnavailable
-from speech_timing.backend import (Phoneme, Prosody, SpeechText, Utterance, Word, check_prosody,
+from speech_timing.backend import (Phoneme, Prosody, SpeechText, Spoken, Utterance, Word, check_prosody,
                                      mark_times_from_words, parse_time)
 from speech_timing.builtin import rate_factor
 from speech_timing.espeak import core_span
@@ -105,6 +105,8 @@ BREAK_SECONDS = {"none": 0.0, "x-weak": 0.0, "weak": 0.0, "medium": 0.15, "stron
 BREAK_FADE = 0.002
 #: Speaking-rate factors of SSML's rate labels (as espeak-ng reads them).
 RATE_LABELS = {"x-slow": 0.6, "slow": 0.8, "medium": 1.0, "default": 1.0, "fast": 1.25, "x-fast": 1.6}
+#: How many utterances a backend keeps to say again as they were.
+REMEMBERED = 64
 #: Rate factors the backend takes (the text's rate times a span's).
 RATE_RANGE = (0.25, 4.0)
 
@@ -342,12 +344,16 @@ class FestivalBackend:
     """
 
     name = "festival"
+    #: it says a text it was asked for before as it said it then (Festival is deterministic; the last
+    #: :data:`REMEMBERED` are kept, so that the live service can synthesise a block's speech ahead)
+    remembers = True
 
     def __init__(self, voice: str | None = None, rate: float = 1.0) -> None:
         if not RATE_RANGE[0] <= rate <= RATE_RANGE[1]:
             raise ValueError(f"rate must be {RATE_RANGE[0]:g} to {RATE_RANGE[1]:g} times the voice's own, not {rate}")
         self.voice = voice_name(voice)
         self.rate = float(rate)
+        self._spoken = Spoken(REMEMBERED)
 
     @property
     def festival_voice(self) -> str:
@@ -356,7 +362,15 @@ class FestivalBackend:
 
     def synthesize(self, speech: SpeechText) -> Utterance:
         """Speak ``speech``: its audio (float32 mono in [-1, 1]) with word, phoneme, mark and sentence times
-        in seconds from the audio's first sample."""
+        in seconds from the audio's first sample (a speech asked for again: as it was said)."""
+        spoken = self._spoken.get(speech)
+        return spoken if spoken is not None else self._spoken.keep(speech, self._synthesize(speech))
+
+    def forget(self, speech: SpeechText) -> None:
+        """Stop remembering what ``speech`` was; asked for again, it is synthesised again."""
+        self._spoken.forget(speech)
+
+    def _synthesize(self, speech: SpeechText) -> Utterance:
         import numpy as np
 
         text = "".join(" " if ch.isspace() or ch == "\0" else ch for ch in speech.text)

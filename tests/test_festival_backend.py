@@ -215,10 +215,13 @@ def test_rate_slows_the_whole_text_and_rate_spans_only_their_words_on_the_diphon
 
 
 def test_the_same_text_gives_the_same_audio_and_times(slt, kal):
-    text = "Some guess gold, others guess a snake."
-    first = slt.synthesize(SpeechText(text))
+    speech = SpeechText("Some guess gold, others guess a snake.")
+    first = slt.synthesize(speech)
+    assert slt.synthesize(speech) is first  # remembered
+    slt.forget(speech)
     kal.synthesize(SpeechText("Something else in between."))  # the process changes voice and back
-    again = slt.synthesize(SpeechText(text))
+    again = slt.synthesize(speech)
+    assert again is not first  # said again
     assert first.words == again.words and first.phonemes == again.phonemes
     assert np.array_equal(first.audio, again.audio)
 
