@@ -118,7 +118,7 @@ _ERROR = "@@agentsim-error@@"
 # The Scheme the process is given once. agentsim.say chunks TEXT into utterances as Festival's own text
 # to speech does (its end-of-utterance tree: sentences), synthesises each with the diphone voice's global
 # duration stretch GLOBAL, the HTS engine's speed SPEED and per-token stretches STRETCHES (a list of
-# (token-index factor)), saves its wave to PREFIX<n>.wav and prints "U file", then its tokens (numbered
+# (token-index factor)), saves its wave to PREFIX<n>.wav and prints "=U file", then its tokens (numbered
 # across the text), words, syllables (lexical stress) and segments (start, end).
 _SCHEME = r"""
 (define (agentsim.roots item)
@@ -129,17 +129,17 @@ _SCHEME = r"""
   (let ((k base))
     (mapcar
      (lambda (tok)
-       (format t "T %d %s\n" k (item.name tok))
+       (format t "=T %d %s\n" k (item.name tok))
        (set! k (+ k 1))
        (mapcar
         (lambda (w)
-          (format t "W\n")
+          (format t "=W\n")
           (mapcar
            (lambda (syl)
-             (format t "Y %s\n" (item.feat syl "stress"))
+             (format t "=Y %s\n" (item.feat syl "stress"))
              (mapcar
               (lambda (seg)
-                (format t "P %s %f %f\n" (item.name seg) (item.feat seg "segment_start") (item.feat seg "end")))
+                (format t "=P %s %f %f\n" (item.name seg) (item.feat seg "segment_start") (item.feat seg "end")))
               (item.relation.daughters syl 'SylStructure)))
            (item.relation.daughters w 'SylStructure)))
         (item.relation.daughters tok 'Token)))
@@ -154,7 +154,7 @@ _SCHEME = r"""
      agentsim.stretches)
     (utt.synth utt)
     (utt.save.wave utt wavfile 'riff)
-    (format t "U %s\n" wavfile)
+    (format t "=U %s\n" wavfile)
     (agentsim.print utt agentsim.k)
     (set! agentsim.n (+ agentsim.n 1))
     (set! agentsim.k (+ agentsim.k (length tokens)))))
@@ -391,12 +391,12 @@ class FestivalBackend:
             try:
                 offset = 0.0
                 for line in process.ask(scheme):
-                    if line.startswith("U "):
-                        with wave.open(line[2:], "rb") as file:
+                    if line.startswith("=U "):
+                        with wave.open(line[3:], "rb") as file:
                             sample_rate = file.getframerate()
                             pieces.append(np.frombuffer(file.readframes(file.getnframes()), dtype="<i2"))
-                        os.remove(line[2:])
-                        lines.append(f"O {offset!r}")
+                        os.remove(line[3:])
+                        lines.append(f"=O {offset!r}")
                         offset += len(pieces[-1]) / sample_rate
                     else:
                         lines.append(line)
@@ -444,14 +444,14 @@ class FestivalBackend:
             parts = line.split()
             if not parts:
                 continue
-            if parts[0] == "O":
+            if parts[0] == "=O":
                 offset = float(parts[1])
-            elif parts[0] == "T":
+            elif parts[0] == "=T":
                 tokens.append([])
                 names.append(parts[2] if len(parts) > 2 else "")
-            elif parts[0] == "Y" and tokens:
+            elif parts[0] == "=Y" and tokens:
                 stressed = parts[1] == "1"
-            elif parts[0] == "P" and tokens and len(parts) == 4:
+            elif parts[0] == "=P" and tokens and len(parts) == 4:
                 tokens[-1].append((parts[1], offset + float(parts[2]), offset + float(parts[3]), stressed))
         owner = _token_chunks(text, chunks, names)
         words: list[Word] = []
