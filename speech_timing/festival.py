@@ -234,6 +234,8 @@ class _Process:
             try:
                 self.process.kill()
                 self.process.wait(timeout=5)
+                self.process.stdin.close()
+                self.process.stdout.close()
             except (OSError, subprocess.TimeoutExpired):
                 pass
             shutil.rmtree(self.folder, ignore_errors=True)
