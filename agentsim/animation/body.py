@@ -95,8 +95,10 @@ def _eye(side: str) -> list[Joint]:
               {"roll": FIXED, "pitch": (-30, 30), "yaw": (-35, 35)}, stage=2, end_site=(0.0, 0.0, 0.025)),
         Joint(f"{side}_eyelid", "skullbase", (0.032 * s, 0.075, 0.085),
               {"roll": FIXED, "pitch": (-25, 75), "yaw": FIXED}, stage=3, end_site=(0.0, 0.012, 0.015)),
-        Joint(f"{side}_eyebrow", "skullbase", (0.035 * s, 0.105, 0.095),
-              {"roll": (-15, 15), "pitch": (-20, 15), "yaw": FIXED}, end_site=(0.02 * s, 0.0, 0.0)),
+        # the brow turns about a point behind the forehead, so that its pitch raises (negative) or lowers
+        # its end site on the brow and its roll tilts that end (positive: the left brow's outer end up)
+        Joint(f"{side}_eyebrow", "skullbase", (0.035 * s, 0.105, 0.045),
+              {"roll": (-15, 15), "pitch": (-20, 15), "yaw": FIXED}, end_site=(0.02 * s, 0.0, 0.05)),
     ]
 
 
@@ -110,7 +112,8 @@ def _mouth() -> list[Joint]:
     the lips, so a corner swings outwards and back (spread, as in "ee") or inwards and forwards (rounded
     and protruded, as in "oo"). The pair follows the body's mirror convention for left and right (as
     shoulder and eyebrow rolls do): ``l_lip_corner.yaw`` spreads when positive, ``r_lip_corner.yaw`` when
-    negative; about 1 mm of corner travel per 2 degrees.
+    negative; about 1 mm of corner travel per 2 degrees. Their roll raises a corner (``l_lip_corner.roll``
+    positive, ``r_lip_corner.roll`` negative, as the brows) and lowers it with the other sign.
     """
     return [
         Joint("lower_lip", "temporomandibular", (0.0, -0.028, 0.028),
@@ -118,9 +121,9 @@ def _mouth() -> list[Joint]:
         Joint("upper_lip", "skullbase", (0.0, -0.018, 0.086),
               {"roll": FIXED, "pitch": (-10, 15), "yaw": FIXED}, end_site=(0.0, -0.004, 0.016)),
         Joint("l_lip_corner", "skullbase", (0.0, -0.025, 0.075),
-              {"roll": FIXED, "pitch": FIXED, "yaw": (-30, 20)}, end_site=(0.026, 0.0, 0.02)),
+              {"roll": (-20, 20), "pitch": FIXED, "yaw": (-30, 20)}, end_site=(0.026, 0.0, 0.02)),
         Joint("r_lip_corner", "skullbase", (0.0, -0.025, 0.075),
-              {"roll": FIXED, "pitch": FIXED, "yaw": (-20, 30)}, end_site=(-0.026, 0.0, 0.02)),
+              {"roll": (-20, 20), "pitch": FIXED, "yaw": (-20, 30)}, end_site=(-0.026, 0.0, 0.02)),
     ]
 
 

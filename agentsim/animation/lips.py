@@ -300,3 +300,78 @@ def curves_driver(name: str, keys: KeyTimes, behaviour, **kw) -> tuple[CurvesDri
     if not channels:
         return None, (note + "; " if note else "") + "no channel moves this body"
     return CurvesDriver(name, keys, channels, curves_duration(behaviour), **kw), note
+
+
+# ------------------------------------------------------------------------------------ phonemes to visemes
+#: The phoneme-to-viseme table: an IPA phoneme (as espeak-ng names them; length marks and stress left out)
+#: -> the viseme of :data:`VISEMES` that shows it. Consonants by place of articulation (bilabials PBM,
+#: labiodentals FV, dentals Th, alveolar stops and nasals D/N, sibilants Z, postalveolars ShCh, velars K,
+#: the approximants R, L and W), vowels by openness and rounding (open Aa/Ah/Ao, mid Eh/Oh/Er, close
+#: Ih/Iy/Uh/Uw). A diphthong shows the viseme of its first element; ``h`` and the glottal stop take the
+#: next phoneme's shape in speech, here the neutral one (Ah). The built-in backend's letter units are
+#: read through :data:`LETTER_VISEMES`.
+PHONEME_VISEMES: dict[str, str] = {
+    "p": "PBM", "b": "PBM", "m": "PBM",
+    "f": "FV", "v": "FV",
+    "θ": "Th", "ð": "Th",
+    "t": "D", "d": "D", "n": "N", "ɾ": "D",
+    "s": "Z", "z": "Z",
+    "ʃ": "ShCh", "ʒ": "ShCh", "tʃ": "ShCh", "dʒ": "ShCh",
+    "k": "K", "ɡ": "K", "g": "K", "ŋ": "K", "x": "K",
+    "ɹ": "R", "r": "R", "l": "L", "ɫ": "L", "w": "W", "j": "Iy", "h": "Ah", "ʔ": "Ah",
+    "i": "Iy", "ɪ": "Ih", "e": "Eh", "ɛ": "Eh", "æ": "Aa", "a": "Aa", "ɑ": "Aa", "ʌ": "Ah", "ə": "Ah",
+    "ɐ": "Ah", "ɜ": "Er", "ɚ": "Er", "ɝ": "Er", "ɒ": "Ao", "ɔ": "Ao", "o": "Oh", "ʊ": "Uh", "u": "Uw",
+    "ɵ": "Uh", "y": "Uw",
+}
+#: The built-in backend's units (letters and letter groups) -> visemes, by the sound the letters spell.
+LETTER_VISEMES: dict[str, str] = {
+    "c": "K", "q": "K", "j": "ShCh", "sh": "ShCh", "ch": "ShCh", "th": "Th", "ph": "FV", "ng": "K",
+    "y": "Iy", "o": "Oh", "u": "Uh", "e": "Eh", "ee": "Iy", "oo": "Uw",
+}
+
+
+def phoneme_viseme(symbol: str) -> str:
+    """The viseme of one phoneme (an IPA symbol, or a built-in backend's letter unit); ``_`` for silence and
+    Ah (the neutral open mouth) for a symbol neither table knows."""
+    s = symbol.strip().replace("ː", "").replace("ˈ", "").replace("ˌ", "")
+    if not s:
+        return "_"
+    for table in (PHONEME_VISEMES, LETTER_VISEMES):
+        for key in (s, s.lower()):
+            if key in table:
+                return table[key]
+    for n in (2, 1):  # a diphthong or affricate by its first element
+        if s[:n] in PHONEME_VISEMES:
+            return PHONEME_VISEMES[s[:n]]
+    return "Ah"
+
+
+@dataclass(frozen=True)
+class VisemeRow:
+    """One phoneme of a speech as heard, and the viseme that shows it (seconds on the run's axis)."""
+
+    block: str
+    behaviour: str
+    word: str
+    phoneme: str
+    viseme: str
+    start_s: float
+    end_s: float
+
+
+def speech_visemes(recording) -> list[VisemeRow]:
+    """The visemes of every speech of a recording, phoneme by phoneme where and as long as it was heard
+    (its playback drift included; a speech stopped early keeps the phonemes that began before the stop)."""
+    rows = []
+    for heard in recording.speech:
+        words = heard.utterance.words
+        speed = 1.0 + heard.drift_ppm * 1e-6
+        for p in heard.utterance.phonemes:
+            a, b = heard.t0 + p.start * speed, heard.t0 + p.end * speed
+            if heard.stopped is not None:
+                if a >= heard.stopped:
+                    continue
+                b = min(b, heard.stopped)
+            word = words[p.word_index].text if 0 <= p.word_index < len(words) else ""
+            rows.append(VisemeRow(heard.block, heard.behaviour, word, p.symbol, phoneme_viseme(p.symbol), a, b))
+    return sorted(rows, key=lambda r: r.start_s)

@@ -93,7 +93,8 @@ def add_outputs(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--poses", metavar="OUT.npz", help="write joint angles per frame (numpy .npz)")
     parser.add_argument("--textgrid", metavar="OUT.TextGrid", help="write words, phones, marks and strokes as a "
                                                                    "Praat TextGrid")
-    parser.add_argument("--csv", metavar="DIR", help="write gestures.csv (one row per pegged behaviour) into DIR")
+    parser.add_argument("--csv", metavar="DIR", help="write gestures.csv (one row per pegged behaviour) and visemes.csv "
+                        "(one row per phoneme heard, with its viseme) into DIR")
     parser.add_argument("--report", metavar="OUT.html", help="write a report to watch and hear in a browser (with "
                                                              "a folder OUT_files beside it)")
 
@@ -132,6 +133,9 @@ def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sour
         write_textgrid(args.textgrid, recording, gestures)
     if args.csv:
         write_csv(Path(args.csv) / "gestures.csv", gestures)
+        from agentsim.animation.lips import VisemeRow, speech_visemes
+
+        write_csv(Path(args.csv) / "visemes.csv", speech_visemes(recording), list(VisemeRow.__dataclass_fields__))
     if args.report:
         from agentsim.media.report import write_report
 

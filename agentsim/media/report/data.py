@@ -28,8 +28,10 @@ import numpy as np
 
 #: Highest frame rate of the regular grid of frames sent to the page (strokes add frames of their own).
 MAX_FPS = 30.0
-#: Leaf joints whose end site the page draws as a point of its own (head top, jaw, finger tips, toes).
-END_SITES = ("skullbase", "temporomandibular", "l_fingers", "r_fingers", "l_ankle", "r_ankle")
+#: Leaf joints whose end site the page draws as a point of its own (head top, jaw, finger tips, toes, the brows
+#: and the mouth corners, which move by turning about their joint).
+END_SITES = ("skullbase", "temporomandibular", "l_fingers", "r_fingers", "l_ankle", "r_ankle", "l_eyebrow",
+             "r_eyebrow", "l_lip_corner", "r_lip_corner")
 #: Joints of the face: drawn smaller.
 FACE = ("temporomandibular", "lower_lip", "upper_lip", "l_lip_corner", "r_lip_corner", "l_eyeball", "r_eyeball",
         "l_eyelid", "r_eyelid", "l_eyebrow", "r_eyebrow")
