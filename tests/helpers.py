@@ -207,3 +207,101 @@ def receive(ws, done, timeout: float = 10.0) -> list[tuple[float, dict]]:
         if done(message):
             return got
     raise AssertionError(f"timed out after {len(got)} messages")
+
+
+# ------------------------------------------------------------------------------------------------ BVH
+class BvhFk:
+    """A BVH file read and composed here, from its text alone (not the project's kinematics nor a BVH
+    library): each joint's offset, channels and End Site, and every frame's world positions of joints and
+    end sites (``Zrotation Xrotation Yrotation`` channels compose as R = Rz Rx Ry, in degrees)."""
+
+    def __init__(self, path):
+        import numpy as np
+
+        words = open(path).read().split()
+        self.names, self.parent, self.offset, self.channels, self.site = [], {}, {}, {}, {}
+        stack, i, last = [], 0, None
+        while words[i] != "MOTION":
+            w = words[i]
+            if w in ("ROOT", "JOINT"):
+                last = words[i + 1]
+                self.names.append(last)
+                self.parent[last] = stack[-1] if stack else None
+                i += 2
+            elif w == "End":
+                last = ("site", stack[-1])
+                i += 2
+            elif w == "{":
+                stack.append(last)
+                i += 1
+            elif w == "}":
+                stack.pop()
+                i += 1
+            elif w == "OFFSET":
+                v = np.array([float(x) for x in words[i + 1:i + 4]])
+                if isinstance(stack[-1], tuple):
+                    self.site[stack[-1][1]] = v
+                else:
+                    self.offset[stack[-1]] = v
+                i += 4
+            elif w == "CHANNELS":
+                n = int(words[i + 1])
+                self.channels[stack[-1]] = words[i + 2:i + 2 + n]
+                i += 2 + n
+            else:
+                i += 1
+        frames = int(words[i + 2])
+        self.frame_time = float(words[i + 5])
+        data = np.array([float(x) for x in words[i + 6:]]).reshape(frames, -1)
+        self.frames = frames
+        self.column = {}
+        k = 0
+        for name in self.names:
+            for c in self.channels[name]:
+                self.column[(name, c)] = k
+                k += 1
+        self.data = data
+        self.world = self._compose()
+
+    def _compose(self):
+        import numpy as np
+
+        def axis(angle, which):
+            a = np.radians(angle)
+            c, s = np.cos(a), np.sin(a)
+            m = np.zeros((len(a), 3, 3))
+            i, j = {"X": (1, 2), "Y": (2, 0), "Z": (0, 1)}[which]
+            k = 3 - i - j
+            m[:, k, k] = 1
+            m[:, i, i], m[:, i, j], m[:, j, i], m[:, j, j] = c, -s, s, c
+            return m
+
+        out = {}
+        for name in self.names:
+            rot = np.tile(np.eye(3), (self.frames, 1, 1))
+            pos = np.zeros((self.frames, 3))
+            for c in self.channels[name]:
+                col = self.data[:, self.column[(name, c)]]
+                if c.endswith("position"):
+                    pos[:, "XYZ".index(c[0])] = col
+                else:
+                    rot = rot @ axis(col, c[0])
+            up = self.parent[name]
+            if up is None:
+                out[name] = (rot, pos + self.offset[name])
+            else:
+                prot, ppos = out[up]
+                out[name] = (prot @ rot, ppos + prot @ self.offset[name])
+        return out
+
+    def position(self, name):
+        """World positions (frames, 3) of a joint, or of a joint's End Site as ``name.end``."""
+        if name.endswith(".end"):
+            joint = name[:-4]
+            rot, pos = self.world[joint]
+            return pos + rot @ self.site[joint]
+        return self.world[name][1]
+
+    def time(self, t: float) -> int:
+        """The frame at time t (s)."""
+        return int(round(t / self.frame_time))

@@ -254,8 +254,8 @@ def test_frames_sent_are_at_most_30_per_second():
 
 
 def test_a_long_run_is_sent_small(tmp_path):
-    """6.7 minutes at 60 fps on the 33-joint body: the positions go as about 2.9 MB of base64, 30 frames a
-    second, and the page's data file stays out of the HTML."""
+    """6.7 minutes at 60 fps on the 63-joint body (hands of 15 joints each): the positions go as base64 of two
+    bytes a coordinate (about 7.6 MB), 30 frames a second, and the page's data file stays out of the HTML."""
     body = Body()
     fps, seconds = 60.0, 402.0
     n = int(seconds * fps)
@@ -271,7 +271,7 @@ def test_a_long_run_is_sent_small(tmp_path):
     poses = (tmp_path / "long_files" / "poses.js").stat().st_size
     points = len(report_data.point_names(body)[0])
     expected = (n // 2 + 1) * points * 3 * 2 * 4 / 3
-    assert len(body.joints) == 33 and poses < expected * 1.02 + 100_000
+    assert len(body.joints) == 63 and poses < expected * 1.02 + 100_000
     assert path.stat().st_size < 8000
     frames, xyz = report_data.decode_poses(report_data.read_js_assignment(
         (tmp_path / "long_files" / "poses.js").read_text(), "REPORT_POSES"))

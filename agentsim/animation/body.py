@@ -70,9 +70,56 @@ def _arm(side: str) -> list[Joint]:
         Joint(f"{side}_wrist", f"{side}_elbow", (0.0, -0.26, 0.0),
               {"roll": (-40, 40), "pitch": (-80, 80), "yaw": FIXED}),
         Joint(f"{side}_fingers", f"{side}_wrist", (0.0, -0.09, 0.0),
-              {"roll": (-100, 10) if side == "l" else (-10, 100), "pitch": FIXED, "yaw": FIXED},
-              end_site=(0.0, -0.09, 0.0)),
+              {"roll": (-100, 10) if side == "l" else (-10, 100), "pitch": FIXED, "yaw": FIXED}),
+        *_hand(side),
     ]
+
+
+#: The four fingers: the knuckle (metacarpophalangeal joint) relative to the middle of the knuckles (the
+#: ``fingers`` joint), then the lengths of the three phalanges (metres).
+FINGERS = {"index": ((0.0, 0.004, 0.026), (0.045, 0.026, 0.020)),
+           "middle": ((0.0, 0.0, 0.008), (0.049, 0.030, 0.021)),
+           "ring": ((0.0, -0.003, -0.010), (0.045, 0.028, 0.020)),
+           "pinky": ((0.0, -0.010, -0.026), (0.035, 0.020, 0.018))}
+#: The names of the hand's joints on one side (without the ``l_``/``r_`` prefix), in H-Anim's naming.
+HAND_JOINTS = ("thumb1", "thumb2", "thumb3", *(f"{f}{k}" for f in FINGERS for k in (1, 2, 3)))
+
+
+def _hand(side: str) -> list[Joint]:
+    """H-Anim's level-of-articulation-2 hand: the thumb (``thumb1`` at the carpometacarpal joint, ``thumb2``,
+    ``thumb3``) on the wrist, and four fingers of three joints each (``index1`` at the knuckle, ``index2``,
+    ``index3``; middle, ring, pinky) on the ``fingers`` joint, which stands for the knuckles as a whole and
+    whose roll still curls all four (as before there were fingers); each end site is a finger tip.
+
+    With the arm hanging the palm faces the thigh (the left palm -X), the fingers point down and the thumb
+    is in front (+Z). A finger flexes towards the palm by its ``roll`` (negative on the left, positive on
+    the right, as ``fingers.roll``); the knuckle's ``pitch`` spreads the finger (positive: towards the
+    little finger, negative: towards the thumb, on either side). The thumb's ``roll`` brings it across the
+    palm (the same signs as the fingers), its ``pitch`` swings it towards the index (negative: away), and
+    ``thumb1.yaw`` turns it to oppose the fingers.
+    """
+    s = 1.0 if side == "l" else -1.0
+    flex = (-100, 15) if side == "l" else (-15, 100)
+    joints = []
+    for finger, (knuckle, (a, b, c)) in FINGERS.items():
+        joints += [
+            Joint(f"{side}_{finger}1", f"{side}_fingers", knuckle, {"roll": flex, "pitch": (-20, 20), "yaw": FIXED}),
+            Joint(f"{side}_{finger}2", f"{side}_{finger}1", (0.0, -a, 0.0), {"roll": flex, "pitch": FIXED,
+                                                                            "yaw": FIXED}),
+            Joint(f"{side}_{finger}3", f"{side}_{finger}2", (0.0, -b, 0.0), {"roll": flex, "pitch": FIXED,
+                                                                            "yaw": FIXED},
+                  end_site=(0.0, -c, 0.0)),
+        ]
+    joints += [
+        Joint(f"{side}_thumb1", f"{side}_wrist", (-0.012 * s, -0.022, 0.022),
+              {"roll": flex, "pitch": (-30, 60), "yaw": (-60, 60)}),
+        Joint(f"{side}_thumb2", f"{side}_thumb1", (0.0, -0.032, 0.018), {"roll": flex, "pitch": (-10, 30),
+                                                                         "yaw": FIXED}),
+        Joint(f"{side}_thumb3", f"{side}_thumb2", (0.0, -0.030, 0.006), {"roll": flex, "pitch": FIXED,
+                                                                         "yaw": FIXED},
+              end_site=(0.0, -0.024, 0.0)),
+    ]
+    return joints
 
 
 def _leg(side: str) -> list[Joint]:

@@ -26,15 +26,17 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
+from agentsim.animation.body import FINGERS, HAND_JOINTS
+
 #: Highest frame rate of the regular grid of frames sent to the page (strokes add frames of their own).
 MAX_FPS = 30.0
-#: Leaf joints whose end site the page draws as a point of its own (head top, jaw, finger tips, toes, the brows
-#: and the mouth corners, which move by turning about their joint).
-END_SITES = ("skullbase", "temporomandibular", "l_fingers", "r_fingers", "l_ankle", "r_ankle", "l_eyebrow",
-             "r_eyebrow", "l_lip_corner", "r_lip_corner")
-#: Joints of the face: drawn smaller.
+#: Leaf joints whose end site the page draws as a point of its own (head top, jaw, finger and thumb tips, toes,
+#: the brows and the mouth corners, which move by turning about their joint).
+END_SITES = ("skullbase", "temporomandibular", *(f"{s}_{f}3" for s in "lr" for f in ("thumb", *FINGERS)),
+             "l_ankle", "r_ankle", "l_eyebrow", "r_eyebrow", "l_lip_corner", "r_lip_corner")
+#: Joints of the face and of the hands: drawn smaller.
 FACE = ("temporomandibular", "lower_lip", "upper_lip", "l_lip_corner", "r_lip_corner", "l_eyeball", "r_eyeball",
-        "l_eyelid", "r_eyelid", "l_eyebrow", "r_eyebrow")
+        "l_eyelid", "r_eyelid", "l_eyebrow", "r_eyebrow", *(f"{s}_{j}" for s in "lr" for j in HAND_JOINTS))
 #: The sync point names of a phase's start, and what the phase that starts there is called.
 PHASES = {"start": "preparation", "ready": "pre-stroke hold", "strokeStart": "stroke", "stroke": "stroke",
           "strokeEnd": "post-stroke hold", "relax": "retraction", "attackPeak": "stroke"}
