@@ -23,6 +23,7 @@ from agentsim.animation.head import GazeDriver, HeadDriver, HeadTurnDriver
 from agentsim.animation.lips import LipsDriver, curves_driver, lips_values
 from agentsim.animation.manager import DriverManager
 from agentsim.animation.motion import KeyTimes, ReplacementGroup
+from agentsim.animation.murml import Form, MurmlDriver, MurmlKeyframeDriver, form_of, keyframe_channels
 from agentsim.animation.pose import (POSTURES, LocomotionDriver, PoseDriver, SpeechJawDriver, TransitionDriver,
                                      face_values)
 from agentsim.animation.scene import Scene, offset_target
@@ -44,6 +45,7 @@ class UnitInfo:
     stop: float | None = None
     target: list[float] | None = None
     note: str = ""
+    form: object = field(default=None, repr=False)  # a MURML gesture's form (agentsim.animation.murml.Form)
 
     def as_dict(self) -> dict:
         return {"block": self.block, "id": self.id, "type": self.type, "lexeme": self.lexeme,
@@ -100,6 +102,19 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
             else None
         name = f"{record.block}:{record.id}"
         common = {"stop": stop, "time_source": ts}
+        if b.type in ("murmlgesture", "murmlface"):
+            form = form_of(b)
+            if form.get("keyframing"):
+                channels, unknown = keyframe_channels(form, manager.body)
+                if unknown:
+                    info.note = f"no DOFs for {', '.join(unknown)}"
+                if channels:
+                    drv = manager.add(MurmlKeyframeDriver(name, keys, channels, **common))
+                    info.drivers.append(drv.name)
+                continue
+            info.form = Form(form, manager.body)
+            arm_items.append((record, keys, info, common))
+            continue
         if b.type in ("gesture", "pointing"):
             arm_items.append((record, keys, info, common))
             continue
@@ -248,7 +263,7 @@ def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> Non
     for item in ordered:
         record, keys, info, common = item
         b = record.behaviour
-        sides = explicit_modes.get(b.attributes.get("mode", "").upper())
+        sides = info.form.sides if info.form is not None else explicit_modes.get(b.attributes.get("mode", "").upper())
         if sides is None:
             if b.type == "pointing":
                 first = "l" if scene.point(b.attributes.get("target", ""))[0] > 0 else "r"
@@ -290,7 +305,9 @@ def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> Non
         last[s] = item
         name = f"{record.block}:{record.id}" + (f" ({'left' if s == 'l' else 'right'})" if hands[id(item)] > 1
                                                 else "")
-        if b.type == "pointing":
+        if info.form is not None:
+            drv = MurmlDriver(name, keys, s, info.form, acquire=acquire, **common)
+        elif b.type == "pointing":
             target = _bml_target(scene, b)
             info.target = [float(x) for x in target]
             drv = PointingDriver(name, keys, s, target, acquire=acquire, **common)

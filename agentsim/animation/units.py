@@ -7,6 +7,8 @@ motion between the keys by linear time warping.
 
 from __future__ import annotations
 
+import functools
+import json
 import math
 from dataclasses import dataclass
 
@@ -75,8 +77,36 @@ _BY_TYPE = {
 }
 
 
+#: A MURML gesture made of static constraints: the hand reaches its form by ready and holds it through the
+#: stroke; a dynamic one moves through the stroke (strokeStart to strokeEnd).
+#                                 start ready sStart stroke sEnd relax  end
+MURML_STATIC = MotionUnit("murml", (0.0, 0.50, 0.55, 0.60, 0.80, 1.00, 1.45), min_duration=0.15)
+MURML_DYNAMIC = MotionUnit("murml", (0.0, 0.45, 0.45, 0.75, 1.05, 1.20, 1.65), min_duration=0.15)
+
+
+@functools.lru_cache(maxsize=256)
+def _murml_unit(kind: str, description: str) -> MotionUnit:
+    form = json.loads(description) if description else {}
+    frames = (form.get("keyframing") or {}).get("frames")
+    if frames:
+        # a key frame animation: its frames span start (at ftime 0) to end (at the last ftime)
+        d = max(frames[-1]["ftime"], 0.1)
+        keys = (0.0, 0.1 * d, 0.1 * d, 0.5 * d, 0.9 * d, 0.9 * d, d) if kind == "murmlgesture" else (
+            0.0, 0.1 * d, 0.9 * d, d)
+        return MotionUnit("murml keyframes", keys, min_duration=0.05)
+    if kind == "murmlface":
+        return FACE
+
+    def dynamic(items) -> bool:
+        return any(c["op"] == "dynamic" or dynamic(c.get("children", ())) for c in items)
+
+    return MURML_DYNAMIC if dynamic(form.get("constraints", ())) else MURML_STATIC
+
+
 def motion_unit(behaviour: Behaviour) -> MotionUnit:
     """The motion unit a behaviour is bound to (the gesture binding)."""
+    if behaviour.type in ("murmlgesture", "murmlface"):
+        return _murml_unit(behaviour.type, behaviour.params.get("murml", ""))
     lexeme = behaviour.attributes.get("lexeme", "").upper()
     if behaviour.type == "gesture":
         return BEAT if lexeme in ("", "BEAT") else GESTURE

@@ -11,6 +11,7 @@ strictly, one BML 1.0 block; leniently (the default), also BML as other realizer
 from __future__ import annotations
 
 import functools
+import json
 import itertools
 import math
 import re
@@ -399,10 +400,23 @@ class _Reader:
                 continue  # the speech reading took what it could, and said what it could not
             if child.local not in PARAMETER_CHILDREN and (self.is_bml(child) or extension):
                 self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"{bid}: child <{child.tag}> ignored", child, [bid])
+            elif kind.name in ("murmlgesture", "murmlface") and child.local == "murml-description":
+                from agentsim.bml.murml import MurmlError, read_description
+
+                try:
+                    form = read_description(child, "face" if kind.name == "murmlface" else "gesture")
+                except MurmlError as exc:
+                    self.warn("PARSING_FAILURE", f"{bid}: {exc}; behaviour ignored", child, [bid])
+                    return
+                beh.params["murml"] = json.dumps(form, separators=(",", ":"))
             elif extension and child.local == "trajectory":
                 beh.params.update({f"trajectory.{k}": v for k, v in child.attrs.items()})
             elif extension and child.local == "parameter" and "name" in child.attrs:
                 beh.params[child.attrs["name"]] = child.attrs.get("value", "")
+        if kind.name in ("murmlgesture", "murmlface") and "murml" not in beh.params:
+            self.warn("PARSING_FAILURE", f"{bid}: <{node.tag}> has no <murml-description>; behaviour ignored", node,
+                      [bid])
+            return
         missing = [name for name in REQUIRED_ATTRIBUTES.get(kind.name, ()) if not node.attrs.get(name, "").strip()]
         if missing:
             self.warn("PARSING_FAILURE", f"{bid}: <{node.tag}> needs {' and '.join(missing)}; behaviour ignored",

@@ -7,11 +7,14 @@ BML_NAMESPACE = "http://www.bml-initiative.org/bml/bml-1.0"
 #: AsapRealizer's extensions: BMLA (continuous interaction) and BMLT (sound files, transitions).
 BMLA_NAMESPACE = "http://www.asap-project.org/bmla"
 BMLT_NAMESPACE = "http://hmi.ewi.utwente.nl/bmlt"
+#: MURML, the form language of gestures AsapRealizer reads inside BML (:mod:`agentsim.bml.murml`).
+MURML_NAMESPACE = "http://www.techfak.uni-bielefeld.de/ags/soa/murml"
 
 #: The behaviour elements of each extension namespace (their types are in the core's BEHAVIOUR_TYPES).
 EXTENSION_BEHAVIOURS = {
     BMLA_NAMESPACE: {"interrupt", "activate", "parametervaluechange"},
     BMLT_NAMESPACE: {"audiofile", "transition"},
+    MURML_NAMESPACE: {"murmlgesture", "murmlface"},
 }
 
 #: Behaviour types that no BML namespace defines: only the lenient reader makes them, from other realizers'
@@ -25,7 +28,8 @@ BMLA_BLOCK_ATTRIBUTES = {
 }
 
 # Children of behaviours that carry parameters, not behaviours of their own.
-PARAMETER_CHILDREN = {"stance", "pose", "description", "text", "sync", "lexeme", "trajectory", "parameter"}
+PARAMETER_CHILDREN = {"stance", "pose", "description", "text", "sync", "lexeme", "trajectory", "parameter",
+                      "murml-description"}
 
 #: Every plain (not namespaced) behaviour attribute some part of this realizer reads, besides the sync
 #: points: BML 1.0's, and the parameters of agentsim's engines. Any other is ignored, with a warning.

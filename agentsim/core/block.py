@@ -207,6 +207,9 @@ BEHAVIOUR_TYPES: dict[str, BehaviourType] = {
         BehaviourType("parametervaluechange", SHIFT_SYNCS),
         BehaviourType("audiofile", SHIFT_SYNCS),
         BehaviourType("transition", SHIFT_SYNCS),
+        # MURML (AsapRealizer's form language of gestures): a gesture or face made from its form
+        BehaviourType("murmlgesture", GESTURE_SYNCS),
+        BehaviourType("murmlface", FACE_SYNCS),
         # What other realizers' BML is mapped to where BML 1.0 has nothing alike (read only by the lenient
         # reader): a viseme of lip sync, keyframed face channels, and a sync point without motion
         BehaviourType("lips", GAZE_SYNCS),

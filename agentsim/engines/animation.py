@@ -15,7 +15,7 @@ class AnimationPlanner(Planner):
 
     behaviour_types = ("gesture", "pointing", "head", "gaze", "gazeShift", "headDirectionShift", "faceLexeme",
                        "faceFacs", "face", "faceShift", "posture", "postureShift", "locomotion", "transition",
-                       "lips", "curves")
+                       "lips", "curves", "murmlgesture", "murmlface")
 
     def preferred(self, behaviour: Behaviour) -> list[float]:
         if behaviour.type == "curves":
