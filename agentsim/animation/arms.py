@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agentsim.animation.drivers import EPSILON, PRIORITY
+from agentsim.animation.lexicon import builtin as builtin_lexicon
 from agentsim.animation.motion import EASE, HOLD, MIN_PREP, KeyTimes, MotionDriver, blend_in, frac
 
 
@@ -69,27 +70,18 @@ class StrokePath:
                           self.twist)
 
 
-#: Gesture lexemes and their strokes (unknown lexemes use DEFAULT).
-GESTURE_FORMS: dict[str, StrokePath] = {
-    "BEAT": StrokePath((-0.04, -0.27, 0.33), (-0.03, -0.37, 0.35), (-0.03, -0.335, 0.35), -8.0, 14.0, 35.0),
-    "CHOP": StrokePath((0.0, -0.08, 0.30), (0.0, -0.30, 0.38), (0.0, -0.25, 0.38), 0.0, 6.0, 8.0),
-    "OFFER": StrokePath((0.04, -0.24, 0.28), (0.12, -0.33, 0.40), (0.12, -0.31, 0.40), 10.0, -8.0, 10.0, 50.0),
-    "POINT_DOWN": StrokePath((0.02, -0.20, 0.30), (0.04, -0.34, 0.38), (0.04, -0.31, 0.38), -15.0, 8.0, 70.0),
-    "DEFAULT": StrokePath((0.0, -0.18, 0.34), (0.0, -0.32, 0.37), (0.0, -0.28, 0.37), -5.0, 10.0, 15.0),
-}
+#: Gesture lexemes and their strokes (unknown lexemes use DEFAULT), from the lexicon
+#: (``data/lexicon.toml``; :mod:`agentsim.animation.lexicon` adds users' files).
+GESTURE_FORMS: dict[str, StrokePath] = {name: StrokePath(**v) for name, v in builtin_lexicon()["strokes"].items()}
 
 
 # --------------------------------------------------------------------------------------------- conducting
 #: Where conducting happens: the centre of the beat pattern relative to the shoulder (outward, up, forward).
-CONDUCT_CENTER = (0.0, -0.20, 0.38)
+CONDUCT_CENTER = builtin_lexicon()["conducting"]["center"]
 #: Conducting patterns by beats per bar: each beat's ictus offset from the centre (outward, up, forward),
-#: the height the hand falls from into it, and how high it rebounds.
-CONDUCT_PATTERNS: dict[int, list[tuple[tuple[float, float, float], float, float]]] = {
-    2: [((0.0, 0.0, 0.0), 0.20, 0.12), ((0.06, 0.05, 0.0), 0.12, 0.12)],
-    3: [((0.0, 0.0, 0.0), 0.20, 0.10), ((0.17, 0.03, 0.0), 0.12, 0.08), ((0.06, 0.08, 0.0), 0.10, 0.12)],
-    4: [((0.0, 0.0, 0.0), 0.20, 0.10), ((-0.14, 0.03, 0.0), 0.12, 0.07), ((0.16, 0.03, 0.0), 0.12, 0.08),
-        ((0.04, 0.09, 0.0), 0.10, 0.12)],
-}
+#: the height the hand falls from into it, and how high it rebounds (from the lexicon too).
+CONDUCT_PATTERNS: dict[int, list[tuple[tuple[float, float, float], float, float]]] = dict(
+    builtin_lexicon()["conducting"]["patterns"])
 
 _CONDUCT = re.compile(r"^CONDUCT(?:ING)?_(\d+)_(\d+)(?:_(\d+))?$")
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import bisect
 import collections
+import json
 
 import math
 from dataclasses import dataclass, field
@@ -22,6 +23,7 @@ from agentsim.animation.drivers import PRIORITY
 from agentsim.animation.head import GazeDriver, HeadDriver, HeadTurnDriver
 from agentsim.animation.lips import LipsDriver, curves_driver, lips_values
 from agentsim.animation.manager import DriverManager
+from agentsim.animation.lexicon import murml_form
 from agentsim.animation.motion import KeyTimes, ReplacementGroup
 from agentsim.animation.murml import Form, MurmlDriver, MurmlKeyframeDriver, form_of, keyframe_channels
 from agentsim.animation.pose import (POSTURES, LocomotionDriver, PoseDriver, SpeechJawDriver, TransitionDriver,
@@ -116,6 +118,11 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
             arm_items.append((record, keys, info, common))
             continue
         if b.type in ("gesture", "pointing"):
+            form = murml_form(lexeme) if b.type == "gesture" and lexeme else None
+            if form is not None:  # a lexeme whose lexicon entry is a MURML form (its mode may mirror it)
+                mode = b.attributes.get("mode", "").upper()
+                hand = "l" if mode in ("LEFT_HAND", "LEFT") else "r" if mode in ("RIGHT_HAND", "RIGHT") else None
+                info.form = Form(json.loads(form), manager.body, hand)
             arm_items.append((record, keys, info, common))
             continue
         if b.type == "lips":

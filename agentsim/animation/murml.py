@@ -183,11 +183,17 @@ class Track:
 class Form:
     """A MURML form as tracks per arm (``l``, ``r``) and slot, evaluated on a body."""
 
-    def __init__(self, form: dict, body):
+    def __init__(self, form: dict, body, hand: str | None = None):
+        """``hand`` (``l`` or ``r``, for a lexicon's form played with a mode): a form of the other arm alone
+        is mirrored onto that one."""
         self.body = body
         self.tracks: dict[str, dict[str, Track]] = {}
         for c in form.get("constraints", ()):
             self._add(c, 0.0, 1.0, None)
+        if hand is not None and set(self.tracks) == {"l" if hand == "r" else "r"}:
+            self.tracks = {}
+            for c in form.get("constraints", ()):
+                self._add(c, 0.0, 1.0, (hand, "x"))
         for side, slots in self.tracks.items():
             self._defaults(side, slots)
 

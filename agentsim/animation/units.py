@@ -109,6 +109,11 @@ def motion_unit(behaviour: Behaviour) -> MotionUnit:
         return _murml_unit(behaviour.type, behaviour.params.get("murml", ""))
     lexeme = behaviour.attributes.get("lexeme", "").upper()
     if behaviour.type == "gesture":
+        from agentsim.animation.lexicon import murml_form
+
+        form = murml_form(lexeme) if lexeme else None
+        if form is not None:  # a lexeme of the lexicon that is a MURML form
+            return _murml_unit("murmlgesture", form)
         return BEAT if lexeme in ("", "BEAT") else GESTURE
     if behaviour.type == "head":
         return SHAKE if lexeme == "SHAKE" else NOD

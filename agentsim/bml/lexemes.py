@@ -37,7 +37,9 @@ def fallback(tag: str, attrs: Mapping[str, str]) -> tuple[str, str] | None:
     if tag in ("face", "faceLexeme", "faceShift"):
         return None if lexeme.upper() in FACE_LEXEMES else (lexeme, "no motion")
     if tag == "gesture":
-        known = (lexeme.upper() in GESTURE_FORMS or lexeme.upper() in SIGNALS
+        from agentsim.animation.lexicon import murml_form
+
+        known = (lexeme.upper() in GESTURE_FORMS or lexeme.upper() in SIGNALS or murml_form(lexeme) is not None
                  or conducting_meter(lexeme.upper()) is not None)
         return None if known else (lexeme, "a generic gesture")
     if tag in ("posture", "postureShift"):

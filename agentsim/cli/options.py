@@ -185,3 +185,18 @@ def explained(result: dict, units: dict[str, str]) -> dict:
     from agentsim.media import GLOSSARY
 
     return {**tidy(result), "units": units, "glossary": GLOSSARY}
+
+
+def add_lexicon(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--lexicon", action="append", default=[], metavar="FILE",
+                        help="add the gesture lexemes of a lexicon file (TOML: strokes or MURML forms; see "
+                             "'agentsim lexicon list' and the README's recipe); repeatable, later files win")
+
+
+def use_lexicons(args: argparse.Namespace) -> None:
+    """Load the ``--lexicon`` files (a usage error naming the file and the table if one cannot be used)."""
+    if getattr(args, "lexicon", None):
+        from agentsim.animation.lexicon import use_lexicon
+
+        for path in args.lexicon:
+            use_lexicon(path)

@@ -40,6 +40,7 @@ def add_parsers(commands) -> None:
     add_outputs(realize)
     options.add_fps(realize, "--bvh/--poses/--report")
     options.add_seed(realize, "the background motion (blinks, sway)")
+    options.add_lexicon(realize)
     realize.set_defaults(handler=realize_files)
 
     plot = commands.add_parser(
@@ -57,7 +58,18 @@ def add_parsers(commands) -> None:
                       help="draw the run up to this time (seconds of the run; default its end)")
     options.add_anticipators(plot)
     options.add_tts(plot)
+    options.add_lexicon(plot)
     plot.set_defaults(handler=plot_timeline)
+
+    lexicon = commands.add_parser("lexicon", help="the gesture lexicon: what <gesture lexeme=...> plays",
+                                  description="The gesture lexemes known (built in, and those of --lexicon "
+                                              "files): each one's name, kind (a stroke or a MURML form) and "
+                                              "where it comes from.")
+    lexicon_actions = lexicon.add_subparsers(dest="action", required=True)
+    lexicon_list = lexicon_actions.add_parser("list", help="the gesture lexemes, their kind and source",
+                                              description="One line a lexeme: name, kind, source.")
+    options.add_lexicon(lexicon_list)
+    lexicon_list.set_defaults(handler=list_lexicon)
 
     anticipators = commands.add_parser("anticipators", help="installed anticipators, and a new plugin",
                                        description="The anticipators BML can peg behaviours to "
@@ -169,10 +181,24 @@ def resolve(path: str) -> Path:
     return path if path == "-" else find(path)
 
 
+def list_lexicon(args: argparse.Namespace) -> int:
+    """``agentsim lexicon list``: the gesture lexemes, one a line (name, kind, source)."""
+    options.use_lexicons(args)
+    from agentsim.animation.lexicon import lexicon_rows
+
+    rows = lexicon_rows()
+    width = max(len(name) for name, _, _ in rows)
+    kinds = max(len(kind) for _, kind, _ in rows)
+    for name, kind, source in rows:
+        print(f"{name:<{width}}  {kind:<{kinds}}  {source}")
+    return 0
+
+
 def realize_files(args: argparse.Namespace) -> int:
     from agentsim.core.feedback import to_json
     from agentsim.realizer import Realizer
 
+    options.use_lexicons(args)
     documents = [(path, read_document(path)) for path in args.files]
     at = args.at if args.at is not None else [0.0] * len(documents)
     if len(at) != len(documents):
@@ -217,6 +243,7 @@ def plot_timeline(args: argparse.Namespace) -> int:
     of it (a usage error, before anything runs, if the window is not seconds that end after they start)."""
     import math
 
+    options.use_lexicons(args)
     from agentsim.animation import evaluate_poses, plot_timeline as draw, plot_timelines
     from agentsim.animation.timeline import run_duration
     from agentsim.realizer import Realizer
