@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from agentsim.bml.dialects import find_blocks, fold_case, without_doctype
-from agentsim.bml.tree import read_forest
+from agentsim.core.xmltree import read_forest
 from agentsim.errors import BMLError
 from agentsim.realizer import Realizer
 

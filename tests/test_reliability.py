@@ -16,7 +16,7 @@ import pytest
 
 from anticipators.metronome import Metronome
 from agentsim.bml.parser import MAX_BEHAVIOURS, MAX_DOCUMENT, guess_block_id, parse_document
-from agentsim.bml.tree import MAX_DEPTH
+from agentsim.core.xmltree import MAX_DEPTH
 from agentsim.core.block import Block
 from agentsim.engines.speech import SpeechConfig
 from agentsim.realizer import Realizer

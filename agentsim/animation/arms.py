@@ -21,11 +21,14 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from agentsim.animation.drivers import EPSILON, PRIORITY
+from agentsim.animation import lexicon as lexicon_data
 from agentsim.animation.lexicon import builtin as builtin_lexicon
+from agentsim.errors import UsageError
 from agentsim.animation.motion import EASE, HOLD, MIN_PREP, KeyTimes, MotionDriver, blend_in, frac
 
 
@@ -327,3 +330,42 @@ class KeyframeDriver(MotionDriver):
                 prev = v
             out[name] = a
         self.write_held(out)
+
+
+def use_lexicon(path: str | Path) -> list[str]:
+    """Add the lexemes of a lexicon file (replacing those of the same name) for the rest of the process;
+    returns their names."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise UsageError(f"cannot read the lexicon {path}: {exc.strerror or exc}") from None
+    lexicon = lexicon_data.read_lexicon(text, str(path))
+    builtin_lexicon()
+    for name, stroke in lexicon["strokes"].items():
+        GESTURE_FORMS[name] = StrokePath(**stroke)
+        lexicon_data.MURML_LEXEMES.pop(name, None)
+        lexicon_data.SOURCES[name] = str(path)
+    for name, form in lexicon["forms"].items():
+        lexicon_data.MURML_LEXEMES[name] = form
+        GESTURE_FORMS.pop(name, None)
+        lexicon_data.SOURCES[name] = str(path)
+    global CONDUCT_CENTER
+    if lexicon["conducting"] is not None:
+        CONDUCT_CENTER = lexicon["conducting"]["center"]
+        CONDUCT_PATTERNS.clear()
+        CONDUCT_PATTERNS.update(lexicon["conducting"]["patterns"])
+        lexicon_data.SOURCES["CONDUCT_*"] = str(path)
+    return [*lexicon["strokes"], *lexicon["forms"]]
+
+
+def lexicon_rows() -> list[tuple[str, str, str]]:
+    """(lexeme, kind, where it comes from) of every gesture lexeme known now, by name."""
+    builtin_lexicon()
+    rows = [(name, "stroke", lexicon_data.SOURCES.get(name, lexicon_data.BUILTIN)) for name in GESTURE_FORMS]
+    rows += [(name, "form (MURML)", lexicon_data.SOURCES.get(name, lexicon_data.BUILTIN))
+             for name in lexicon_data.MURML_LEXEMES]
+    meters = ", ".join(str(m) for m in sorted(CONDUCT_PATTERNS))
+    rows.append(("CONDUCT_<beats>_<unit>[_<beat>]", f"conducting (patterns of {meters} beats; others alternate)",
+                 lexicon_data.SOURCES.get("CONDUCT_*", lexicon_data.BUILTIN)))
+    return sorted(rows)

@@ -1,5 +1,5 @@
 """The gesture lexicon as data: what ``<gesture lexeme="NAME">`` plays, read from ``data/lexicon.toml`` and
-from the files users add (``agentsim realize --lexicon FILE``, :func:`use_lexicon`), like Greta's gestuary
+from the files users add (``agentsim realize --lexicon FILE``, :func:`agentsim.animation.arms.use_lexicon`), like Greta's gestuary
 or SmartBody's gesture map. The file's comments say what a lexeme holds: a stroke (the wrist's path into
 and out of its ictus) or a form (a MURML description, played as :mod:`agentsim.animation.murml` plays a
 ``<murmlgesture>``), and the conducting patterns.
@@ -13,7 +13,6 @@ import functools
 import json
 import tomllib
 from importlib import resources
-from pathlib import Path
 
 from agentsim.errors import UsageError
 
@@ -21,7 +20,7 @@ STROKE_KEYS = {"top": 3, "bottom": 3, "rebound": 3}
 STROKE_NUMBERS = {"wrist": -5.0, "flick": 10.0, "curl": 15.0, "twist": 0.0}
 BUILTIN = "built in"
 
-#: A lexeme's MURML form (JSON, as :func:`agentsim.bml.murml.read_description` gives it), by name.
+#: A lexeme's MURML form (JSON, as :func:`agentsim.animation.murml_form.read_description` gives it), by name.
 MURML_LEXEMES: dict[str, str] = {}
 #: Where each lexeme was last defined (``built in`` or a file), by name.
 SOURCES: dict[str, str] = {}
@@ -51,8 +50,8 @@ def _stroke(name: str, entry: dict, source: str) -> dict:
 
 
 def _form(name: str, text: str, source: str) -> str:
-    from agentsim.bml.murml import MurmlError, read_description
-    from agentsim.bml.tree import read_forest
+    from agentsim.animation.murml_form import MurmlError, read_description
+    from agentsim.core.xmltree import read_forest
     from agentsim.errors import BMLError
 
     if not isinstance(text, str):
@@ -121,48 +120,7 @@ def builtin() -> dict:
     return lexicon
 
 
-def use_lexicon(path: str | Path) -> list[str]:
-    """Add the lexemes of a lexicon file (replacing those of the same name) for the rest of the process;
-    returns their names."""
-    from agentsim.animation import arms
-
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise UsageError(f"cannot read the lexicon {path}: {exc.strerror or exc}") from None
-    lexicon = read_lexicon(text, str(path))
-    builtin()
-    for name, stroke in lexicon["strokes"].items():
-        arms.GESTURE_FORMS[name] = arms.StrokePath(**stroke)
-        MURML_LEXEMES.pop(name, None)
-        SOURCES[name] = str(path)
-    for name, form in lexicon["forms"].items():
-        MURML_LEXEMES[name] = form
-        arms.GESTURE_FORMS.pop(name, None)
-        SOURCES[name] = str(path)
-    if lexicon["conducting"] is not None:
-        arms.CONDUCT_CENTER = lexicon["conducting"]["center"]
-        arms.CONDUCT_PATTERNS.clear()
-        arms.CONDUCT_PATTERNS.update(lexicon["conducting"]["patterns"])
-        SOURCES["CONDUCT_*"] = str(path)
-    return [*lexicon["strokes"], *lexicon["forms"]]
-
-
 def murml_form(lexeme: str) -> str | None:
     """The MURML form (JSON) of a gesture lexeme that is one, else None."""
     builtin()
     return MURML_LEXEMES.get(lexeme.strip().upper())
-
-
-def lexicon_rows() -> list[tuple[str, str, str]]:
-    """(lexeme, kind, where it comes from) of every gesture lexeme known now, by name."""
-    from agentsim.animation import arms
-
-    builtin()
-    rows = [(name, "stroke", SOURCES.get(name, BUILTIN)) for name in arms.GESTURE_FORMS]
-    rows += [(name, "form (MURML)", SOURCES.get(name, BUILTIN)) for name in MURML_LEXEMES]
-    meters = ", ".join(str(m) for m in sorted(arms.CONDUCT_PATTERNS))
-    rows.append(("CONDUCT_<beats>_<unit>[_<beat>]", f"conducting (patterns of {meters} beats; others alternate)",
-                 SOURCES.get("CONDUCT_*", BUILTIN)))
-    return sorted(rows)

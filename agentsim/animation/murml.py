@@ -1,4 +1,4 @@
-"""Gestures made from their form: MURML descriptions (read by :mod:`agentsim.bml.murml`) as procedural
+"""Gestures made from their form: MURML descriptions (read by :mod:`agentsim.animation.murml_form`) as procedural
 motion units.
 
 A form gives each arm it names four slots: the wrist's location, the palm's and the extended fingers'
@@ -38,7 +38,7 @@ from agentsim.animation.arms import side_sign
 from agentsim.animation.body import FINGERS, euler_matrix
 from agentsim.animation.drivers import PRIORITY
 from agentsim.animation.motion import EASE, KeyTimes, MotionDriver, blend_in, frac
-from agentsim.bml.murml import direction_letters, parse_shape, symbols
+from agentsim.animation.murml_form import direction_letters, parse_shape, symbols
 
 SLOT_NAMES = ("HandLocation", "PalmOrientation", "ExtFingerOrientation", "HandShape")
 

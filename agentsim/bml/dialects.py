@@ -20,7 +20,7 @@ from typing import Iterable
 # The body's lexicons (agentsim.animation.arms and .pose, with numpy) are imported where foreign vocabulary
 # is mapped or noted: reading BML 1.0 does without them.
 from agentsim.bml import lexemes
-from agentsim.bml.tree import FOREST, Node
+from agentsim.core.xmltree import FOREST, Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
 from agentsim.animation.units import motion_unit

@@ -21,7 +21,7 @@ from typing import Callable
 from agentsim.bml import lexemes
 from agentsim.bml.dialects import Adapter, Notes, find_blocks, fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
-from agentsim.bml.tree import Node, encode, read_forest, read_tree
+from agentsim.core.xmltree import Node, encode, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
                                      EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
@@ -401,7 +401,7 @@ class _Reader:
             if child.local not in PARAMETER_CHILDREN and (self.is_bml(child) or extension):
                 self.warn("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", f"{bid}: child <{child.tag}> ignored", child, [bid])
             elif kind.name in ("murmlgesture", "murmlface") and child.local == "murml-description":
-                from agentsim.bml.murml import MurmlError, read_description
+                from agentsim.animation.murml_form import MurmlError, read_description
 
                 try:
                     form = read_description(child, "face" if kind.name == "murmlface" else "gesture")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from agentsim.bml.tree import Node
+from agentsim.core.xmltree import Node
 
 #: SSML elements whose words are spoken with a prosody span around them (attributes kept as written).
 SPANS = {"emphasis": ("level",), "prosody": ("rate", "pitch", "volume"), "say-as": ("interpret-as", "format")}

@@ -3,12 +3,13 @@ children that are parameters and the attributes that are never sync references."
 
 from __future__ import annotations
 
+#: MURML, the form language of gestures AsapRealizer reads inside BML (:mod:`agentsim.animation.murml_form`).
+from agentsim.animation.murml_form import MURML_NAMESPACE
+
 BML_NAMESPACE = "http://www.bml-initiative.org/bml/bml-1.0"
 #: AsapRealizer's extensions: BMLA (continuous interaction) and BMLT (sound files, transitions).
 BMLA_NAMESPACE = "http://www.asap-project.org/bmla"
 BMLT_NAMESPACE = "http://hmi.ewi.utwente.nl/bmlt"
-#: MURML, the form language of gestures AsapRealizer reads inside BML (:mod:`agentsim.bml.murml`).
-MURML_NAMESPACE = "http://www.techfak.uni-bielefeld.de/ags/soa/murml"
 
 #: The behaviour elements of each extension namespace (their types are in the core's BEHAVIOUR_TYPES).
 EXTENSION_BEHAVIOURS = {

@@ -196,7 +196,7 @@ def add_lexicon(parser: argparse.ArgumentParser) -> None:
 def use_lexicons(args: argparse.Namespace) -> None:
     """Load the ``--lexicon`` files (a usage error naming the file and the table if one cannot be used)."""
     if getattr(args, "lexicon", None):
-        from agentsim.animation.lexicon import use_lexicon
+        from agentsim.animation.arms import use_lexicon
 
         for path in args.lexicon:
             use_lexicon(path)

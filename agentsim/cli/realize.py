@@ -184,7 +184,7 @@ def resolve(path: str) -> Path:
 def list_lexicon(args: argparse.Namespace) -> int:
     """``agentsim lexicon list``: the gesture lexemes, one a line (name, kind, source)."""
     options.use_lexicons(args)
-    from agentsim.animation.lexicon import lexicon_rows
+    from agentsim.animation.arms import lexicon_rows
 
     rows = lexicon_rows()
     width = max(len(name) for name, _, _ in rows)

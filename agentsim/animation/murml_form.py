@@ -31,7 +31,8 @@ import re
 import tomllib
 from importlib import resources
 
-from agentsim.bml.vocabulary import MURML_NAMESPACE
+#: MURML, the form language of gestures AsapRealizer reads inside BML.
+MURML_NAMESPACE = "http://www.techfak.uni-bielefeld.de/ags/soa/murml"
 
 __all__ = ["MURML_NAMESPACE", "MurmlError", "read_description", "symbols"]
 SLOTS = ("HandShape", "HandLocation", "PalmOrientation", "ExtFingerOrientation")
@@ -234,7 +235,7 @@ def _keyframing(node) -> dict:
 
 
 def read_description(node, kind: str) -> dict:
-    """The form of a ``<murml-description>`` element (a :class:`~agentsim.bml.tree.Node`) of a
+    """The form of a ``<murml-description>`` element (a :class:`~agentsim.core.xmltree.Node`) of a
     ``murmlgesture`` or ``murmlface``."""
     parts = node.elements()
     if not parts:
