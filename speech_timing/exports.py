@@ -14,8 +14,11 @@ def write_wav(path: str | Path, utterance: Utterance) -> Path:
 
     if utterance.audio is None:
         raise AgentsimError(f"the {utterance.backend or 'chosen'} backend makes no sound: use --tts espeak")
+    from agentsim.core.written import written
+
     path = Path(path)
-    soundfile.write(str(path), utterance.audio, utterance.sample_rate, subtype="PCM_16")
+    with written(path) as tmp:
+        soundfile.write(str(tmp), utterance.audio, utterance.sample_rate, subtype="PCM_16", format="WAV")
     return path
 
 
@@ -45,6 +48,9 @@ def write_textgrid(path: str | Path, utterance: Utterance, offset: float = 0.0) 
         "phones", intervals((p.symbol + ("ˈ" if p.stressed else ""), p.start, p.end) for p in utterance.phonemes),
         offset, end))
     grid.addTier(textgrid.PointTier("marks", [Point(offset + m.time, m.name) for m in utterance.marks], offset, end))
+    from agentsim.core.written import written
+
     path = Path(path)
-    grid.save(str(path), format="long_textgrid", includeBlankSpaces=True)
+    with written(path) as tmp:
+        grid.save(str(tmp), format="long_textgrid", includeBlankSpaces=True)
     return path

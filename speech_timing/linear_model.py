@@ -88,7 +88,10 @@ class LinearModel:
 
     def save(self, path: str | Path) -> None:
         """Write the model to a JSON file."""
-        Path(path).write_text(self.to_json() + "\n", encoding="utf-8")
+        from agentsim.core.written import written
+
+        with written(path) as tmp:
+            tmp.write_text(self.to_json() + "\n", encoding="utf-8")
 
     @classmethod
     def load(cls, path: str | Path) -> "LinearModel":

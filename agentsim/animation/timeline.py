@@ -31,6 +31,7 @@ import numpy as np
 
 from agentsim.animation.output import PoseStream
 from agentsim.animation.units import PHASE_NAMES
+from agentsim.core.written import save_figure
 
 _PHASE_COLOURS = {
     "preparation": "#9ecae1", "pre-stroke hold": "#deebf7", "stroke": "#e6550d", "post-stroke hold": "#fdd0a2",
@@ -469,7 +470,7 @@ def plot_timeline(source, out_png: str | Path, stream: PoseStream | None = None,
     """
     out_png = Path(out_png)
     fig = timeline_figure(source, stream=stream, title=title, width=width, start=start, end=end)
-    fig.savefig(out_png, dpi=_DPI)
+    save_figure(fig, out_png, dpi=_DPI)
     return out_png
 
 
@@ -587,7 +588,7 @@ def plot_timelines(source, out: str | Path, stream: PoseStream | None = None, wi
     if duration <= limit:
         written.append(plot_timeline(recording, png, stream=stream, title=title, width=width))
     else:
-        overview_figure(recording, title=title, width=width, window=window).savefig(png, dpi=_DPI)
+        save_figure(overview_figure(recording, title=title, width=width, window=window), png, dpi=_DPI)
         written.append(png)
         for a, b in time_windows(duration, window):
             part = f"{a:g}-{b:g} s of {duration:.0f} s"

@@ -66,8 +66,9 @@ def track_beats(args: argparse.Namespace) -> int:
     committed = committed_beats(run["updates"], args.lookahead, end=run["audio_seconds"])
     if args.beats_out:
         try:
-            with open(args.beats_out, "w", encoding="utf-8") as out:
-                out.writelines(f"{b:.6f}\n" for b in committed)
+            from agentsim.media.files import write_text
+
+            write_text(args.beats_out, "".join(f"{b:.6f}\n" for b in committed))
         except OSError as exc:
             raise AgentsimError(f"cannot write {args.beats_out!r}: {exc}") from None
     if args.reference:

@@ -159,7 +159,8 @@ def check_outputs(args: argparse.Namespace) -> None:
     """Say, before any work, which output cannot be written."""
     from agentsim.media.files import check_writable
 
-    check_writable([args.wav, args.bvh, args.poses, args.textgrid, args.report], [args.csv])
+    check_writable([args.wav, args.bvh, args.poses, args.textgrid, args.report], [args.csv],
+                   inputs=[resolve(f) for f in args.files])
 
 
 def read_document(path: str) -> str | bytes:
@@ -264,7 +265,7 @@ def plot_timeline(args: argparse.Namespace) -> int:
     start, end = seconds("--from", args.start), seconds("--to", args.end)
     if start is not None and end is not None and not end > start:
         raise UsageError(f"--to ({end:g} s) must come after --from ({start:g} s)")
-    check_writable([args.out])
+    check_writable([args.out], inputs=[resolve(args.file)])
     tts = options.backend(args.tts, args.voice)
     realizer = Realizer(anticipators=options.anticipators(args), tts=tts)
     realizer.submit(read_document(args.file), source=str(resolve(args.file)))

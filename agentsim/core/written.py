@@ -1,25 +1,104 @@
-"""Files that cannot half-exist: written under a temporary name beside their place and renamed there once
-whole, so that a full disk or an interrupted run leaves the old file (or none), never a truncated one.
-Every writer of a run's outputs (WAV, BVH, npz, TextGrid, CSV, JSON) goes through :func:`written`."""
+"""Outputs that cannot half-exist, and the one way every output is written.
+
+A file (:func:`written`) is written under a temporary name made safely beside its place (created with
+exclusive creation, ``O_EXCL``, under a random name by :func:`tempfile.mkstemp`, so that a file or a
+symbolic link planted at a guessed name is never followed or reused) and renamed there once whole with
+:func:`os.replace`: a full disk or a killed run leaves the old file (or none), never a truncated one.
+
+A run's folder (:func:`staged_folder`) is written whole into a staging folder beside it,
+``.NAME.staging-XXXX``, and swapped with the old folder only once the run has finished (an atomic exchange
+of the two names where the kernel offers one, ``renameat2(RENAME_EXCHANGE)``; else the old folder is renamed
+aside to ``.NAME.old-XXXX`` and the new one renamed in). The old run is then deleted. A run that is killed
+leaves the previous complete run in place and its staging folder beside it; the next run into the same
+folder deletes that staging folder first (and puts an old folder back that a kill between the two renames
+left aside); a run holds a lock on its staging folder (:func:`fcntl.flock`), so that the staging folder of
+a run still going is never taken for a killed run's.
+
+:func:`check_output` refuses, before any work, an output path that is a device, a FIFO or a socket (a
+rename would replace the node itself: as root, ``--wav /dev/null`` would replace the system's
+``/dev/null``), a folder where a file is meant, or one of the run's inputs.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
+import errno
+import glob
 import os
+import shutil
+import stat
+import tempfile
 from pathlib import Path
+from typing import Iterable, Iterator
+
+from agentsim.errors import UsageError
+
+__all__ = ["written", "check_output", "save_figure", "staged_folder", "clear_staged", "RUN_FILES"]
+
+#: The files one of which a run's folder holds (a run's figures): a folder with none of them that is not
+#: empty is someone else's, which a run never replaces.
+RUN_FILES = ("metrics.json", "compare.json")
+
+
+def _kind(mode: int) -> str | None:
+    """What a node that is no regular file or folder is, by its mode, or None."""
+    for test, name in ((stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return None
+
+
+def check_output(path: str | Path, inputs: Iterable[str | Path | None] = (), folder: bool = False) -> None:
+    """Raise :class:`UsageError` (one line) if ``path`` may not be written as an output: it is a device, a
+    FIFO or a socket; a folder where a file is meant (``folder`` false) or a file where a folder is meant;
+    or the same file as one of ``inputs`` (:func:`os.path.samefile`), or (for a folder) holds one of them.
+    A symbolic link is judged by what it points at."""
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):  # a file in the way of its folder is said where it is made
+        mode = None
+    except OSError as exc:
+        raise UsageError(f"cannot write {path}: {exc.strerror or exc}") from None
+    if mode is not None:
+        kind = _kind(mode)
+        if kind:
+            raise UsageError(f"cannot write {path}: it is {kind}, not a file (name a regular file)")
+        if stat.S_ISDIR(mode) and not folder:
+            raise UsageError(f"cannot write {path}: it is a folder")
+        if not stat.S_ISDIR(mode) and folder:
+            raise UsageError(f"cannot make the output folder {path}: a file of that name is in the way")
+    for name in inputs:
+        if name is None or str(name) == "-":
+            continue
+        source = Path(name)
+        if folder:  # a run's folder is replaced whole: what it holds (or will hold) is lost
+            inside = source.resolve()
+            if inside == path.resolve() or path.resolve() in inside.parents:
+                raise UsageError(f"cannot write the output folder {path}: it holds the run's input {source}")
+        elif mode is not None and source.exists() and os.path.samefile(source, path):
+            raise UsageError(f"cannot write {path}: it is one of the run's inputs")
 
 
 @contextlib.contextmanager
-def written(path: str | Path):
-    """Write a file so that it cannot half-exist: the body writes to a temporary name beside ``path`` (with
-    the same suffix), renamed to ``path`` once it is whole; if the writing fails (a full disk), the temporary
-    file is removed and ``path`` is left as it was.
+def written(path: str | Path) -> Iterator[Path]:
+    """Write a file so that it cannot half-exist: the body writes to the temporary file yielded (made
+    beside ``path`` with exclusive creation under a random name, with the same suffix), renamed to ``path``
+    once it is whole; if the writing fails (a full disk), the temporary file is removed and ``path`` is left
+    as it was. ``path`` is refused (:class:`UsageError`) if it is a device, a FIFO or a folder.
 
     >>> with written("out.txt") as tmp:  # doctest: +SKIP
     ...     tmp.write_text("whole")
     """
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.partial-{os.getpid()}{path.suffix}")
+    check_output(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    fd, name = tempfile.mkstemp(dir=parent, prefix=f".{path.stem}.partial-", suffix=path.suffix)
+    os.close(fd)
+    tmp = Path(name)
     try:
         yield tmp
         os.replace(tmp, path)
@@ -27,3 +106,131 @@ def written(path: str | Path):
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+
+
+def save_figure(fig, path: str | Path, **options) -> Path:
+    """Save a matplotlib figure through :func:`written` (the format from ``path``'s suffix)."""
+    path = Path(path)
+    with written(path) as tmp:
+        fig.savefig(tmp, format=path.suffix.lstrip(".") or None, **options)
+    return path
+
+
+# ----------------------------------------------------------------------------------------------------
+# A run's folder.
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap the names ``a`` and ``b`` in one step (Linux ``renameat2(RENAME_EXCHANGE)``); False where the
+    kernel, the C library or the file system cannot."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
+        return True
+    if ctypes.get_errno() in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):
+        return False
+    raise OSError(ctypes.get_errno(), os.strerror(ctypes.get_errno()), str(b))
+
+
+def _siblings(out: Path, kind: str) -> list[Path]:
+    parent = out.parent if str(out.parent) else Path(".")
+    return sorted(parent.glob(f".{glob.escape(out.name)}.{kind}-*"))
+
+
+@contextlib.contextmanager
+def _held(folder: Path, wait: bool = True) -> Iterator[bool]:
+    """Hold a lock on ``folder`` itself (:func:`fcntl.flock` on the folder), yielding whether it was got
+    (``wait`` false: at once or not at all). A run holds the lock of its staging folder while it lives, so
+    the staging folders whose lock can be got are those of killed runs."""
+    import fcntl
+
+    try:
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        yield False
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except OSError:
+            yield False
+            return
+        yield True
+    finally:
+        os.close(fd)
+
+
+def clear_staged(out: str | Path) -> list[Path]:
+    """Remove what killed runs into ``out`` left: their staging folders, and an old run renamed aside (put
+    back first if ``out`` itself is missing: the kill came between the two renames of the swap). The
+    folders of runs still going (whose lock is held) are left alone. Returns what was removed."""
+    out = Path(out)
+    removed = []
+    for kind in ("old", "staging"):
+        for leftover in _siblings(out, kind):
+            with _held(leftover, wait=False) as stale:
+                if not stale:
+                    continue
+                if kind == "old" and not out.exists():
+                    os.rename(leftover, out)
+                    continue
+                shutil.rmtree(leftover, ignore_errors=True)
+                removed.append(leftover)
+    return removed
+
+
+def _replaceable(out: Path, marks: Iterable[str]) -> bool:
+    """Whether ``out`` may be replaced by a new run: it is empty or holds a run (one of ``marks``)."""
+    try:
+        entries = os.listdir(out)
+    except FileNotFoundError:
+        return True
+    return not entries or any(name in entries for name in marks)
+
+
+@contextlib.contextmanager
+def staged_folder(out: str | Path, inputs: Iterable[str | Path | None] = (),
+                  marks: Iterable[str] = RUN_FILES) -> Iterator[Path]:
+    """Stage a run's folder: the body writes into the folder yielded (beside ``out``), which replaces
+    ``out`` once the body has returned; if it raises, the staging folder is removed and ``out`` is left as it
+    was. ``out`` is refused (:class:`UsageError`) if it is a file, holds one of ``inputs``, or holds files
+    that are no run's (a folder that is neither empty nor holds one of ``marks`` is never replaced)."""
+    out = Path(out)
+    check_output(out, inputs, folder=out.is_dir())
+    if not _replaceable(out, marks):
+        raise UsageError(f"cannot write the output folder {out}: it holds files that are not an agentsim run's "
+                         f"(name a new or empty folder)")
+    parent = out.parent if str(out.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        clear_staged(out)
+        staging = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out.name}.staging-"))
+    except OSError as exc:
+        raise UsageError(f"cannot write the output folder {out}: {exc.strerror or exc}") from None
+    with _held(staging):
+        try:
+            yield staging
+            os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes it 0700; a run's folder is as mkdir makes it
+            if not out.exists():
+                os.rename(staging, out)
+            elif _exchange(staging, out):
+                shutil.rmtree(staging, ignore_errors=True)  # the old run, now under the staging name
+            else:
+                aside = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out.name}.old-"))
+                with _held(aside):
+                    os.replace(out, aside)
+                    os.rename(staging, out)
+                    shutil.rmtree(aside, ignore_errors=True)
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

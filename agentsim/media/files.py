@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Iterable
 
 
 from agentsim.errors import UsageError
-from agentsim.core.written import written
+from agentsim.core.written import check_output, written
 from agentsim.media import AXIS
 if TYPE_CHECKING:  # checking where to write needs no audio
     from agentsim.media.audio import Track
@@ -28,17 +28,19 @@ def _cannot_write_in(folder: Path) -> str | None:
     return None
 
 
-def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[str | Path | None] = ()) -> None:
-    """Raise :class:`UsageError` naming the first output that cannot be written: a file whose folder cannot be
-    made (folders are made on demand) or is not writable, a folder that cannot be made or written. Called
-    before any work is done."""
+def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[str | Path | None] = (),
+                   inputs: Iterable[str | Path | None] = ()) -> None:
+    """Raise :class:`UsageError` naming the first output that cannot be written: a device, a FIFO, a folder
+    where a file is meant or one of the run's ``inputs`` (:func:`~agentsim.core.written.check_output`), a file
+    whose folder cannot be made (folders are made on demand) or is not writable, a folder that cannot be made
+    or written. Called before any work is done."""
+    inputs = list(inputs)
     for name in files:
         if name is None:
             continue
         path = Path(name)
         folder = path.parent if str(path.parent) else Path(".")
-        if path.is_dir():
-            raise UsageError(f"cannot write {path}: it is a folder")
+        check_output(path, inputs)
         if not folder.is_dir():
             try:
                 folder.mkdir(parents=True, exist_ok=True)
@@ -56,6 +58,7 @@ def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[st
         if name is None:
             continue
         path = Path(name)
+        check_output(path, inputs, folder=path.is_dir())
         try:
             path.mkdir(parents=True, exist_ok=True)
         except FileExistsError:

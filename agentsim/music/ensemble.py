@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -169,7 +168,9 @@ def render_ensemble(*args, **kwargs) -> tuple[np.ndarray, int, np.ndarray]:
 
 def write_beats(path: "str | os.PathLike", beat_times: Sequence[float]) -> None:
     """Write beat times (seconds), one per line, as ``mir_eval.io.load_events`` reads them."""
-    Path(path).write_text("".join(f"{t:.6f}\n" for t in np.asarray(beat_times, float)))
+    from agentsim.media.files import write_text
+
+    write_text(path, "".join(f"{t:.6f}\n" for t in np.asarray(beat_times, float)))
 
 
 def read_beats(path: "str | os.PathLike") -> np.ndarray:

@@ -51,7 +51,6 @@ TABLE_HEADER = (f"{'strategy':<8} {'recovered':>9} {'final err%':>10} {'asy mean
 def main(args: argparse.Namespace) -> int:
     """Run ``agentsim run conductor`` with parsed ``args``; returns the exit status."""
     from scenarios.conductor.config import load_config
-    from scenarios.conductor.scenario import collect_metrics, listen_live, simulate, write_outputs
 
     overrides = {"piece": {"tempo": getattr(args, "target_bpm", None), "meter": getattr(args, "meter", None),
                            "bars": getattr(args, "bars", None)},
@@ -68,12 +67,23 @@ def main(args: argparse.Namespace) -> int:
     table = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
     from agentsim.media.files import check_writable
 
-    check_writable(folders=[out])  # so does an output folder that cannot be written
+    check_writable(folders=[out])  # an output folder that cannot be written is said before any work
     live = args.live or args.device is not None
     if args.seconds is not None and not live:
         raise AgentsimError("--seconds only applies to --input")
     if getattr(args, "sample_rate", None) is not None and not live:
         raise AgentsimError("--sample-rate only applies to --input")
+    from agentsim.core.written import staged_folder
+
+    # written into a staging folder beside --out that replaces the old run once this one has finished
+    with staged_folder(out, inputs=[args.config]) as staging:
+        return _run(args, config, out, staging, live, as_json, table)
+
+
+def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table) -> int:
+    """The run of :func:`main`, written into ``out`` (the staging folder that becomes ``shown``)."""
+    from scenarios.conductor.scenario import collect_metrics, listen_live, simulate, write_outputs
+
     if live:
         if args.compare:
             raise AgentsimError("--compare cannot be used with --input (a live ensemble plays once)")
@@ -88,7 +98,7 @@ def main(args: argparse.Namespace) -> int:
         run = listen_live(config, args.strategy, args.seconds, device)
         metrics = collect_metrics(run)
         write_outputs(run, metrics, out)
-        _report(metrics, out, time.perf_counter() - started, table)
+        _report(metrics, shown, time.perf_counter() - started, table)
         if as_json:
             print(json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}))  # as metrics.json
         return 0
@@ -104,7 +114,7 @@ def main(args: argparse.Namespace) -> int:
         write_outputs(run, metrics, folder, pictures=not args.compare, stages=stages)
         rows.append(metrics)
         if not args.compare:
-            _report(metrics, folder, time.perf_counter() - started, table)
+            _report(metrics, shown, time.perf_counter() - started, table)
         else:
             stages.write(f"{name}: {time.perf_counter() - started:.1f} s")
     if args.compare:
@@ -113,9 +123,10 @@ def main(args: argparse.Namespace) -> int:
         print(TABLE_HEADER, file=table)
         for m in rows:
             print(_summary_row(m), file=table)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "compare.json").write_text(json.dumps(rows, indent=2) + "\n")
-        print(f"written to {out}/<strategy>/ and {out / 'compare.json'}", file=table)
+        from agentsim.media.files import write_text
+
+        write_text(out / "compare.json", json.dumps(rows, indent=2) + "\n")
+        print(f"written to {shown}/<strategy>/ and {shown / 'compare.json'}", file=table)
     if as_json:
         print(json.dumps(rows if args.compare else {**rows[0], "time_axis": AXIS, "glossary": GLOSSARY}))  # as compare.json, metrics.json
     return 0

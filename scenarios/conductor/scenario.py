@@ -410,6 +410,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     from agentsim.media.files import write_feedback, write_text, write_wav
     from agentsim.media.report import write_report
     from agentsim.media.report.page import start_audio
+    from agentsim.core.written import save_figure
     from agentsim.media.tables import gesture_rows, write_csv
 
     say = stages or Stages.off()
@@ -443,7 +444,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     if not plots:
         return out
     with say("pictures"):
-        run_tempo_figure(run, metrics).savefig(out / "tempo.png")
+        save_figure(run_tempo_figure(run, metrics), out / "tempo.png")
         if pictures:
             plot_timelines(recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW,
                            threshold=TIMELINE_WINDOW, title=f"conductor ({run.strategy_name})")

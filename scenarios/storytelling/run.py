@@ -49,7 +49,9 @@ from pathlib import Path
 
 import numpy as np
 
+from agentsim.core.written import save_figure
 from agentsim.errors import AgentsimError
+from agentsim.media.files import write_text
 from agentsim.core.progress import Stages
 from agentsim.media import AXIS, GLOSSARY
 from scenarios.storytelling.markup import Story, StoryError, read_story
@@ -115,7 +117,7 @@ def main(args: argparse.Namespace) -> int:
     Raises :class:`AgentsimError` (a missing story, a bad tag, an unknown strategy) before anything is
     synthesised or realized.
     """
-    from speech_timing.animator_time import STRATEGIES, check_strategy
+    from speech_timing.animator_time import check_strategy
 
     started = time.perf_counter()
     strategy = check_strategy(getattr(args, "strategy", "best") or "best")
@@ -124,25 +126,38 @@ def main(args: argparse.Namespace) -> int:
     if not args.window > 0:
         raise AgentsimError("--window must be positive")
     delivery = args.delivery
-    scene = read_story(resolve_story(args.scene)).scene if getattr(args, "scene", None) else None
-    story = load_story(resolve_story(args.story), scene)
+    scene_path = resolve_story(args.scene) if getattr(args, "scene", None) else None
+    scene = read_story(scene_path).scene if scene_path else None
+    story_path = resolve_story(args.story)
+    story = load_story(story_path, scene)
     out = Path(args.out)
+    from agentsim.core.written import staged_folder
     from agentsim.media.files import check_writable
 
-    check_writable(folders=[out])  # before anything is synthesised
-    voice = make_voice(args.tts, cache_dir=args.cache, cache=not args.no_cache, voice=getattr(args, "voice", None))
+    check_writable(folders=[out])  # an output folder that cannot be written is said before any work
+    # the run is written into a staging folder beside --out, which replaces the old run once this one has
+    # finished: a killed run leaves the old one whole (agentsim.core.written)
+    with staged_folder(out, inputs=[story_path, scene_path, args.cache]) as staging:
+        return _run(args, story, strategy, delivery, out, staging, started)
 
+
+def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: Path, staging: Path,
+         started: float) -> int:
+    """The run of :func:`main` into ``staging`` (which becomes ``out`` once it has returned)."""
+    from speech_timing.animator_time import STRATEGIES
+
+    voice = make_voice(args.tts, cache_dir=args.cache, cache=not args.no_cache, voice=getattr(args, "voice", None))
     as_json = getattr(args, "json", False)
     printed = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
     stages = Stages()
     if not args.compare:
         telling = tell(story, strategy=strategy, delivery=delivery, seed=args.seed, voice=voice, anchor=args.anchor,
                        timing=args.timing, stages=stages)
-        stages_seconds = write_outputs(telling, out, fps=args.fps, window=args.window, seed=args.seed,
+        stages_seconds = write_outputs(telling, staging, fps=args.fps, window=args.window, seed=args.seed,
                                        stages=stages)
         wall = time.perf_counter() - started - voice.backend.synthesis_seconds
         metrics = _metrics(telling, args, voice, stages_seconds, wall)
-        (out / "metrics.json").write_text(json.dumps(_clean(metrics), indent=2) + "\n")
+        write_text(staging / "metrics.json", json.dumps(_clean(metrics), indent=2) + "\n")
         print(_summary(story, metrics, voice, f"{out}/"), file=printed)
         if as_json:
             print(json.dumps(_clean(metrics)))
@@ -156,7 +171,7 @@ def main(args: argparse.Namespace) -> int:
         synthesis = voice.backend.synthesis_seconds
         tellings[name] = t = tell(story, strategy=name, delivery=delivery, seed=args.seed, voice=voice,
                                   anchor=args.anchor, timing=args.timing, stages=stages)
-        stages_seconds = write_outputs(t, out / name, fps=args.fps, window=args.window, seed=args.seed,
+        stages_seconds = write_outputs(t, staging / name, fps=args.fps, window=args.window, seed=args.seed,
                                        pictures=False, stages=stages)
         every[name] = _metrics(t, args, voice, stages_seconds,
                                time.perf_counter() - begun - (voice.backend.synthesis_seconds - synthesis))
@@ -167,8 +182,8 @@ def main(args: argparse.Namespace) -> int:
                                   delivery=metrics["delivery"], strategies=rows))
     for name, m in every.items():
         m["compare_wall_seconds"] = wall
-        (out / name / "metrics.json").write_text(json.dumps(_clean(m), indent=2) + "\n")
-    (out / "compare.json").write_text(json.dumps(compared, indent=2) + "\n")
+        write_text(staging / name / "metrics.json", json.dumps(_clean(m), indent=2) + "\n")
+    write_text(staging / "compare.json", json.dumps(compared, indent=2) + "\n")
     print(comparison_table(rows), file=printed)
     print(_summary(story, metrics, voice, f"{out}/<strategy>/ and {out / 'compare.json'}"), file=printed)
     if as_json:
@@ -265,7 +280,7 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
                    plots: bool, pictures: bool, say: Stages) -> "OrderedDict[str, float]":
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.media.audio import run_track_stream
-    from agentsim.media.files import write_feedback, write_text, write_wav
+    from agentsim.media.files import write_feedback, write_wav
     from agentsim.media.report import write_report
     from agentsim.media.report.page import start_audio
     from agentsim.media.tables import gesture_rows, write_csv
@@ -377,6 +392,6 @@ def plot_errors(telling: Telling, png: Path) -> Path:
     if len(errors):  # a story without gestures has nothing to name (matplotlib would warn)
         ax.legend(fontsize=7, ncol=5, loc="upper right")
     fig.tight_layout()
-    fig.savefig(png, dpi=110)
+    save_figure(fig, png, dpi=110)
     plt.close(fig)
     return png

@@ -43,6 +43,7 @@ import numpy as np
 
 from speech_timing.backend import Mark, Phoneme, SpeechText, Utterance, Word
 from speech_timing.samples import BLOCK, PcmFile
+from agentsim.core.written import written
 
 #: 16-bit samples read from (and written to) a cache file at a time.
 READ_BLOCK = BLOCK
@@ -258,21 +259,20 @@ class CachedBackend:
         has_audio = utt.audio is not None
         if has_audio:
             audio = utt.audio if isinstance(utt.audio, PcmFile) else np.asarray(utt.audio)
-            tmp = audio_path.with_suffix(f".{os.getpid()}.tmp.npy")  # processes that write at once: one each
-            with open(tmp, "wb") as f:  # the file np.save writes, a block at a time (no 16-bit copy held whole)
+            # processes that write at once: a temporary file each (written)
+            with written(audio_path) as tmp, open(tmp, "wb") as f:  # the file np.save writes, a block at a time
+                # (no 16-bit copy held whole)
                 np.lib.format.write_array_header_1_0(f, {"descr": "<i2", "fortran_order": False,
                                                          "shape": (len(audio),)})
                 for a in range(0, len(audio), READ_BLOCK):  # no float64 copy of a long narration either
                     block = np.round(np.asarray(audio[a:a + READ_BLOCK], dtype=np.float64) * 32768.0)
                     f.write(np.clip(block, -32768, 32767).astype("<i2").tobytes())
-            tmp.replace(audio_path)
         meta = {"format": CACHE_FORMAT, "backend": _identity(self.backend), "text": utt.text,
                 "duration": utt.duration, "sample_rate": utt.sample_rate, "backend_name": utt.backend,
                 "sentences": list(utt.sentences), "audio": has_audio,
                 "words": [asdict(w) for w in utt.words], "phonemes": [asdict(p) for p in utt.phonemes]}
-        tmp = meta_path.with_suffix(f".{os.getpid()}.tmp.json")
-        tmp.write_text(json.dumps(meta, ensure_ascii=False))
-        tmp.replace(meta_path)
+        with written(meta_path) as tmp:
+            tmp.write_text(json.dumps(meta, ensure_ascii=False))
         if has_audio:
             try:
                 stored = PcmFile(audio_path)

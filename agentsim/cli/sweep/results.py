@@ -23,6 +23,7 @@ import json
 import math
 from pathlib import Path
 
+from agentsim.core.written import written
 from agentsim.cli.sweep.spec import ROW_COLUMNS, Point, shell_line
 from agentsim.errors import Unavailable
 
@@ -86,9 +87,8 @@ def write(table, folder: Path) -> tuple[Path, Path]:
     parquet, csv = folder / "results.parquet", folder / "results.csv"
     for path, save in ((parquet, lambda p: table.to_parquet(p, index=False)),
                        (csv, lambda p: table.to_csv(p, index=False))):
-        partial = path.with_name(path.name + ".partial")
-        save(partial)
-        partial.replace(path)
+        with written(path) as tmp:
+            save(tmp)
     return parquet, csv
 
 

@@ -36,6 +36,7 @@ from agentsim.cli.sweep import results
 from agentsim.cli.sweep.point import run_point, worker_info
 from agentsim.cli.sweep.spec import Point, Spec, output_folders, project_version
 from agentsim.errors import AgentsimError, Unavailable
+from agentsim.media.files import write_text
 
 #: How long to wait for a scheduler to answer and for its first worker to join (seconds).
 CONNECT_TIMEOUT = 30.0
@@ -132,10 +133,7 @@ def cached_outcomes(folder: Path, points: list[Point]) -> dict[str, dict]:
 
 
 def save(folder: Path, point: Point, outcome: dict) -> None:
-    path = folder / "points" / f"{point.key}.json"
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(json.dumps({**outcome, "argv": list(point.argv)}) + "\n")
-    partial.replace(path)
+    write_text(folder / "points" / f"{point.key}.json", json.dumps({**outcome, "argv": list(point.argv)}) + "\n")
 
 
 def failure(exc: BaseException) -> dict:
@@ -162,7 +160,7 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
         (folder / "points").mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise AgentsimError(f"cannot create the sweep folder {str(folder)!r}: {exc}") from None
-    (folder / "sweep.json").write_text(json.dumps(spec.to_json(), indent=2, default=str) + "\n")
+    write_text(folder / "sweep.json", json.dumps(spec.to_json(), indent=2, default=str) + "\n")
     outcomes = cached_outcomes(folder, spec.points)
     cached = len({p.key for p in spec.points if p.key in outcomes})
     todo: dict[str, list[Point]] = {}

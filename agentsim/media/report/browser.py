@@ -235,8 +235,11 @@ class Chromium:
             params.update(captureBeyondViewport=True, clip={"x": 0, "y": 0, "width": size["width"],
                                                             "height": size["height"], "scale": 1})
         data = self.send("Page.captureScreenshot", params)["data"]
+        from agentsim.core.written import written
+
         path = Path(path)
-        path.write_bytes(base64.b64decode(data))
+        with written(path) as tmp:
+            tmp.write_bytes(base64.b64decode(data))
         return path
 
 

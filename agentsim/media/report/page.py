@@ -149,10 +149,10 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     title = title or path.stem
     notes = [str(n) for n in notes]
 
-    shutil.copyfile(VENDOR / "three.min.js", folder / "three.min.js")
-    shutil.copyfile(VENDOR / "LICENSE-three.txt", folder / "LICENSE-three.txt")
-    shutil.copyfile(ASSETS / "report.js", folder / "report.js")
-    shutil.copyfile(ASSETS / "report.css", folder / "report.css")
+    for source in (VENDOR / "three.min.js", VENDOR / "LICENSE-three.txt", ASSETS / "report.js",
+                   ASSETS / "report.css"):
+        with written(folder / source.name) as tmp:  # never through a link planted at the name
+            shutil.copyfile(source, tmp)
 
     # the sound is encoded on a thread of its own (libsndfile does not hold the interpreter) while the
     # timeline and the poses are made
