@@ -208,14 +208,15 @@ class AudioBeatAnticipator(Anticipator):
 
 def read_audio(path: str | Path) -> tuple[np.ndarray, int]:
     """Mono float32 samples and the sample rate of an audio file (WAV, FLAC, OGG via soundfile)."""
-    import soundfile
 
     path = Path(path)
     if not path.is_file():
         raise UsageError(f"{str(path)!r} is a folder, not an audio file" if path.is_dir()
                          else f"no audio file {str(path)!r}")
     try:
-        data, sample_rate = soundfile.read(str(path), dtype="float32", always_2d=True)
+        from agentsim.core.inputs import read_audio_limited
+
+        data, sample_rate = read_audio_limited(path)
     except RuntimeError as exc:
         raise AgentsimError(f"cannot read audio file {str(path)!r}: {exc}") from None
     return data.mean(axis=1), int(sample_rate)

@@ -21,7 +21,13 @@ def read_taps(path: str | Path) -> list[float]:
     if not path.is_file():
         raise ValueError(f"no tap file {str(path)!r}")
     times = []
-    for number, line in enumerate(path.read_text().splitlines(), 1):
+    from agentsim.core.inputs import TooLarge, read_text
+
+    try:
+        text = read_text(path, what=f"the tap file {str(path)!r}", errors="replace")
+    except TooLarge as exc:
+        raise ValueError(str(exc)) from None
+    for number, line in enumerate(text.splitlines(), 1):
         line = line.split("#", 1)[0].strip()
         if line:
             try:

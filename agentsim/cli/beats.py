@@ -75,7 +75,11 @@ def track_beats(args: argparse.Namespace) -> int:
         import numpy as np
 
         try:
-            reference = np.loadtxt(args.reference, ndmin=1)
+            import io
+
+            from agentsim.core.inputs import read_text
+
+            reference = np.loadtxt(io.StringIO(read_text(args.reference, errors="replace")), ndmin=1)
         except (OSError, ValueError) as exc:
             raise AgentsimError(f"cannot read reference beats {args.reference!r}: {exc}") from None
         result = score_committed(run["updates"], reference, lookahead=args.lookahead, skip=args.skip,

@@ -164,15 +164,22 @@ def check_outputs(args: argparse.Namespace) -> None:
 
 
 def read_document(path: str) -> str | bytes:
-    """A BML document from a file, or from standard input for ``-``."""
+    """A BML document from a file, or from standard input for ``-``: read no further than
+    :data:`~agentsim.core.inputs.MAX_INPUT` (a longer one is refused, before any work, without reading the
+    rest)."""
+    from agentsim.core.inputs import read_limited
+
     if path == "-":
-        return sys.stdin.buffer.read()
+        return read_limited("-", what="the BML document on standard input")
     p = resolve(path)
     if p.is_dir():
         raise UsageError(f"{path} is a folder, not a BML file (name the files in it: {path}/*.xml)")
-    if not p.is_file():
+    if not p.exists():
         raise UsageError(f"no such file: {path}")
-    return p.read_bytes()
+    try:
+        return read_limited(p, what=f"the BML document {path}")
+    except OSError as exc:
+        raise UsageError(f"cannot read {path}: {exc.strerror or exc}") from None
 
 
 def resolve(path: str) -> Path:

@@ -80,7 +80,12 @@ def read_text(path: str | None) -> str:
     p = resolve(path)
     if not p.is_file():
         raise UsageError(f"{path!r} is a folder, not a text file" if p.is_dir() else f"no text file {path!r}")
-    text = p.read_text(encoding="utf-8")
+    from agentsim.core.inputs import read_text as read_limited
+
+    try:
+        text = read_limited(p, what=f"the text {path!r}")
+    except UnicodeDecodeError as exc:
+        raise AgentsimError(f"{path!r} is not UTF-8 text (byte {exc.start}: {exc.reason})") from None
     if not text.strip():
         raise AgentsimError(f"{path!r} has no text")
     return text

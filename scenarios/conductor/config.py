@@ -235,9 +235,9 @@ def _read_toml(path: Path) -> dict:
     if not path.is_file():
         raise AgentsimError(f"no such file: {path}")
     try:
-        with open(path, "rb") as f:
-            data = f.read()
-        return tomllib.loads(data.decode("utf-8"))
+        from agentsim.core.inputs import read_limited
+
+        return tomllib.loads(read_limited(path).decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise AgentsimError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason}); TOML files are UTF-8") from None
     except OSError as exc:

@@ -201,7 +201,9 @@ def read_story(path: str | Path) -> Story:
     if not path.is_file():
         raise StoryError(f"no story file {str(path)!r}")
     try:
-        source = path.read_text(encoding="utf-8")
+        from agentsim.core.inputs import read_text
+
+        source = read_text(path, what=f"the story {str(path)!r}")
     except (OSError, UnicodeDecodeError) as exc:
         raise StoryError(f"cannot read the story {str(path)!r}: {exc}") from None
     return parse_story(source, name=str(path), title=path.stem.replace("_", " "))

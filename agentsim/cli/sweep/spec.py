@@ -162,7 +162,9 @@ def load(path: str | Path) -> Spec:
     if not path.is_file():
         raise UsageError(f"no {where}")
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        from agentsim.core.inputs import read_text
+
+        data = tomllib.loads(read_text(path, what=where))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise UsageError(f"{where} is not TOML: {exc}") from None
     unknown = [k for k in data if k not in TOP_KEYS]
@@ -363,7 +365,8 @@ def point_key(argv: tuple[str, ...], version: str) -> str:
     for word in argv:
         p = Path(word)
         if p.is_absolute() and p.is_file():
-            files[word] = hashlib.sha256(p.read_bytes()).hexdigest()
+            with open(p, "rb") as f:  # a block at a time: a long audio file is never held whole
+                files[word] = hashlib.file_digest(f, "sha256").hexdigest()
     blob = json.dumps({"argv": list(argv), "version": version, "files": files}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
