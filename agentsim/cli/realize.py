@@ -118,20 +118,41 @@ def run_outputs(args: argparse.Namespace) -> list[str]:
 
 
 def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sources=(), beat_times=None) -> None:
-    """Write the files ``args`` asks for from a finished run, on its time axis."""
+    """Write the files ``args`` asks for from a finished run, on its time axis: the sound mixed a stretch
+    at a time, the poses evaluated a window at a time into a scratch folder (never held whole), after
+    :func:`~agentsim.media.budget.check_budget` has said that the files fit."""
     if not run_outputs(args):
         return  # nothing asked for: nothing to load
-    from agentsim.media.audio import run_track
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="agentsim-poses-") as scratch:
+        _write_run_outputs(args, realizer, title, extra_sources, beat_times, Path(scratch))
+
+
+def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch: Path) -> None:
+    from agentsim.animation.timeline import run_duration
+    from agentsim.media.audio import run_track_stream
+    from agentsim.media.budget import check_budget, frames_of, pose_bytes
     from agentsim.media.files import write_npz, write_textgrid, write_wav
     from agentsim.media.tables import gesture_rows, write_csv
 
     recording = realizer.recording()
+    duration = run_duration(recording)
+    track = run_track_stream(recording, extra_sources) if (args.wav or args.report) else None
+    poses = pose_bytes(frames_of(duration, args.fps)) if (args.bvh or args.poses or args.report) else {}
+    sizes = {}
+    if args.wav:
+        sizes[f"--wav {args.wav}"] = (Path(args.wav), 44 + 2 * track.length)
+    for flag, name, key in (("--bvh", args.bvh, "bvh"), ("--poses", args.poses, "npz"),
+                            ("--report", args.report, "report")):
+        if name:
+            sizes[f"{flag} {name}"] = (Path(name), poses[key] + (2 * track.length if key == "report" else 0))
+    check_budget(sizes, duration, (scratch, poses["scratch"]) if poses else None)  # before any file is written
     stream = None
-    if args.bvh or args.poses or args.report:
+    if poses:
         from agentsim.animation import evaluate_poses
 
-        stream = evaluate_poses(recording, fps=args.fps, seed=args.seed)
-    track = run_track(recording, extra_sources) if (args.wav or args.report) else None
+        stream = evaluate_poses(recording, fps=args.fps, seed=args.seed, folder=scratch)
     gestures = gesture_rows(recording, beat_times) if (args.csv or args.report or args.textgrid) else []
     if args.wav:
         write_wav(args.wav, track)

@@ -84,11 +84,11 @@ def speech_sources(recording) -> list[Source]:
 
 def file_sources(recording) -> list[Source]:
     """The sound files a recording played (``bmlt:audiofile``), as sources."""
-    import soundfile
+    from agentsim.core.inputs import read_audio_limited
 
     sources = []
     for played in recording.audio:
-        data, rate = soundfile.read(played.path, dtype="float32", always_2d=True)
+        data, rate = read_audio_limited(played.path)  # weighed by its header first
         sources.append(Source(data.mean(axis=1), int(rate), float(played.start), 1.0, played.stopped,
                               label=f"{played.block}:{played.behaviour}"))
     return sources
