@@ -94,8 +94,20 @@ def delivery(args: argparse.Namespace):
         raise AgentsimError(f"bad event-delivery condition: {exc}") from None
 
 
+def seed(text: str) -> int:
+    """A seed from the command line: a whole number from 0 (numpy's and SimPy's generators take no negative
+    one), refused by the parser (one line, exit 2) before any work."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number from 0, got {value}")
+    return value
+
+
 def add_seed(parser: argparse.ArgumentParser, what: str) -> None:
-    parser.add_argument("--seed", type=int, default=0, help=f"seed of {what} (0)")
+    parser.add_argument("--seed", type=seed, default=0, help=f"seed of {what} (a whole number from 0; 0)")
 
 
 def add_out(parser: argparse.ArgumentParser, default: str | None, what: str = "output folder",

@@ -18,9 +18,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from agentsim.cli.sweep.spec import MAX_POINTS
 from agentsim.errors import AgentsimError, UsageError
 
-USAGE = ("agentsim sweep SPEC.toml [--workers N | --scheduler ADDRESS] --out DIR [--quiet]\n"
+USAGE = ("agentsim sweep SPEC.toml [--workers N | --scheduler ADDRESS] --out DIR [--max-points N] [--quiet]\n"
          "       agentsim sweep report DIR [--metric M ...] [--by KEY] [--axis KEY] [--over KEY ...] [--markdown] "
          "[--png FILE]")
 
@@ -45,8 +46,15 @@ def add_parsers(commands) -> None:
     where.add_argument("--workers", type=int, metavar="N",
                        help="worker processes of the local Dask cluster (default: one per core)")
     where.add_argument("--scheduler", metavar="ADDRESS",
-                       help="run on the Dask scheduler at ADDRESS (tcp://host:8786) and its workers instead")
+                       help="run on the Dask scheduler at ADDRESS (tls://host:8786, or tcp:// on a network you "
+                            "trust) and its workers instead; the credentials of a TLS scheduler are Dask's "
+                            "configuration: DASK_DISTRIBUTED__COMM__TLS__CA_FILE, "
+                            "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT and DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY "
+                            "(the local cluster of --workers makes its own temporary TLS credentials)")
     parser.add_argument("--out", metavar="DIR", help="the sweep's folder: results, and the cache of finished points")
+    parser.add_argument("--max-points", type=int, metavar="N",
+                        help=f"run a grid of up to N points (default: at most {MAX_POINTS}; a larger grid is refused "
+                             f"before any work)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     report = parser.add_argument_group("report")
     report.add_argument("--metric", action="append", metavar="M",
@@ -85,9 +93,13 @@ def sweep_handler(args: argparse.Namespace) -> int:
         raise UsageError("say where the sweep writes: --out DIR")
     if args.workers is not None and args.workers < 1:
         raise UsageError("--workers must be at least 1")
+    if args.max_points is not None and args.max_points < 1:
+        raise UsageError("--max-points must be at least 1")
     from agentsim.cli.sweep import runner, spec
 
-    checked = spec.load(args.spec)  # every mistake of the spec is named here, before any work
+    # every mistake of the spec is named here, before any work; the count of points first
+    checked = spec.load(args.spec, max_points=args.max_points,
+                        say=None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True)))
     outcome = runner.run(checked, Path(args.out), workers=args.workers, scheduler=args.scheduler, quiet=args.quiet)
     failed = outcome.failed
     print(f"{outcome.points} points of 'agentsim {checked.name}': {outcome.computed} computed, {outcome.cached} "
@@ -102,8 +114,8 @@ def sweep_handler(args: argparse.Namespace) -> int:
 def report_handler(args: argparse.Namespace) -> int:
     if args.folder is None:
         raise UsageError("say which sweep: agentsim sweep report DIR")
-    if args.workers is not None or args.scheduler or args.out:
-        raise UsageError("'agentsim sweep report DIR' takes no --workers, --scheduler or --out")
+    if args.workers is not None or args.scheduler or args.out or args.max_points is not None:
+        raise UsageError("'agentsim sweep report DIR' takes no --workers, --scheduler, --out or --max-points")
     from agentsim.cli.sweep.report import markdown_table, plot, summarize, text_tables
 
     folder = Path(args.folder)

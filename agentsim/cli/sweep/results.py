@@ -59,7 +59,8 @@ def make_row(point: Point, outcome: dict) -> dict:
     row.update(status=outcome["status"], error=outcome.get("error"))
     if outcome.get("result") is not None:
         row.update(metric_columns(outcome["result"], point.values))
-    row.update(seconds=outcome.get("seconds"), worker=outcome.get("worker"), point=point.key,
+    row.update(seconds=outcome.get("seconds"), worker=outcome.get("worker"), attempts=outcome.get("attempts"),
+               point=point.key,
                command=shell_line(point.argv))
     return row
 

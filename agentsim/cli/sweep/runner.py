@@ -18,7 +18,14 @@ The folder (``--out DIR``) holds:
 
 A point that fails is a row with its error and is not cached: a rerun tries it again. A worker that dies
 takes its points with it, and the scheduler runs them on another worker (up to Dask's
-``distributed.scheduler.allowed-failures`` deaths per point; beyond that the point fails).
+``distributed.scheduler.allowed-failures`` deaths per point; beyond that the point fails); the sweep says
+on stderr how many points were run again so, and the ``attempts`` column of the results counts the runs
+of each point (1 where no worker was lost under it; a point from the cache keeps the count of its run).
+
+The local cluster (``--workers``) talks TLS with credentials made for it alone
+(``distributed.Security.temporary()``: a certificate and key held in memory, never written): another user of
+the machine cannot join it or run code in its workers. ``--scheduler`` reaches a scheduler with the
+credentials of Dask's configuration (``distributed.comm.tls.*``).
 """
 
 from __future__ import annotations
@@ -94,6 +101,7 @@ def connect(workers: int | None, scheduler: str | None):
         else:
             cluster = stack.enter_context(dd.LocalCluster(
                 n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
+                security=dd.Security.temporary(), protocol="tls://", host="127.0.0.1",
                 # Dask's own log lines stay off the terminal: a worker's heartbeat that races the cluster's
                 # shutdown is logged as an error with its traceback although nothing is lost; what does go
                 # wrong reaches the sweep as a failed point or a lost worker, and is reported as such
@@ -134,6 +142,20 @@ def cached_outcomes(folder: Path, points: list[Point]) -> dict[str, dict]:
 
 def save(folder: Path, point: Point, outcome: dict) -> None:
     write_text(folder / "points" / f"{point.key}.json", json.dumps({**outcome, "argv": list(point.argv)}) + "\n")
+
+
+def attempts(client, futures) -> dict[str, int]:
+    """How many times the scheduler ran each future's task: one, and one more for each worker that died
+    under it (the scheduler's count of the task's "suspicious" deaths)."""
+    keys = [future.key for future in futures]
+
+    def counted(dask_scheduler, keys=keys):
+        return {k: dask_scheduler.tasks[k].suspicious + 1 for k in keys if k in dask_scheduler.tasks}
+
+    try:
+        return client.run_on_scheduler(counted)
+    except Exception:  # noqa: BLE001 - a scheduler that cannot say (another version): no count rather than none
+        return {}
 
 
 def failure(exc: BaseException) -> dict:
@@ -194,6 +216,7 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
                     elif outcome.get("version") not in (None, mine):
                         outcome = {**outcome, "status": "failed", "result": None,
                                    "error": f"the worker ran agentsim {outcome['version']}, not {mine}"}
+                    outcome = {**outcome, "attempts": 1}  # unless a lost worker is found under it below
                     if outcome["status"] == "ok":
                         save(folder, point, outcome)
                     else:
@@ -202,6 +225,17 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
                     bar.set_postfix(failed=failed, refresh=False)
                     bar.update(1)
                 compute = time.perf_counter() - sending
+                retried = {k: n for k, n in attempts(client, futures).items() if n > 1}
+                for future, point in futures.items():
+                    if future.key in retried:
+                        outcomes[point.key] = {**outcomes[point.key], "attempts": retried[future.key]}
+                        if outcomes[point.key]["status"] == "ok":
+                            save(folder, point, outcomes[point.key])
+                again = len(retried)
+                if again:
+                    print(f"agentsim: a worker was lost under {again} point{'s' if again > 1 else ''}, run again "
+                          f"on another worker (the 'attempts' column of results.csv counts the runs)",
+                          file=sys.stderr)
             finally:
                 if pending:  # interrupted: nothing keeps running for a sweep that stopped
                     client.cancel(list(pending))

@@ -51,7 +51,12 @@ REPORT_KEYS = ("metrics", "axis", "by", "over")
 #: Options the sweep sets itself.
 SWEEP_OPTIONS = ("json", "out", "help")
 #: Columns every row has beside the grid's and the metrics'.
-ROW_COLUMNS = ("status", "error", "seconds", "worker", "point", "command")
+ROW_COLUMNS = ("status", "error", "seconds", "worker", "attempts", "point", "command")
+#: The most points a sweep runs unless ``--max-points N`` allows more: each is checked by the command's parser
+#: before any work (about 60 microseconds each), and its row kept in memory.
+MAX_POINTS = 10_000
+#: From how many points a sweep says their count before it checks them (a second's work or more).
+SAY_COUNT = 1_000
 
 
 @dataclass(frozen=True)
@@ -151,8 +156,19 @@ def find_action(parser: argparse.ArgumentParser, key: str) -> argparse.Action | 
     return None
 
 
-def load(path: str | Path) -> Spec:
-    """Read and check a spec; every mistake is a :class:`UsageError` of one line naming it."""
+def count(grid: dict) -> int:
+    """How many points ``grid`` makes (the product of its axes' lengths), without making them."""
+    total = 1
+    for values in grid.values():
+        total *= len(values)
+    return total
+
+
+def load(path: str | Path, max_points: int | None = None, say=None) -> Spec:
+    """Read and check a spec; every mistake is a :class:`UsageError` of one line naming it. The grid's
+    points are counted first (``say`` is told how many, from :data:`SAY_COUNT` on) and refused past
+    ``max_points`` (default
+    :data:`MAX_POINTS`) before any is made; then they are made one after another, each checked."""
     path = Path(path)
     where = f"sweep spec {str(path)!r}"
     if not path.exists() and len(path.parts) == 1:
@@ -194,7 +210,14 @@ def load(path: str | Path) -> Spec:
                 takes_out="--out" in flags_of(parser))
     check_keys(spec, parser, where)
     check_report(spec, where)
-    spec.points = expand(spec, parser, where)
+    total, most = count(grid), MAX_POINTS if max_points is None else max_points
+    if say is not None and total >= SAY_COUNT:
+        say(f"agentsim: {where}: {total} points of 'agentsim {spec.name}', checking them")
+    if total > most:
+        raise UsageError(f"{where}: the grid makes {total} points, more than the {most} a sweep runs"
+                         + (" without --max-points N" if max_points is None else " with this --max-points")
+                         + f" (give --max-points {total} to run them all)")
+    spec.points = list(expand(spec, parser, where))
     return spec
 
 
@@ -243,13 +266,14 @@ def check_report(spec: Spec, where: str) -> None:
             raise UsageError(f"{where}: [report] {key.split()[0]} = {name!r} is no grid key")
 
 
-def expand(spec: Spec, parser: argparse.ArgumentParser, where: str) -> list[Point]:
-    """Every combination of the grid, in the order of its keys (the last varies fastest), each command line
-    checked by the command's own parser (a bad value is named before any work)."""
+def expand(spec: Spec, parser: argparse.ArgumentParser, where: str):
+    """Every combination of the grid, made one at a time in the order of its keys (the last varies
+    fastest), each command line checked by the command's own parser (a bad value is named before any
+    work)."""
     keys = list(spec.grid)
     axes = [list(spec.grid[k]) if isinstance(spec.grid[k], dict) else spec.grid[k] for k in keys]
     version = project_version()
-    points, checked = [], set()
+    checked = set()
     for combination in itertools.product(*axes):
         values, options = {}, dict(spec.fixed)
         for key, value in zip(keys, combination):
@@ -262,8 +286,7 @@ def expand(spec: Spec, parser: argparse.ArgumentParser, where: str) -> list[Poin
         if argv not in checked:
             check_argv(argv, values, where)
             checked.add(argv)
-        points.append(Point(values=values, argv=argv, key=point_key(argv, version)))
-    return points
+        yield Point(values=values, argv=argv, key=point_key(argv, version))
 
 
 def arguments(parser: argparse.ArgumentParser, options: dict, base: Path, where: str) -> list[str]:
