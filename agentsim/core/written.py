@@ -35,7 +35,7 @@ from typing import Iterable, Iterator
 
 from agentsim.errors import UsageError
 
-__all__ = ["written", "check_output", "save_figure", "staged_folder", "clear_staged", "RUN_FILES"]
+__all__ = ["written", "check_output", "save_figure", "staged_folder", "clear_staged", "clear_partials", "RUN_FILES"]
 
 #: The files one of which a run's folder holds (a run's figures): a folder with none of them that is not
 #: empty is someone else's, which a run never replaces.
@@ -106,6 +106,17 @@ def written(path: str | Path) -> Iterator[Path]:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+
+
+def clear_partials(folder: str | Path) -> list[Path]:
+    """Remove the temporary files of :func:`written` that a killed process left in ``folder``
+    (``.NAME.partial-XXXX.SUFFIX``); returns them."""
+    removed = []
+    for leftover in Path(folder).glob(".*.partial-*"):
+        if leftover.is_file() and not leftover.is_symlink():
+            leftover.unlink(missing_ok=True)
+            removed.append(leftover)
+    return removed
 
 
 def save_figure(fig, path: str | Path, **options) -> Path:

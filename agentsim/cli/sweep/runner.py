@@ -43,6 +43,7 @@ from agentsim.cli.sweep import results
 from agentsim.cli.sweep.point import run_point, worker_info
 from agentsim.cli.sweep.spec import Point, Spec, output_folders, project_version
 from agentsim.errors import AgentsimError, Unavailable
+from agentsim.core.written import clear_partials
 from agentsim.media.files import write_text
 
 #: How long to wait for a scheduler to answer and for its first worker to join (seconds).
@@ -182,6 +183,8 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
         (folder / "points").mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise AgentsimError(f"cannot create the sweep folder {str(folder)!r}: {exc}") from None
+    for where in (folder, folder / "points"):  # what a killed sweep was writing: never whole, never read
+        clear_partials(where)
     write_text(folder / "sweep.json", json.dumps(spec.to_json(), indent=2, default=str) + "\n")
     outcomes = cached_outcomes(folder, spec.points)
     cached = len({p.key for p in spec.points if p.key in outcomes})

@@ -1,0 +1,389 @@
+"""Outputs that are whole or absent, inputs that cannot exhaust the machine: kill -9 at random points of a
+storyteller run and of a sweep, a full disk (a small tmpfs), read-only folders, device nodes, FIFOs,
+planted symbolic links and inputs named as outputs; inputs past their limit and runs whose files would be
+larger than a file may be or than the disk holds.
+
+The storyteller's kill loop runs 3 times in the default suite and 20 times with ``-m system``; the sweep's
+(a local cluster started each time) 3 and 20 times with ``-m system`` only. The kill times come from a seeded
+numpy Generator, spread over the length of a whole run measured first."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import signal
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agentsim.core.written import check_output, staged_folder, written
+from agentsim.errors import UsageError
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ("@title Tiny\n[gaze:audience]Long [beat]ago, the [point:left]North Wind and the Sun had a [brows]quarrel. "
+        "Each of them\n[beat]said that he was the [beat:both]stronger.\n")
+GOOD = ('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="b1" characterId="agent">'
+        '<gesture id="g1" lexeme="BEAT" start="{start}"/></bml>')
+
+
+def env() -> dict:
+    return dict(os.environ, PYTHONPATH=str(ROOT))
+
+
+def cli(*args: str, cwd: Path, stdin=None, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "agentsim", *args], capture_output=True, text=True, cwd=cwd,
+                          env=env(), stdin=stdin, timeout=timeout)
+
+
+def one_line(proc: subprocess.CompletedProcess) -> str:
+    lines = [line for line in proc.stderr.splitlines() if line.startswith("agentsim:")]
+    assert len(lines) == 1 and "internal error" not in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+    return lines[0]
+
+
+# ----------------------------------------------------------------------------------------------------
+# One way to write: devices, FIFOs, folders, inputs, planted links.
+
+
+def test_a_device_a_fifo_or_a_folder_is_refused_as_a_file(tmp_path):
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    for path, kind in ((Path("/dev/null"), "a character device"), (fifo, "a FIFO"), (tmp_path, "a folder")):
+        with pytest.raises(UsageError, match=kind):
+            with written(path) as tmp:
+                tmp.write_text("never")
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode) and stat.S_ISFIFO(os.stat(fifo).st_mode)
+
+
+def test_the_command_line_refuses_a_device_or_the_input_as_output_before_work(tmp_path):
+    bml = tmp_path / "good.xml"
+    bml.write_text(GOOD.format(start=0))
+    before = bml.read_bytes()
+    (tmp_path / "link.bvh").symlink_to(bml)
+    for target, said in (("/dev/null", "it is a character device, not a file (name a regular file)"), ("good.xml", "it is one of the run's inputs"),
+                         ("link.bvh", "it is one of the run's inputs")):
+        proc = cli("realize", "--tts", "builtin", "--bvh", target, "good.xml", cwd=tmp_path)
+        assert proc.returncode == 2 and not proc.stdout  # nothing ran
+        assert one_line(proc) == f"agentsim: cannot write {target}: {said}"
+    assert bml.read_bytes() == before and stat.S_ISCHR(os.stat("/dev/null").st_mode)
+
+
+def test_a_planted_link_at_a_temporary_name_is_not_followed(tmp_path):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("mine")
+    # the names the old writer used, and a spread of guesses at the new random ones
+    for name in [f".metrics.partial-{os.getpid()}.json"] + [f".metrics.partial-{i:08x}.json" for i in range(64)]:
+        (tmp_path / name).symlink_to(victim)
+    names = set()
+    for text in ("one", "two"):
+        with written(tmp_path / "metrics.json") as tmp:
+            names.add(tmp.name)
+            assert not tmp.is_symlink() and tmp.stat().st_size == 0 and tmp.stat().st_nlink == 1
+            tmp.write_text(text)
+    assert victim.read_text() == "mine" and (tmp_path / "metrics.json").read_text() == "two" and len(names) == 2
+
+
+def test_a_run_folder_is_never_one_that_holds_someone_elses_files_or_the_input(tmp_path):
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "thesis.tex").write_text("years of work")
+    with pytest.raises(UsageError, match="not an agentsim run's"):
+        with staged_folder(tmp_path / "mine"):
+            pass
+    story = tmp_path / "st" / "tiny.story"
+    story.parent.mkdir()
+    story.write_text(TINY)
+    proc = cli("run", "storytelling", "--story", str(story), "--tts", "builtin", "--no-cache", "--out", "st",
+               cwd=tmp_path)
+    assert proc.returncode == 2 and "holds the run's input" in one_line(proc)
+    assert (tmp_path / "mine" / "thesis.tex").read_text() == "years of work" and story.read_text() == TINY
+
+
+# ----------------------------------------------------------------------------------------------------
+# Weigh before reading.
+
+
+def test_endless_standard_input_is_refused_in_one_line(tmp_path):
+    with open("/dev/zero", "rb") as zero:
+        proc = cli("realize", "--tts", "builtin", "-", cwd=tmp_path, stdin=zero)
+    assert proc.returncode == 2 and not proc.stdout
+    assert one_line(proc) == "agentsim: the BML document on standard input is longer than 8 MB: at most 8 MB is read"
+
+
+def test_a_huge_file_is_refused_from_its_size_without_being_read(tmp_path):
+    big = tmp_path / "big.xml"
+    with open(big, "wb") as f:
+        f.truncate(2 * 1024 ** 3)  # 2 GB, sparse
+    proc = cli("realize", "--tts", "builtin", "big.xml", cwd=tmp_path)
+    assert proc.returncode == 2
+    assert one_line(proc) == "agentsim: the BML document big.xml is 2048.0 MB long: at most 8 MB is read"
+    taps = tmp_path / "taps.txt"
+    with open(taps, "wb") as f:
+        f.truncate(9 * 1024 * 1024)
+    from anticipators.tap import read_taps
+
+    with pytest.raises(ValueError, match="9.0 MB long: at most 8 MB is read"):
+        read_taps(taps)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Writers that do not allocate the whole timeline.
+
+
+def test_a_behaviour_a_million_seconds_in_is_refused_by_its_projected_size(tmp_path):
+    (tmp_path / "far.xml").write_text(GOOD.format(start=999999))
+    proc = cli("realize", "--tts", "builtin", "--bvh", "far.bvh", "far.xml", cwd=tmp_path)
+    assert proc.returncode == 2
+    line = one_line(proc)
+    # 1000001 s at 60 fps: 60000061 frames of the body's channels, 10 bytes a value
+    from agentsim.animation.body import Body
+
+    size = 60000061 * Body().n_dofs * 10 / 1024 ** 3
+    assert line == (f"agentsim: --bvh far.bvh: the run lasts 1000000 s, so the file would take {size:.1f} GiB, more "
+                    f"than the 4.0 GiB a run's file may take (a WAV cannot hold more): move what starts that late "
+                    f"sooner")
+    assert not list(tmp_path.glob("*.bvh")) and not list(tmp_path.glob(".*partial*"))
+
+
+@contextlib.contextmanager
+def tmpfs(where: Path, size: str, read_only: bool = False):
+    where.mkdir()
+    options = f"size={size}" + (",ro" if read_only else "")
+    made = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(where)], capture_output=True,
+                          text=True)
+    if made.returncode:
+        pytest.skip(f"cannot mount a tmpfs here: {made.stderr.strip() or made.returncode}")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", str(where)], check=True)
+
+
+def test_a_full_disk_is_said_before_writing_and_leaves_nothing(tmp_path):
+    (tmp_path / "g.xml").write_text(GOOD.format(start=500))
+    with tmpfs(tmp_path / "small", "2m") as small:
+        proc = cli("realize", "--tts", "builtin", "--bvh", "small/x.bvh", "g.xml", cwd=tmp_path)
+        assert proc.returncode == 1
+        line = one_line(proc)
+        assert line.startswith("agentsim: not enough disk space for --bvh small/x.bvh: the run lasts 501 s, so "
+                               "they would take ") and line.endswith(f"and {small} has 2.0 MiB free")
+        assert os.listdir(small) == []
+        # a file that does fit, but not beside its temporary copy: the old one stays whole
+        (small / "old.txt").write_text("old")
+        with pytest.raises(OSError):
+            with written(small / "old.txt") as tmp, open(tmp, "wb") as f:
+                f.write(b"x" * 4 * 1024 * 1024)
+        assert (small / "old.txt").read_text() == "old" and os.listdir(small) == ["old.txt"]
+
+
+def test_a_read_only_folder_is_said_before_work(tmp_path):
+    (tmp_path / "tiny.story").write_text(TINY)
+    with tmpfs(tmp_path / "ro", "1m", read_only=True):
+        proc = cli("run", "storytelling", "--story", "tiny.story", "--tts", "builtin", "--no-cache",
+                   "--out", "ro/st", cwd=tmp_path)
+        assert proc.returncode == 2
+        assert one_line(proc).startswith("agentsim: cannot make the output folder ro/st: ")
+
+
+# ----------------------------------------------------------------------------------------------------
+# Sweeps.
+
+
+def test_usage_errors_of_a_sweep_and_a_seed_are_one_line_before_work(tmp_path):
+    proc = cli("eval", "speech-sync", "--tts", "builtin", "--seed", "-1", cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines()[-1].endswith("argument --seed: a seed is a whole number from 0, got -1")
+    spec = tmp_path / "big.toml"
+    spec.write_text('command = ["eval", "speech-sync"]\n[grid]\nseed = ' + json.dumps(list(range(1000)))
+                    + '\njitter = ' + json.dumps([i / 1000 for i in range(11)]) + '\n[fixed]\ntts = "builtin"\n')
+    proc = cli("sweep", "big.toml", "--out", "sw", "--quiet", cwd=tmp_path)
+    assert proc.returncode == 2 and not (tmp_path / "sw").exists()
+    assert one_line(proc) == (f"agentsim: sweep spec 'big.toml': the grid makes 11000 points, more than the 10000 a "
+                              f"sweep runs without --max-points N (give --max-points 11000 to run them all)")
+    proc = cli("sweep", "big.toml", "--out", "sw", "--max-points", "100", "--quiet", cwd=tmp_path)
+    assert proc.returncode == 2 and "more than the 100 a sweep runs with this --max-points" in one_line(proc)
+
+
+def test_the_local_cluster_talks_tls_and_refuses_a_client_without_its_credentials():
+    distributed = pytest.importorskip("distributed")
+    from agentsim.cli.sweep.runner import connect
+
+    with connect(1, None) as client:
+        address = client.scheduler.address
+        assert address.startswith("tls://127.0.0.1:")
+        assert client.submit(os.getpid).result(timeout=30) != os.getpid()  # the credentials work
+        with pytest.raises((OSError, TimeoutError, ValueError, TypeError)):
+            distributed.Client(address, timeout="3s")  # no certificate: no connection
+
+
+def test_a_lost_worker_is_counted_in_the_attempts(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    from agentsim.cli.sweep.runner import attempts, connect
+
+    mark = tmp_path / "died-once"
+
+    def dies_once(path=str(mark)):
+        if not os.path.exists(path):
+            Path(path).write_text("x")
+            os._exit(1)  # the worker's process dies under the task
+        return 7
+
+    with connect(2, None) as client:
+        futures = {client.submit(dies_once, key="dies-once", pure=False): "a",
+                   client.submit(lambda: 8, key="lives", pure=False): "b"}
+        assert [f.result(timeout=60) for f in futures] == [7, 8]
+        assert attempts(client, futures) == {"dies-once": 2, "lives": 1}
+    assert isinstance(distributed.__version__, str)
+
+
+# ----------------------------------------------------------------------------------------------------
+# kill -9 at random points.
+
+
+def digest(folder: Path) -> dict | None:
+    """What identifies a complete storyteller run in ``folder``: its seed and the digests of the files that
+    depend on it only; None if the folder is missing or any file is not whole."""
+    if not folder.is_dir():
+        return None
+    names = sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+    try:
+        metrics = json.loads((folder / "metrics.json").read_text())
+        for line in (folder / "feedback.jsonl").read_text().splitlines():
+            json.loads(line)
+        for png in folder.glob("*.png"):
+            assert png.read_bytes()[-8:-4] == b"IEND"
+        bvh = (folder / "story.bvh").read_text()
+        frames = int(bvh.split("Frames: ", 1)[1].split("\n", 1)[0])
+        assert len(bvh.split("Frame Time: ", 1)[1].strip().splitlines()) == frames + 1
+        assert (folder / "report.html").read_text().rstrip().endswith("</html>")
+    except (OSError, ValueError, IndexError, AssertionError, KeyError):
+        return None
+    return {"names": names, "seed": metrics["seed"],
+            **{n: hashlib.sha256((folder / n).read_bytes()).hexdigest() for n in ("story.bvh", "feedback.jsonl",
+                                                                                 "gestures.csv", "story.bml")}}
+
+
+def story_command(seed: int) -> list[str]:
+    return [sys.executable, "-m", "agentsim", "run", "storytelling", "--story", "tiny.story", "--tts", "builtin",
+            "--no-cache", "--seed", str(seed), "--out", "st"]
+
+
+def killed_after(command: list[str], cwd: Path, seconds: float) -> int | None:
+    """Run ``command`` in a process group of its own and kill -9 the group after ``seconds``; its exit status
+    if it ended first, else None."""
+    proc = subprocess.Popen(command, cwd=cwd, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:
+        return proc.wait(timeout=seconds)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        return None
+
+
+def storyteller_kills(tmp_path: Path, runs: int, seed: int = 28) -> dict:
+    """A complete run (seed 1), then ``runs`` runs of seed 2 killed at random times, then one run of seed 2
+    to the end; returns what was seen after each kill."""
+    (tmp_path / "tiny.story").write_text(TINY)
+    started = time.perf_counter()
+    assert subprocess.run(story_command(1), cwd=tmp_path, env=env(), capture_output=True).returncode == 0
+    whole = time.perf_counter() - started
+    first = digest(tmp_path / "st")
+    assert first is not None and first["seed"] == 1
+    rng = np.random.default_rng(seed)
+    seen = []
+    for at in rng.uniform(0.0, whole * 1.1, runs):
+        status = killed_after(story_command(2), tmp_path, at)
+        seen.append({"at": at, "status": status, "digest": digest(tmp_path / "st"),
+                     "beside": sorted(p.name for p in tmp_path.iterdir() if p.name not in ("tiny.story", "st")),
+                     "inside": sorted(p.name for p in (tmp_path / "st").iterdir() if p.name.startswith("."))})
+    assert subprocess.run(story_command(2), cwd=tmp_path, env=env(), capture_output=True).returncode == 0
+    second = digest(tmp_path / "st")
+    assert second is not None and second["seed"] == 2
+    leftovers = sorted(p.name for p in tmp_path.iterdir() if p.name not in ("tiny.story", "st"))
+    return {"first": first, "second": second, "seen": seen, "leftovers": leftovers, "whole_s": whole}
+
+
+def check_storyteller(outcome: dict) -> None:
+    for kill in outcome["seen"]:
+        assert kill["digest"] in (outcome["first"], outcome["second"]), kill  # the old run or the new, whole
+        assert kill["status"] in (None, 0), kill
+        assert all(name.startswith(".st.staging-") for name in kill["beside"]), kill  # the rest is staged
+        assert kill["inside"] == [], kill
+    assert outcome["leftovers"] == []  # the next run cleared what the killed ones staged
+
+
+def test_a_killed_storyteller_leaves_the_old_run_or_the_new_whole(tmp_path):
+    check_storyteller(storyteller_kills(tmp_path, runs=3))
+
+
+@pytest.mark.system
+def test_twenty_killed_storytellers(tmp_path):
+    outcome = storyteller_kills(tmp_path, runs=20)
+    check_storyteller(outcome)
+    assert any(k["status"] is None for k in outcome["seen"])  # the loop did kill runs midway
+
+
+SPEC = 'command = ["eval", "speech-sync"]\n[grid]\nseed = [0, 1, 2, 3]\n[fixed]\ntts = "builtin"\n'
+
+
+def sweep_state(folder: Path) -> dict:
+    """What a sweep's folder holds: whether results.csv is whole (all rows) or absent, and its points."""
+    import pandas as pd
+
+    state = {"csv": None, "points": 0, "bad_points": 0, "hidden": []}
+    if (folder / "results.csv").exists():
+        state["csv"] = len(pd.read_csv(folder / "results.csv"))
+    for path in (folder / "points").glob("*.json") if (folder / "points").is_dir() else []:
+        try:
+            assert json.loads(path.read_text())["status"] == "ok"
+            state["points"] += 1
+        except (ValueError, KeyError, AssertionError):
+            state["bad_points"] += 1
+    state["hidden"] = sorted(p.name for p in folder.rglob(".*")) if folder.is_dir() else []
+    return state
+
+
+def sweep_kills(tmp_path: Path, runs: int, seed: int = 28) -> dict:
+    """A whole sweep (timed), then ``runs`` sweeps into the same folder (emptied first half of the time)
+    killed at random times, then one to the end; returns what was seen after each kill."""
+    import shutil
+
+    (tmp_path / "spec.toml").write_text(SPEC)
+    command = [sys.executable, "-m", "agentsim", "sweep", "spec.toml", "--workers", "1", "--out", "sw", "--quiet"]
+    started = time.perf_counter()
+    assert subprocess.run(command, cwd=tmp_path, env=env(), capture_output=True).returncode == 0
+    whole = time.perf_counter() - started
+    rng = np.random.default_rng(seed)
+    seen = []
+    for at in rng.uniform(0.0, whole, runs):
+        if rng.random() < 0.5:
+            shutil.rmtree(tmp_path / "sw")
+        status = killed_after(command, tmp_path, at)
+        seen.append({"at": at, "status": status, **sweep_state(tmp_path / "sw")})
+    done = subprocess.run(command, cwd=tmp_path, env=env(), capture_output=True, text=True)
+    return {"seen": seen, "final": sweep_state(tmp_path / "sw"), "final_status": done.returncode, "whole_s": whole}
+
+
+def check_sweep(outcome: dict) -> None:
+    for kill in outcome["seen"]:
+        assert kill["csv"] in (None, 4) and kill["bad_points"] == 0, kill  # results whole or absent
+        assert all(".partial-" in name for name in kill["hidden"]), kill  # hidden: only temporaries
+    assert outcome["final_status"] == 0
+    assert outcome["final"] == {"csv": 4, "points": 4, "bad_points": 0, "hidden": []}  # cleared, whole
+
+
+@pytest.mark.system  # a local cluster started four times: about a minute
+def test_a_killed_sweep_leaves_whole_results_or_none(tmp_path):
+    check_sweep(sweep_kills(tmp_path, runs=3))
+
+
+@pytest.mark.system
+def test_twenty_killed_sweeps(tmp_path):
+    check_sweep(sweep_kills(tmp_path, runs=20))
