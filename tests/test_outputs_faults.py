@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agentsim.core.written import check_output, staged_folder, written
+from agentsim.core.written import staged_folder, written
 from agentsim.errors import UsageError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -204,8 +204,8 @@ def test_usage_errors_of_a_sweep_and_a_seed_are_one_line_before_work(tmp_path):
                     + '\njitter = ' + json.dumps([i / 1000 for i in range(11)]) + '\n[fixed]\ntts = "builtin"\n')
     proc = cli("sweep", "big.toml", "--out", "sw", "--quiet", cwd=tmp_path)
     assert proc.returncode == 2 and not (tmp_path / "sw").exists()
-    assert one_line(proc) == (f"agentsim: sweep spec 'big.toml': the grid makes 11000 points, more than the 10000 a "
-                              f"sweep runs without --max-points N (give --max-points 11000 to run them all)")
+    assert one_line(proc) == ("agentsim: sweep spec 'big.toml': the grid makes 11000 points, more than the 10000 a "
+                              "sweep runs without --max-points N (give --max-points 11000 to run them all)")
     proc = cli("sweep", "big.toml", "--out", "sw", "--max-points", "100", "--quiet", cwd=tmp_path)
     assert proc.returncode == 2 and "more than the 100 a sweep runs with this --max-points" in one_line(proc)
 
@@ -223,7 +223,7 @@ def test_the_local_cluster_talks_tls_and_refuses_a_client_without_its_credential
 
 
 def test_a_lost_worker_is_counted_in_the_attempts(tmp_path):
-    distributed = pytest.importorskip("distributed")
+    pytest.importorskip("distributed")
     from agentsim.cli.sweep.runner import attempts, connect
 
     mark = tmp_path / "died-once"
@@ -239,7 +239,6 @@ def test_a_lost_worker_is_counted_in_the_attempts(tmp_path):
                    client.submit(lambda: 8, key="lives", pure=False): "b"}
         assert [f.result(timeout=60) for f in futures] == [7, 8]
         assert attempts(client, futures) == {"dies-once": 2, "lives": 1}
-    assert isinstance(distributed.__version__, str)
 
 
 # ----------------------------------------------------------------------------------------------------

@@ -28,6 +28,10 @@ of the strategies that names the stage); elsewhere nothing more is printed.
 With ``--json`` the figures written (``metrics.json``, or with ``--compare`` those of ``compare.json``) are
 printed as JSON on stdout, and what is otherwise printed goes to stderr.
 
+The files are written into a staging folder beside ``--out`` (``.NAME.staging-XXXXXXXX``) that replaces the
+old run only once every file is whole (:func:`agentsim.core.written.staged_folder`): a killed run leaves
+the old run as it was, and the next run deletes what the killed one staged.
+
 Every file is on the run's one time axis: simulated time 0 is WAV sample 0, BVH frame 0 and feedback
 ``globalTime`` 0 (the TextGrid says so in its ``axis`` tier, ``metrics.json`` in ``time_axis``).
 
