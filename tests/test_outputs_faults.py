@@ -363,7 +363,7 @@ def sweep_kills(tmp_path: Path, runs: int, seed: int = 28) -> dict:
     seen = []
     for at in rng.uniform(0.0, whole, runs):
         if rng.random() < 0.5:
-            shutil.rmtree(tmp_path / "sw")
+            shutil.rmtree(tmp_path / "sw", ignore_errors=True)  # absent if the last kill came before it
         status = killed_after(command, tmp_path, at)
         seen.append({"at": at, "status": status, **sweep_state(tmp_path / "sw")})
     done = subprocess.run(command, cwd=tmp_path, env=env(), capture_output=True, text=True)
