@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -29,18 +28,18 @@ from tests import test_outputs_faults as faults  # noqa: E402 - the loops the te
 
 
 def refusal(args: list[str], stdin=None) -> dict:
-    """Exit status, wall seconds and peak memory (MB, of that process alone) of a command that should refuse
-    its input."""
+    """Exit status, wall seconds and peak memory (MB, of that process alone: GNU time's %M, as a child forked
+    from this process would count this one's pages) of a command that should refuse its input."""
     with tempfile.TemporaryDirectory() as folder:
         Path(folder, "far.xml").write_text(faults.GOOD.format(start=999999))
         started = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, "-m", "agentsim", *args], cwd=folder, env=faults.env(), stdin=stdin,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-        said = proc.stderr.read()
-        _, status, usage = os.wait4(proc.pid, 0)
-        proc.returncode = os.waitstatus_to_exitcode(status)
+        proc = subprocess.run(["/usr/bin/time", "-f", "peak_kb=%M", sys.executable, "-m", "agentsim", *args],
+                              cwd=folder, env=faults.env(), stdin=stdin, capture_output=True, text=True)
+    lines = proc.stderr.strip().splitlines()
+    peak = int(lines[-1].removeprefix("peak_kb="))
+    said = [line for line in lines if line.startswith("agentsim:")]
     return {"exit": proc.returncode, "seconds": round(time.perf_counter() - started, 2),
-            "peak_rss_mb": round(usage.ru_maxrss / 1024, 1), "said": said.strip().splitlines()[-1]}
+            "peak_rss_mb": round(peak / 1024, 1), "said": said[-1] if said else ""}
 
 
 def main() -> None:
@@ -56,8 +55,8 @@ def main() -> None:
     report["storyteller"] = {
         "runs": len(seen), "whole_run_s": round(story["whole_s"], 2),
         "killed": sum(k["status"] is None for k in seen), "ended_before_the_kill": sum(k["status"] == 0 for k in seen),
-        "left_previous_run": sum(k["digest"] == story["first"] for k in seen),
-        "left_new_run": sum(k["digest"] == story["second"] and k["digest"] != story["first"] for k in seen),
+        "left_the_run_before_it": sum(k["digest"] == k["before"] for k in seen),
+        "left_its_own_run_whole": sum(k["digest"] != k["before"] and k["digest"] == story["second"] for k in seen),
         "left_anything_else": sum(k["digest"] not in (story["first"], story["second"]) for k in seen),
         "kills_leaving_a_staging_folder": sum(bool(k["beside"]) for k in seen),
         "left_outside_staging": sum(any(not n.startswith(".st.staging-") for n in k["beside"]) for k in seen),

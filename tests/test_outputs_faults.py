@@ -298,8 +298,9 @@ def storyteller_kills(tmp_path: Path, runs: int, seed: int = 28) -> dict:
     rng = np.random.default_rng(seed)
     seen = []
     for at in rng.uniform(0.0, whole * 1.1, runs):
+        before = digest(tmp_path / "st")
         status = killed_after(story_command(2), tmp_path, at)
-        seen.append({"at": at, "status": status, "digest": digest(tmp_path / "st"),
+        seen.append({"at": at, "status": status, "before": before, "digest": digest(tmp_path / "st"),
                      "beside": sorted(p.name for p in tmp_path.iterdir() if p.name not in ("tiny.story", "st")),
                      "inside": sorted(p.name for p in (tmp_path / "st").iterdir() if p.name.startswith("."))})
     assert subprocess.run(story_command(2), cwd=tmp_path, env=env(), capture_output=True).returncode == 0
@@ -311,7 +312,7 @@ def storyteller_kills(tmp_path: Path, runs: int, seed: int = 28) -> dict:
 
 def check_storyteller(outcome: dict) -> None:
     for kill in outcome["seen"]:
-        assert kill["digest"] in (outcome["first"], outcome["second"]), kill  # the old run or the new, whole
+        assert kill["digest"] in (kill["before"], outcome["second"]), kill  # the old run or the new, whole
         assert kill["status"] in (None, 0), kill
         assert all(name.startswith(".st.staging-") for name in kill["beside"]), kill  # the rest is staged
         assert kill["inside"] == [], kill
