@@ -14,7 +14,7 @@ def write_wav(path: str | Path, utterance: Utterance) -> Path:
 
     if utterance.audio is None:
         raise AgentsimError(f"the {utterance.backend or 'chosen'} backend makes no sound: use --tts espeak")
-    from agentsim.core.written import written
+    from agentsim.written import written
 
     path = Path(path)
     with written(path) as tmp:
@@ -48,7 +48,7 @@ def write_textgrid(path: str | Path, utterance: Utterance, offset: float = 0.0) 
         "phones", intervals((p.symbol + ("ˈ" if p.stressed else ""), p.start, p.end) for p in utterance.phonemes),
         offset, end))
     grid.addTier(textgrid.PointTier("marks", [Point(offset + m.time, m.name) for m in utterance.marks], offset, end))
-    from agentsim.core.written import written
+    from agentsim.written import written
 
     path = Path(path)
     with written(path) as tmp:

@@ -88,7 +88,7 @@ class LinearModel:
 
     def save(self, path: str | Path) -> None:
         """Write the model to a JSON file."""
-        from agentsim.core.written import written
+        from agentsim.written import written
 
         with written(path) as tmp:
             tmp.write_text(self.to_json() + "\n", encoding="utf-8")

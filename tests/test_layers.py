@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("agentsim", "speech_timing", "anticipators", "scenarios")
 
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
-    ("error root", ("agentsim", "agentsim.errors")),
+    ("root: errors and whole-or-nothing writing", ("agentsim", "agentsim.errors", "agentsim.written")),
     ("speech timing", ("speech_timing",)),
     ("realizer core", ("agentsim.core", "agentsim.examples", "agentsim.anticipators")),
     ("realizer libraries", ("agentsim.bml", "agentsim.music", "agentsim.animation")),

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agentsim.core.written import staged_folder, written
+from agentsim.written import staged_folder, written
 from agentsim.errors import UsageError
 
 ROOT = Path(__file__).resolve().parents[1]

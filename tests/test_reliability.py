@@ -357,7 +357,7 @@ def test_two_thousand_mutated_documents_neither_stop_the_realizer_nor_lose_feedb
 
 # ---------------------------------------------------------------------- outputs that cannot half-exist
 def test_a_file_is_written_whole_or_not_at_all(tmp_path):
-    from agentsim.core.written import written
+    from agentsim.written import written
     from agentsim.media.files import write_text
 
     target = tmp_path / "feedback.jsonl"

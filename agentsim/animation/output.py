@@ -21,7 +21,7 @@ from agentsim.animation.behaviours import build_drivers
 from agentsim.animation.body import FK_ROWS, Body
 from agentsim.animation.manager import DriverManager
 from agentsim.animation.time_source import TimeSource
-from agentsim.core.written import written
+from agentsim.written import written
 
 #: Joints whose world positions a PoseStream carries for every frame.
 TRACKED_JOINTS = ("HumanoidRoot", "vt10", "skullbase", "l_eyeball", "r_eyeball", "l_shoulder", "r_shoulder",

@@ -31,7 +31,7 @@ import numpy as np
 
 from agentsim.animation.output import PoseStream
 from agentsim.animation.units import PHASE_NAMES
-from agentsim.core.written import save_figure
+from agentsim.written import save_figure
 
 _PHASE_COLOURS = {
     "preparation": "#9ecae1", "pre-stroke hold": "#deebf7", "stroke": "#e6550d", "post-stroke hold": "#fdd0a2",

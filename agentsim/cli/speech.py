@@ -151,7 +151,7 @@ def plot_errors(results: list[dict], path: str) -> None:
     ax.set_ylabel("|stroke - word onset| (ms)")
     ax.set_title(f"speech-gesture sync, timing={results[0]['timing']}, seed={results[0]['seed']}")
     fig.tight_layout()
-    from agentsim.core.written import save_figure
+    from agentsim.written import save_figure
 
     save_figure(fig, path, dpi=100)
     plt.close(fig)

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Iterable
 
 
 from agentsim.errors import UsageError
-from agentsim.core.written import check_output, written
+from agentsim.written import check_output, written
 from agentsim.media import AXIS
 if TYPE_CHECKING:  # checking where to write needs no audio
     from agentsim.media.audio import Track
@@ -31,7 +31,7 @@ def _cannot_write_in(folder: Path) -> str | None:
 def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[str | Path | None] = (),
                    inputs: Iterable[str | Path | None] = ()) -> None:
     """Raise :class:`UsageError` naming the first output that cannot be written: a device, a FIFO, a folder
-    where a file is meant or one of the run's ``inputs`` (:func:`~agentsim.core.written.check_output`), a file
+    where a file is meant or one of the run's ``inputs`` (:func:`~agentsim.written.check_output`), a file
     whose folder cannot be made (folders are made on demand) or is not writable, a folder that cannot be made
     or written. Called before any work is done."""
     inputs = list(inputs)

@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable
 
-from agentsim.core.written import written
+from agentsim.written import written
 
 #: The order in which a behaviour's sync points are tried for its peg: its stroke first.
 PEG_ORDER = ("stroke", "strokeStart", "attackPeak", "ready", "strokeEnd", "relax", "start", "end")

@@ -168,9 +168,10 @@ def render_ensemble(*args, **kwargs) -> tuple[np.ndarray, int, np.ndarray]:
 
 def write_beats(path: "str | os.PathLike", beat_times: Sequence[float]) -> None:
     """Write beat times (seconds), one per line, as ``mir_eval.io.load_events`` reads them."""
-    from agentsim.media.files import write_text
+    from agentsim.written import written
 
-    write_text(path, "".join(f"{t:.6f}\n" for t in np.asarray(beat_times, float)))
+    with written(path) as tmp:
+        tmp.write_text("".join(f"{t:.6f}\n" for t in np.asarray(beat_times, float)), encoding="utf-8")
 
 
 def read_beats(path: "str | os.PathLike") -> np.ndarray:

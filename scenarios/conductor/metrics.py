@@ -239,7 +239,7 @@ def plot_tempo(path: str | Path, beat_times, ensemble_bpm, target_bpm, ictus: di
     """Target, conductor and ensemble tempo over time, with the recovery point and the asynchrony
     (:func:`tempo_figure`), as a PNG."""
     path = Path(path)
-    from agentsim.core.written import save_figure
+    from agentsim.written import save_figure
 
     save_figure(tempo_figure(beat_times, ensemble_bpm, target_bpm, ictus, title, events, first_index, onsets), path)
     return path

@@ -73,7 +73,7 @@ def main(args: argparse.Namespace) -> int:
         raise AgentsimError("--seconds only applies to --input")
     if getattr(args, "sample_rate", None) is not None and not live:
         raise AgentsimError("--sample-rate only applies to --input")
-    from agentsim.core.written import staged_folder
+    from agentsim.written import staged_folder
 
     # written into a staging folder beside --out that replaces the old run once this one has finished
     with staged_folder(out, inputs=[args.config]) as staging:

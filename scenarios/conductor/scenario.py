@@ -410,7 +410,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     from agentsim.media.files import write_feedback, write_text, write_wav
     from agentsim.media.report import write_report
     from agentsim.media.report.page import start_audio
-    from agentsim.core.written import save_figure
+    from agentsim.written import save_figure
     from agentsim.media.tables import gesture_rows, write_csv
 
     say = stages or Stages.off()

@@ -29,7 +29,7 @@ With ``--json`` the figures written (``metrics.json``, or with ``--compare`` tho
 printed as JSON on stdout, and what is otherwise printed goes to stderr.
 
 The files are written into a staging folder beside ``--out`` (``.NAME.staging-XXXXXXXX``) that replaces the
-old run only once every file is whole (:func:`agentsim.core.written.staged_folder`): a killed run leaves
+old run only once every file is whole (:func:`agentsim.written.staged_folder`): a killed run leaves
 the old run as it was, and the next run deletes what the killed one staged.
 
 Every file is on the run's one time axis: simulated time 0 is WAV sample 0, BVH frame 0 and feedback
@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agentsim.core.written import save_figure
+from agentsim.written import save_figure
 from agentsim.errors import AgentsimError
 from agentsim.media.files import write_text
 from agentsim.core.progress import Stages
@@ -135,12 +135,12 @@ def main(args: argparse.Namespace) -> int:
     story_path = resolve_story(args.story)
     story = load_story(story_path, scene)
     out = Path(args.out)
-    from agentsim.core.written import staged_folder
+    from agentsim.written import staged_folder
     from agentsim.media.files import check_writable
 
     check_writable(folders=[out])  # an output folder that cannot be written is said before any work
     # the run is written into a staging folder beside --out, which replaces the old run once this one has
-    # finished: a killed run leaves the old one whole (agentsim.core.written)
+    # finished: a killed run leaves the old one whole (agentsim.written)
     with staged_folder(out, inputs=[story_path, scene_path, args.cache]) as staging:
         return _run(args, story, strategy, delivery, out, staging, started)
 

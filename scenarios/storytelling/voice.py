@@ -43,7 +43,7 @@ import numpy as np
 
 from speech_timing.backend import Mark, Phoneme, SpeechText, Utterance, Word
 from speech_timing.samples import BLOCK, PcmFile
-from agentsim.core.written import written
+from agentsim.written import written
 
 #: 16-bit samples read from (and written to) a cache file at a time.
 READ_BLOCK = BLOCK

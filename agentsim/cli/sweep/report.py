@@ -310,7 +310,7 @@ def plot(summary: Summary, path: Path) -> Path:
     over = f" over {', '.join(summary.over)}" if summary.over else ""
     fit_title(fig, f"agentsim {summary.command}: mean and 95\u00a0% bootstrap interval{over}", room)
     fig.tight_layout(rect=(0, bottom, 1, 1))  # (it keeps the subplots below the title, however many lines)
-    from agentsim.core.written import save_figure
+    from agentsim.written import save_figure
 
     save_figure(fig, path, dpi=100)
     plt.close(fig)

@@ -23,7 +23,7 @@ import json
 import math
 from pathlib import Path
 
-from agentsim.core.written import written
+from agentsim.written import written
 from agentsim.cli.sweep.spec import ROW_COLUMNS, Point, shell_line
 from agentsim.errors import Unavailable
 

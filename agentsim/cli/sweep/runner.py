@@ -43,7 +43,7 @@ from agentsim.cli.sweep import results
 from agentsim.cli.sweep.point import run_point, worker_info
 from agentsim.cli.sweep.spec import Point, Spec, output_folders, project_version
 from agentsim.errors import AgentsimError, Unavailable
-from agentsim.core.written import clear_partials
+from agentsim.written import clear_partials
 from agentsim.media.files import write_text
 
 #: How long to wait for a scheduler to answer and for its first worker to join (seconds).

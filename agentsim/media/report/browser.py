@@ -235,7 +235,7 @@ class Chromium:
             params.update(captureBeyondViewport=True, clip={"x": 0, "y": 0, "width": size["width"],
                                                             "height": size["height"], "scale": 1})
         data = self.send("Page.captureScreenshot", params)["data"]
-        from agentsim.core.written import written
+        from agentsim.written import written
 
         path = Path(path)
         with written(path) as tmp:

@@ -183,7 +183,7 @@ def write_poses(path, stream, comment: str = "", max_fps: float = MAX_FPS, keep:
     """Write ``poses.js``: the text of ``js_assignment("REPORT_POSES", pose_payload(stream, max_fps, keep),
     comment)``, its positions quantized, encoded and written a stretch of frames at a time (never the text of
     a long run's positions whole). Returns the payload without ``xyz``."""
-    from agentsim.core.written import written
+    from agentsim.written import written
 
     payload, pieces = _quantized_poses(stream, max_fps, keep)
     marker = "\x00xyz\x00"  # JSON writes it escaped, as no base64 text could be

@@ -26,7 +26,7 @@ from urllib.parse import quote
 
 import numpy as np
 
-from agentsim.core.written import written
+from agentsim.written import written
 from agentsim.media import AXIS
 from agentsim.media.files import write_text
 from agentsim.media.report.data import (FACE, js_assignment, point_names, run_duration, stroke_times,
