@@ -145,7 +145,7 @@ BAD_SPECS = [
     ('command = ["realize"]', "'agentsim realize' prints no --json"),
     ('command = ["eval"]', "unknown command 'eval'"),
     ('command = ["eval", "speech-sync"]\n[grid]\njiter = [0.1]', "unknown option 'jiter' of 'agentsim eval speech-sync'"),
-    ('command = ["eval", "speech-sync"]\n[fixed]\ntts = "festival"', "argument --tts: invalid choice: 'festival'"),
+    ('command = ["eval", "speech-sync"]\n[fixed]\ntts = "flite"', "argument --tts: invalid choice: 'flite'"),
     ('command = ["eval", "speech-sync"]\n[grid]\nseed = [1, "two"]', "argument --seed: expected a whole number from 0, got 'two' (at seed=two)"),
     ('command = ["eval", "speech-sync"]\n[grid]\nseed = [1, -1]', "argument --seed: a seed is a whole number from 0, got -1 (at seed=-1)"),
     ('command = ["eval", "speech-sync"]\n[grid]\nseed = []', "grid key 'seed' must be a list of at least one value"),
