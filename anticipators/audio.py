@@ -43,14 +43,22 @@ class AudioBeatAnticipator(Anticipator):
         Time of beat 1's neighbourhood: beats are numbered from here at the tracked tempo.
     start : float
         Simulated time at which a file starts to sound.
+    input : str
+        A live input device to listen to instead of ``source`` (a name, a number, or ``default``; the
+        command line's ``--anticipator audio:beats,input=DEVICE``), at ``sample_rate`` (44100 if not given).
     """
 
     def __init__(self, anticipator_id: str = "beats", source=None, sample_rate: int | None = None,
                  tracker: str = "causal", block_seconds: float = 0.02, horizon_beats: int = 8,
-                 origin: float = 0.0, start: float = 0.0, **tracker_options):
+                 origin: float = 0.0, start: float = 0.0, input: str = "", **tracker_options):
         super().__init__(anticipator_id)
         from anticipators.beats.tracking import make_tracker
 
+        if input:
+            if source is not None:
+                raise UsageError("an audio anticipator listens to a source or to an input, not both")
+            source = DeviceSource(device_named(input), int(sample_rate or 44100), block_seconds)
+            source.check()  # no such device: said now, before anything runs
         self.audio = None
         if isinstance(source, (str, Path)):
             self.audio, sample_rate = read_audio(source)
@@ -251,6 +259,12 @@ def alsa_problem() -> str | None:
         return (f"the ALSA configuration ({where}) is missing or empty: PortAudio would abort on it; reinstall "
                 "alsa-lib's configuration (apt-get install --reinstall libasound2-data) or unset ALSA_CONFIG_PATH")
     return None
+
+
+def device_named(name: str) -> str | int | None:
+    """The sounddevice device a command line names: ``default`` (None), a number, or a name."""
+    name = name.strip()
+    return None if name == "default" else int(name) if name.isdigit() else name
 
 
 class DeviceSource:

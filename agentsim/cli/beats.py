@@ -112,10 +112,9 @@ def listen(args: argparse.Namespace) -> dict:
 
     from agentsim.core.clock import make_environment
     from agentsim.core.pegboard import PegBoard
-    from anticipators.audio import AudioBeatAnticipator, DeviceSource
+    from anticipators.audio import AudioBeatAnticipator, DeviceSource, device_named
 
-    device = None if args.input == "default" else int(args.input) if args.input.isdigit() else args.input
-    source = DeviceSource(device, args.sample_rate)
+    source = DeviceSource(device_named(args.input), args.sample_rate)
     source.check()
     env = make_environment(realtime=True)
     anticipator = AudioBeatAnticipator("beats", source=source, tracker=args.tracker)

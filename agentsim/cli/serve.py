@@ -40,6 +40,13 @@ def add_parsers(commands) -> None:
     serve.add_argument("--media", metavar="DIR",
                        help="the directory <bmlt:audiofile fileName> reads sound files from (relative paths "
                             "inside it only); without it clients' audiofile behaviours are refused")
+    options.add_anticipators(serve)
+    serve.add_argument("--input", metavar="DEVICE",
+                       help="listen to this live input device (a name or number; 'default': the system's default "
+                            "input) with the audio beat anticipator, whose beats clients' BML pegs to as "
+                            "anticipators:beats:next1, anticipators:beats:beat3 (as --anticipator "
+                            "audio:beats,input=DEVICE); an input that is dead, or silent from the start, stops the "
+                            "service within 2 s")
     options.add_tts(serve)
     serve.add_argument("--strict", action="store_true", help="read pure BML 1.0 only")
     serve.add_argument("--fps", type=float, default=30.0, help="poses per second streamed to viewers (30)")
@@ -68,11 +75,17 @@ def run_server(args: argparse.Namespace) -> int:
         raise UsageError(f"--media names the directory sound files are read from; {args.media!r} is not one")
     if args.calibrate and args.audio == "none":
         raise UsageError("--calibrate measures the sound device's delay: it needs --audio DEVICE, not --audio none")
+    if args.input is not None:
+        if not args.input.strip() or "," in args.input:
+            raise UsageError(f"--input names one input device, got {args.input!r}")
+        args.anticipator.append(f"audio:beats,input={args.input.strip()}")
+    anticipators = options.anticipators(args)  # one that cannot be made: said before anything starts
     try:
         tts = options.backend(args.tts, args.voice)
         service = Service(host=args.host, port=args.port, audio=args.audio, tts=tts,
                           strict=args.strict, fps=args.fps, calibrate=args.calibrate,
-                          token=args.token, allow_origins=args.allow_origins, media=args.media)
+                          token=args.token, allow_origins=args.allow_origins, media=args.media,
+                          anticipators=anticipators)
     except NoAudioDevice as exc:  # say which option chooses the device, and how to do without one
         if exc.kind == "input":
             raise Unavailable(f"{exc.problem}. Leave --calibrate out, or {GET_A_DEVICE} and name its input "
