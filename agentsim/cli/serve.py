@@ -47,6 +47,19 @@ def add_parsers(commands) -> None:
                             "anticipators:beats:next1, anticipators:beats:beat3 (as --anticipator "
                             "audio:beats,input=DEVICE); an input that is dead, or silent from the start, stops the "
                             "service within 2 s")
+    from agentsim.live import limits as live
+
+    limits = serve.add_argument_group(
+        "how much speech one block may ask for (a block past a limit is refused whole, with one warning to its "
+        "sender; seconds are estimated from the characters before synthesis, and checked against the audio)")
+    limits.add_argument("--max-speech-chars", type=int, default=live.SPEECH_CHARACTERS, metavar="N",
+                        help=f"characters of text in one speech ({live.SPEECH_CHARACTERS:,})")
+    limits.add_argument("--max-speech-seconds", type=float, default=live.SPEECH_SECONDS, metavar="S",
+                        help=f"seconds one speech may last ({live.SPEECH_SECONDS:g})")
+    limits.add_argument("--max-block-chars", type=int, default=live.BLOCK_CHARACTERS, metavar="N",
+                        help=f"characters of text in a block's speeches together ({live.BLOCK_CHARACTERS:,})")
+    limits.add_argument("--max-block-seconds", type=float, default=live.BLOCK_SECONDS, metavar="S",
+                        help=f"seconds a block's speeches may last together ({live.BLOCK_SECONDS:g})")
     options.add_tts(serve)
     serve.add_argument("--strict", action="store_true", help="read pure BML 1.0 only")
     serve.add_argument("--fps", type=float, default=30.0, help="poses per second streamed to viewers (30)")
@@ -79,13 +92,16 @@ def run_server(args: argparse.Namespace) -> int:
         if not args.input.strip() or "," in args.input:
             raise UsageError(f"--input names one input device, got {args.input!r}")
         args.anticipator.append(f"audio:beats,input={args.input.strip()}")
+    from agentsim.live.limits import Limits
+
+    limits = Limits(args.max_speech_chars, args.max_speech_seconds, args.max_block_chars, args.max_block_seconds)
     anticipators = options.anticipators(args)  # one that cannot be made: said before anything starts
     try:
         tts = options.backend(args.tts, args.voice)
         service = Service(host=args.host, port=args.port, audio=args.audio, tts=tts,
                           strict=args.strict, fps=args.fps, calibrate=args.calibrate,
                           token=args.token, allow_origins=args.allow_origins, media=args.media,
-                          anticipators=anticipators)
+                          anticipators=anticipators, limits=limits)
     except NoAudioDevice as exc:  # say which option chooses the device, and how to do without one
         if exc.kind == "input":
             raise Unavailable(f"{exc.problem}. Leave --calibrate out, or {GET_A_DEVICE} and name its input "

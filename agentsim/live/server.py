@@ -50,6 +50,7 @@ from typing import Callable
 from agentsim.core import feedback as fb
 from agentsim.core.clock import make_environment
 from agentsim.errors import AgentsimError, ScheduleError, UsageError
+from agentsim.live.limits import Limits
 
 #: How often the realizer's thread takes what clients sent (s): a block waits at most this long.
 POLL = 0.005
@@ -140,12 +141,16 @@ class LiveRealizer:
     every feedback goes to each function in :attr:`listeners` as ``listener(feedback, sender)``, ``sender``
     that of the block it is about (None if unknown; in the realizer's thread: they must not block). ``every(period,
     fn)`` calls ``fn(now)`` every ``period`` simulated seconds while it runs. ``media``: the directory sound
-    files that clients name are read from (:class:`MediaDirectory`; None: none are). Realizer options
-    (``tts``, ``strict``, ``speech``, ``anticipators``) are passed on.
+    files that clients name are read from (:class:`MediaDirectory`; None: none are). ``limits``: how much
+    speech a block may ask for (:class:`Limits`). Realizer options (``tts``, ``strict``, ``speech``,
+    ``anticipators``) are passed on.
+
+    The audio synthesised for a block is weighed (:attr:`audio_bytes`, by block) and released when the block
+    ends: nothing but the block's own speeches holds it (the backend is not asked to remember it).
     """
 
     def __init__(self, queue_size: int = QUEUE, poll: float = POLL, media: str | Path | None = None,
-                 **realizer_options):
+                 limits: Limits | None = None, **realizer_options):
         from agentsim.realizer import Realizer
 
         self.env = make_environment(realtime=True)
@@ -169,8 +174,19 @@ class LiveRealizer:
         #: called with it, in that thread
         self.error: BaseException | None = None
         self.on_failure: list[Callable[[BaseException], None]] = []
+        #: functions called with a block's id when its audio is released (the loudspeaker lets its go)
+        self.on_release: list[Callable[[str], None]] = []
         #: faults gone on after, by kind (reported in the server's status)
         self.faults: collections.Counter[str] = collections.Counter()
+        self.limits = limits if limits is not None else Limits()
+        #: blocks refused for asking for too much speech (:class:`Limits`)
+        self.refused_long = 0
+        #: the synthesised speeches of each block not yet ended, with their audio's bytes (block id -> list
+        #: of (utterance, bytes)); written by the reader, released by the realizer's thread
+        self.audio: dict[str, list] = {}
+        self.audio_lock = threading.Lock()
+        #: bytes of audio released with their blocks, since the start
+        self.audio_released = 0
         self.thread = threading.Thread(target=self.run, name="agentsim-realizer", daemon=True)
 
     # ------------------------------------------------------------------------------------------- threads
@@ -278,21 +294,71 @@ class LiveRealizer:
                     reply(fb.warning(block.block_id, "PARSING_FAILURE", f"block refused: {error}", self.env.now,
                                      "agent", line=error.line, column=error.column))
                     continue
-                self.prepare(block)
-                self.inbox.put((block, reply, sender))
+                if self.prepare(block, reply):
+                    self.inbox.put((block, reply, sender))
 
-    def prepare(self, block) -> None:
-        """Synthesise a block's speeches ahead (a backend that remembers what it said, as espeak-ng's does,
-        then answers the planner at once)."""
+    def prepare(self, block, reply: Callable[[dict], None] | None = None) -> bool:
+        """Synthesise a block's speeches ahead, so that the realizer's thread (whose clock the feedback keeps)
+        only plans and plays: the planner is handed each utterance, the backend forgets it (the block's
+        speeches alone hold its audio, weighed in :attr:`audio`, until the block ends). A block that asks for
+        more speech than :attr:`limits` allow is refused with one warning (False)."""
         from agentsim.engines.speech import speech_text
 
-        backend = self.realizer.speech.planner.backend
-        for behaviour in block.behaviours:
-            if behaviour.type == "speech" and getattr(backend, "remembers", False):
+        planner = self.realizer.speech.planner
+        backend = planner.backend
+        # espeak-ng's rate is words a minute; another backend's, a factor on its own pace (taken as 175 a minute)
+        rate = getattr(backend, "rate", None) or 1.0
+        rate = float(rate) if getattr(backend, "name", "") == "espeak" else 175.0 * float(rate)
+        speeches = [b for b in block.behaviours if b.type == "speech"]
+        texts = [(b.id, speech_text(b)) for b in speeches]
+        why = self.limits.check([(i, t.text) for i, t in texts], rate)
+        made = []
+        if why is None:
+            for behaviour, (_, text) in zip(speeches, texts):
                 try:
-                    backend.synthesize(speech_text(behaviour))
+                    utterance = backend.synthesize(text)
                 except Exception:  # the planner meets the same problem, and warns the sender; counted here
                     self.faults["synthesis_ahead"] += 1
+                    continue
+                forget = getattr(backend, "forget", None)
+                if forget is not None:
+                    forget(text)
+                made.append((behaviour, utterance))
+            durations = {i: 0.0 for i, _ in texts}  # (one that could not be synthesised: the planner warns)
+            durations.update((b.id, u.duration) for b, u in made)
+            why = self.limits.check([(i, t.text) for i, t in texts], rate, durations)
+        if why is not None:
+            made.clear()  # what was synthesised goes with them
+            self.refused_long += 1
+            if reply is not None:
+                reply(fb.warning(block.id, "PARSING_FAILURE", f"block refused: {why}", self.env.now,
+                                 block.character_id))
+            return False
+        weighed = []
+        for behaviour, utterance in made:
+            planner.set_utterance(behaviour, utterance)
+            audio = getattr(utterance, "audio", None)
+            weighed.append((utterance, int(audio.nbytes) if audio is not None else 0))
+        if weighed:
+            with self.audio_lock:
+                self.audio.setdefault(block.id, []).extend(weighed)
+        return True
+
+    @property
+    def audio_bytes(self) -> int:
+        """Bytes of synthesised audio held for blocks that have not ended."""
+        with self.audio_lock:
+            return sum(n for held in self.audio.values() for _, n in held)
+
+    def release(self, block_id: str) -> None:
+        """A block ended (or was refused): its speeches' audio is let go, wherever the realizer keeps them."""
+        with self.audio_lock:
+            held = self.audio.pop(block_id, ())
+        for utterance, n in held:
+            utterance.audio = None
+            self.audio_released += n
+        for fn in self.on_release:
+            fn(block_id)
 
     def submit(self, block, reply: Callable[[dict], None], sender: object = None) -> None:
         """Submit a block that was read (in the realizer's thread)."""
@@ -303,11 +369,14 @@ class LiveRealizer:
         try:
             self.realizer.submit(block)
         except Exception as exc:
+            self.release(block.id)
             reply(fb.warning(block.id, "IMPOSSIBLE_TO_SCHEDULE", f"block refused: the realizer failed to plan it "
                              f"({type(exc).__name__}: {exc})", self.env.now, block.character_id))
 
     def emit(self, item: dict) -> None:
         block_id = str(item.get("id", "")).split(":", 1)[0]
+        if item.get("type") == "blockProgress" and item.get("id") == f"{block_id}:end":
+            self.release(block_id)
         sender = self.senders.get(block_id)
         for listener in self.listeners:
             listener(item, sender)
@@ -659,6 +728,8 @@ class Server:
     def status(self) -> dict:
         """The reply to ``{"status": true}``: clients, messages sent, and what was refused, dropped or failed."""
         status = {"type": "status", "clients": len(self.clients), "sent": self.sent, **self.counters,
+                  "refused_long_blocks": self.live.refused_long, "speech_audio_bytes": self.live.audio_bytes,
+                  "speech_audio_released": self.live.audio_released,
                   "realizer_faults": dict(self.live.faults), "time": self.live.env.now}
         for source in self.status_sources:
             status.update(source())
