@@ -184,15 +184,19 @@ class TTSBackend(Protocol):
 
 
 class Spoken:
-    """What a backend said, kept: the last ``size`` utterances by their :class:`SpeechText`, looked up and
-    added under a lock of their own (not the synthesiser's), so that a speech asked for again is answered
-    at once, as it was said."""
+    """What a backend said, kept: the last ``size`` utterances by their :class:`SpeechText`, holding at most
+    ``max_bytes`` of audio together (the oldest are forgotten first; one larger than that is not kept at all),
+    looked up and added under a lock of their own (not the synthesiser's), so that a speech asked for again is
+    answered at once, as it was said."""
 
-    def __init__(self, size: int) -> None:
+    def __init__(self, size: int, max_bytes: int) -> None:
         import threading
         from collections import OrderedDict
 
         self.size = size
+        self.max_bytes = max_bytes
+        #: bytes of audio the kept utterances hold
+        self.bytes = 0
         self._kept: "OrderedDict[SpeechText, Utterance]" = OrderedDict()
         self._lock = threading.Lock()
 
@@ -206,14 +210,26 @@ class Spoken:
     def keep(self, speech: SpeechText, utterance: "Utterance") -> "Utterance":
         """Keep ``utterance`` as what ``speech`` was; returns what is kept (one kept before wins)."""
         with self._lock:
-            utterance = self._kept.setdefault(speech, utterance)
-            if len(self._kept) > self.size:
-                self._kept.popitem(last=False)
+            if speech in self._kept:
+                return self._kept[speech]
+            self._kept[speech] = utterance
+            self.bytes += _weight(utterance)
+            while self._kept and (len(self._kept) > self.size or self.bytes > self.max_bytes):
+                _, forgotten = self._kept.popitem(last=False)
+                self.bytes -= _weight(forgotten)
             return utterance
 
     def forget(self, speech: SpeechText) -> None:
         with self._lock:
-            self._kept.pop(speech, None)
+            forgotten = self._kept.pop(speech, None)
+            if forgotten is not None:
+                self.bytes -= _weight(forgotten)
+
+
+def _weight(utterance: "Utterance") -> int:
+    """Bytes of audio an utterance holds."""
+    audio = utterance.audio
+    return int(audio.nbytes) if audio is not None else 0
 
 
 def check_prosody(speech: SpeechText) -> list[Prosody]:

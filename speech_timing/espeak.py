@@ -902,8 +902,11 @@ def _first_sound_after(events: list[_RawEvent], index: int) -> int | None:
     return None
 
 
-#: How many utterances a backend keeps to say again as they were (see :meth:`EspeakBackend.synthesize`).
+#: How many utterances a backend keeps to say again as they were (see :meth:`EspeakBackend.synthesize`),
+#: and how many bytes of audio they may hold together (the oldest are forgotten first; one larger than
+#: that is not kept at all).
 REMEMBERED = 64
+REMEMBERED_BYTES = 64 * 2 ** 20
 
 
 class EspeakBackend:
@@ -949,7 +952,7 @@ class EspeakBackend:
         self.rate = int(rate)
         # what was said, kept: the same text is said the same every time (each synthesis is a fresh
         # engine's, see _Pristine), and asked for again it is not synthesised again
-        self._spoken = Spoken(REMEMBERED)
+        self._spoken = Spoken(REMEMBERED, REMEMBERED_BYTES)
 
     @property
     def sample_rate(self) -> int:
@@ -968,12 +971,18 @@ class EspeakBackend:
         -------
         Utterance
             Times in seconds from the start of ``audio`` (float32 mono in [-1, 1]). The same ``speech``
-            asked for again gets the same utterance (the last :data:`REMEMBERED` are kept).
+            asked for again gets the same utterance (the last :data:`REMEMBERED` are kept, up to
+            :data:`REMEMBERED_BYTES` of audio).
         """
         spoken = self._spoken.get(speech)  # what it said is looked up without waiting for the engine
         if spoken is not None:
             return spoken
         return self._spoken.keep(speech, self._synthesize(speech))  # under the engine's lock: one for all threads
+
+    @property
+    def remembered_bytes(self) -> int:
+        """Bytes of audio the remembered utterances hold."""
+        return self._spoken.bytes
 
     def forget(self, speech: SpeechText) -> None:
         """Stop remembering what ``speech`` was (whoever asked keeps it, in a form of its own: the speech

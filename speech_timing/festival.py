@@ -107,6 +107,8 @@ BREAK_FADE = 0.002
 RATE_LABELS = {"x-slow": 0.6, "slow": 0.8, "medium": 1.0, "default": 1.0, "fast": 1.25, "x-fast": 1.6}
 #: How many utterances a backend keeps to say again as they were.
 REMEMBERED = 64
+#: and how many bytes of audio they may hold together
+REMEMBERED_BYTES = 64 * 2 ** 20
 #: Rate factors the backend takes (the text's rate times a span's).
 RATE_RANGE = (0.25, 4.0)
 
@@ -355,7 +357,7 @@ class FestivalBackend:
             raise ValueError(f"rate must be {RATE_RANGE[0]:g} to {RATE_RANGE[1]:g} times the voice's own, not {rate}")
         self.voice = voice_name(voice)
         self.rate = float(rate)
-        self._spoken = Spoken(REMEMBERED)
+        self._spoken = Spoken(REMEMBERED, REMEMBERED_BYTES)
 
     @property
     def festival_voice(self) -> str:

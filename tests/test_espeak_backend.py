@@ -412,3 +412,21 @@ def test_a_text_is_said_the_same_whatever_was_said_before_and_in_every_process(t
     script = script.replace("np.save(", "EspeakBackend().synthesize(SpeechText(sys.argv[3])); np.save(")
     subprocess.run([sys.executable, "-c", script, text, str(tmp_path / "later.npy"), other], check=True, timeout=120)
     assert not np.array_equal(np.load(tmp_path / "later.npy"), first.audio)
+
+
+def test_what_is_remembered_is_weighed_in_bytes(monkeypatch):
+    """The utterances remembered hold at most REMEMBERED_BYTES of audio together: the oldest are forgotten first,
+    and one larger than that is not kept at all."""
+    backend = EspeakBackend()
+    texts = [SpeechText(f"The {word} keeper walked up the hill at night.") for word in ("first", "second", "third")]
+    first = backend.synthesize(texts[0])
+    size = first.audio.nbytes
+    monkeypatch.setattr(backend._spoken, "max_bytes", int(2.5 * size))
+    kept = [first] + [backend.synthesize(t) for t in texts[1:]]
+    # the three together pass the bound: the first one is forgotten, the other two are what is weighed
+    assert backend.remembered_bytes == kept[1].audio.nbytes + kept[2].audio.nbytes <= 2.5 * size
+    assert backend.synthesize(texts[2]) is kept[2] and backend.synthesize(texts[0]) is not first
+    monkeypatch.setattr(backend._spoken, "max_bytes", size // 2)
+    big = SpeechText("A sentence a good deal longer than any of the ones before, said only once.")
+    said = backend.synthesize(big)
+    assert backend.synthesize(big) is not said and backend.remembered_bytes == 0
