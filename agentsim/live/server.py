@@ -38,6 +38,7 @@ import asyncio
 import collections
 import gc
 import ipaddress
+import itertools
 import json
 import queue
 import secrets
@@ -241,10 +242,11 @@ class LiveRealizer:
         while not self.closing:
             while True:
                 try:
-                    block, reply, sender = self.inbox.get_nowait()
+                    entry = self.inbox.get_nowait()
                 except queue.Empty:
                     break
-                self.submit(block, reply, sender)
+                self.submit(*entry)
+                del entry  # (its reply holds the client's connection: not kept while the realizer waits)
             yield self.env.timeout(self.poll)
 
     def tick(self, period: float, fn: Callable[[float], None]):
@@ -274,28 +276,32 @@ class LiveRealizer:
     def read(self) -> None:
         """The reader's thread: parse each document in the order it came and have its speech synthesised,
         so that the realizer's thread (whose clock the feedback keeps) only plans and plays."""
-        from agentsim.bml.parser import Refused, parse_document
-
         realizer = self.realizer
         while True:
             entry = self.incoming.get()
             if entry is None or self.closing:
                 return
-            text, reply, sender = entry
-            try:
-                blocks = parse_document(text, strict=realizer.strict, name_block=realizer.name_block)
-            except Exception as exc:  # the reader's own fault: the client hears of it, nothing else
-                reply(fb.warning("", "PARSING_FAILURE", f"document refused: the reader failed ({exc})",
-                                 self.env.now, "agent"))
+            self.read_one(*entry, realizer)
+            del entry  # (its reply holds the client's connection: not kept while the reader waits)
+
+    def read_one(self, text, reply: Callable[[dict], None], sender, realizer) -> None:
+        """Parse one document and hand its blocks on (in the reader's thread)."""
+        from agentsim.bml.parser import Refused, parse_document
+
+        try:
+            blocks = parse_document(text, strict=realizer.strict, name_block=realizer.name_block)
+        except Exception as exc:  # the reader's own fault: the client hears of it, nothing else
+            reply(fb.warning("", "PARSING_FAILURE", f"document refused: the reader failed ({exc})",
+                             self.env.now, "agent"))
+            return
+        for block in blocks:
+            if isinstance(block, Refused):
+                error = block.error
+                reply(fb.warning(block.block_id, "PARSING_FAILURE", f"block refused: {error}", self.env.now,
+                                 "agent", line=error.line, column=error.column))
                 continue
-            for block in blocks:
-                if isinstance(block, Refused):
-                    error = block.error
-                    reply(fb.warning(block.block_id, "PARSING_FAILURE", f"block refused: {error}", self.env.now,
-                                     "agent", line=error.line, column=error.column))
-                    continue
-                if self.prepare(block, reply):
-                    self.inbox.put((block, reply, sender))
+            if self.prepare(block, reply):
+                self.inbox.put((block, reply, sender))
 
     def prepare(self, block, reply: Callable[[dict], None] | None = None) -> bool:
         """Synthesise a block's speeches ahead, so that the realizer's thread (whose clock the feedback keeps)
@@ -535,6 +541,11 @@ class Server:
         self.failure: BaseException | None = None
         self.delay = delay
         self.clients: set = set()
+        #: each connected client by the key its blocks are sent with (the realizer remembers who sent a block by
+        #: this number, never by the connection: a client that has gone is not kept alive by its blocks)
+        self.by_key: dict[int, object] = {}
+        self.key_of: dict[object, int] = {}
+        self.keys = itertools.count(1)
         #: each client's :class:`Outbox`
         self.outboxes: dict[object, Outbox] = {}
         self.subscribers: dict[object, set[str]] = {}
@@ -562,8 +573,9 @@ class Server:
         """Send a feedback to whom it concerns: a warning about a block to its sender alone; anything else to
         its sender and the clients subscribed to ``"feedback"`` (a warning about no client's block, to them)."""
         to = set()
-        if sender in self.clients:
-            to.add(sender)
+        client = self.by_key.get(sender) if sender is not None else None
+        if client is not None:
+            to.add(client)
         if not (item.get("type") == "warningFeedback" and sender is not None):
             to.update(c for c in self.clients if "feedback" in self.subscribers.get(c, ()))
         if to:
@@ -620,9 +632,10 @@ class Server:
         while True:
             await asyncio.sleep(0.25)
             now = self.loop.time()
-            for client, outbox in list(self.outboxes.items()):
-                if outbox.stalled(now):
-                    self.close_slow(client, f"nothing taken for {STALL_SECONDS:g} s")
+            # (a comprehension: no loop variable keeps a client that has gone while the watch sleeps)
+            for client in [c for c, outbox in self.outboxes.items() if outbox.stalled(now)]:
+                self.close_slow(client, f"nothing taken for {STALL_SECONDS:g} s")
+            client = None
 
     def reply_to(self, client) -> Callable[[dict], None]:
         """A ``reply`` for the realizer's thread that reaches ``client`` alone."""
@@ -644,6 +657,9 @@ class Server:
 
         self.clients.add(client)
         self.outboxes[client] = Outbox(self, client)
+        key = next(self.keys)
+        self.by_key[key] = client
+        self.key_of[client] = key
         try:
             sock = client.transport.get_extra_info("socket")
             if sock is not None:
@@ -666,6 +682,8 @@ class Server:
         finally:
             self.counters["closed_clients"] += 1
             self.clients.discard(client)
+            self.by_key.pop(key, None)
+            self.key_of.pop(client, None)
             outbox = self.outboxes.pop(client, None)
             if outbox is not None:
                 outbox.stop()
@@ -688,7 +706,7 @@ class Server:
         if text.lstrip().startswith("{"):
             self.control(client, text)
             return
-        if not self.live.offer(text, self.reply_to(client), client):
+        if not self.live.offer(text, self.reply_to(client), self.key_of.get(client)):
             self.counters["refused_documents"] += 1
             self.send(client, fb.to_json(fb.warning(
                 "", "PARSING_FAILURE", f"document refused: {self.live.incoming.maxsize} documents are already "
