@@ -62,14 +62,19 @@ class RawClient:
         return data
 
     def frame(self, deadline: float) -> tuple[int, bytes]:
-        """The next frame the server sent: (opcode, payload); EOFError when the connection ended."""
-        b0, b1 = self.read(2, deadline)
-        n = b1 & 0x7F
-        if n == 126:
-            (n,) = struct.unpack("!H", self.read(2, deadline))
-        elif n == 127:
-            (n,) = struct.unpack("!Q", self.read(8, deadline))
-        return b0 & 0x0F, self.read(n, deadline)
+        """The next frame the server sent: (opcode, payload); EOFError when the connection ended. A ping read
+        is answered with its pong, as every WebSocket client does, and not returned."""
+        while True:
+            b0, b1 = self.read(2, deadline)
+            n = b1 & 0x7F
+            if n == 126:
+                (n,) = struct.unpack("!H", self.read(2, deadline))
+            elif n == 127:
+                (n,) = struct.unpack("!Q", self.read(8, deadline))
+            opcode, payload = b0 & 0x0F, self.read(n, deadline)
+            if opcode != 0x9:
+                return opcode, payload
+            self.send(payload, opcode=0xA)
 
     def close(self) -> None:
         self.sock.close()

@@ -20,8 +20,9 @@ Protocol, at ``ws://HOST:PORT/``:
   several); any other JSON is answered with a warning.
 
 Each client has one bounded :class:`Outbox`: a client that falls behind loses poses first (counted), never
-feedback, and one that takes nothing for :data:`STALL_SECONDS` while messages wait is closed with
-:data:`CLOSE_CODE` and a reason.
+feedback, and one that takes nothing for :data:`STALL_SECONDS` while messages wait, or does not answer a ping
+for that long while it is sent messages (what came before the ping lies unread in its buffers), is closed
+with :data:`CLOSE_CODE` and a reason.
 
 ``http://HOST:PORT/`` serves the viewer page (the report's viewer, connected live).
 
@@ -40,6 +41,7 @@ import gc
 import ipaddress
 import itertools
 import json
+import math
 import queue
 import secrets
 import sys
@@ -77,6 +79,11 @@ BACKLOG_POSES = 8
 BACKLOG_MESSAGES = 2048
 #: How long (s) a client may take nothing while messages wait for it before it is closed (:data:`CLOSE_CODE`).
 STALL_SECONDS = 5.0
+#: How often (s) a client that is being sent messages is pinged: one that has not answered a ping for
+#: :data:`STALL_SECONDS` has not read what came before it, however large its buffers, and is closed.
+PING_EVERY = 1.0
+#: How long (s) after the last message sent to a client it is still pinged.
+PING_WHILE = 2.0
 #: How long (s) a client being closed is given to take its close frame before its connection is cut.
 CLOSE_GRACE = 2.0
 #: The close code for a client that did not read (1008, policy violation).
@@ -450,6 +457,12 @@ class Outbox:
         self.ready = asyncio.Event()
         #: since when (``loop.time()``) the message being sent waits for the client to take what it was sent
         self.waiting_since: float | None = None
+        #: when a message was last sent; when the ping not yet answered was sent (None: none waits), and the
+        #: pong it waits for
+        self.last_sent = -math.inf
+        self.ping_sent: float | None = None
+        self.last_ping = -math.inf
+        self.pong: asyncio.Future | None = None
         self.closing = False
         self.task = asyncio.ensure_future(self.run())
 
@@ -474,10 +487,40 @@ class Outbox:
         self.messages.append((message, droppable))
         self.ready.set()
 
-    def stalled(self, now: float) -> bool:
-        """Whether the client took nothing for :data:`STALL_SECONDS` while more messages waited for it."""
-        return (not self.closing and self.waiting_since is not None and bool(self.messages)
-                and now - self.waiting_since >= STALL_SECONDS)
+    def stalled(self, now: float) -> str | None:
+        """Why the client is taken not to read (None: it reads): it took nothing for :data:`STALL_SECONDS`
+        while more messages waited for it, or it has not answered a ping for that long (what came before the
+        ping lies unread in its buffers)."""
+        if self.closing:
+            return None
+        if self.waiting_since is not None and self.messages and now - self.waiting_since >= STALL_SECONDS:
+            return f"nothing taken for {STALL_SECONDS:g} s"
+        if self.ping_sent is not None and now - self.ping_sent >= STALL_SECONDS:
+            return f"no answer to a ping for {STALL_SECONDS:g} s"
+        return None
+
+    def keep_alive(self, now: float) -> None:
+        """Ping a client that is being sent messages, every :data:`PING_EVERY` s, one ping at a time."""
+        if self.pong is not None and self.pong.done():
+            if not self.pong.cancelled():
+                self.pong.exception()  # retrieved (a closed connection's), so that asyncio does not log it
+            self.pong, self.ping_sent = None, None
+        if (self.closing or self.ping_sent is not None or now - self.last_sent > PING_WHILE
+                or now - self.last_ping < PING_EVERY):
+            return
+        self.ping_sent = self.last_ping = now
+        asyncio.ensure_future(self.send_ping())
+
+    async def send_ping(self) -> None:
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            self.pong = await self.client.ping()
+        except ConnectionClosed:  # it went away: forgotten when its handler ends
+            self.ping_sent = None
+        except Exception as exc:
+            self.ping_sent = None
+            self.server.fault("pinging a client", exc)
 
     async def run(self) -> None:
         from websockets.exceptions import ConnectionClosed
@@ -494,6 +537,7 @@ class Outbox:
             try:
                 await self.client.send(message)
                 self.server.sent += 1
+                self.last_sent = loop.time()
             except ConnectionClosed:  # a client that went away: it is forgotten when its handler ends
                 self.server.counters["unsent"] += 1 + len(self.messages)
                 self.messages.clear()
@@ -627,15 +671,18 @@ class Server:
         asyncio.ensure_future(close())
 
     async def watch(self) -> None:
-        """Close, every quarter of a second, the clients that took nothing for :data:`STALL_SECONDS` while
-        messages waited for them."""
+        """Every quarter of a second: close the clients that took nothing for :data:`STALL_SECONDS` while
+        messages waited for them, or did not answer a ping for that long; ping those being sent messages."""
         while True:
             await asyncio.sleep(0.25)
             now = self.loop.time()
-            # (a comprehension: no loop variable keeps a client that has gone while the watch sleeps)
-            for client in [c for c, outbox in self.outboxes.items() if outbox.stalled(now)]:
-                self.close_slow(client, f"nothing taken for {STALL_SECONDS:g} s")
+            # (comprehensions: no loop variable keeps a client that has gone while the watch sleeps)
+            for client, why in [(c, o.stalled(now)) for c, o in self.outboxes.items() if o.stalled(now)]:
+                self.close_slow(client, why)
             client = None
+            for outbox in list(self.outboxes.values()):
+                outbox.keep_alive(now)
+            outbox = None
 
     def reply_to(self, client) -> Callable[[dict], None]:
         """A ``reply`` for the realizer's thread that reaches ``client`` alone."""
