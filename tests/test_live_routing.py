@@ -158,3 +158,25 @@ def test_a_client_that_has_gone_is_not_kept_by_its_blocks():
         gc.collect()
         assert "gone" in running.service.live.senders  # its block is remembered
         assert held() is None  # its connection is not
+
+
+def test_two_clients_sending_the_same_block_id_do_not_take_each_others_feedback(service):
+    """A block whose id is that of another client's block that has not ended is refused to its sender alone;
+    the first block's feedback still goes to the first client, to its end. Once it has ended, the id is
+    free again."""
+    wait = f'<bml {NS} id="bml1"><wait id="w" start="0" end="1.5"/><head id="h" lexeme="NOD" start="1"/></bml>'
+    with connect(service.url) as a, connect(service.url) as b:
+        a.send(wait)
+        until(a, lambda m: m["id"] == "bml1:start")
+        b.send(f'<bml {NS} id="bml1"><head id="h" lexeme="NOD"/></bml>')
+        (warning,) = [m for m in until(b, lambda m: m["type"] == "warningFeedback")]
+        assert warning["description"] == ("block refused: another client's block 'bml1' has not ended; give yours "
+                                          "an id of its own")
+        got = until(a, lambda m: m["id"] == "bml1:end")
+        assert {"bml1:h:start", "bml1:h:end", "bml1:end"} <= {m["id"] for m in got}  # all of it, to a
+        assert not [m for m in got if m["type"] == "warningFeedback"]
+        b.send(f'<bml {NS} id="bml1"><head id="h" lexeme="NOD"/></bml>')  # ended: b may use the id now
+        assert until(b, lambda m: m["id"] == "bml1:end")[-1]["id"] == "bml1:end"
+        a.send('{"status": true}')
+        status = until(a, lambda m: m.get("type") == "status")[-1]
+        assert status["refused_taken_ids"] == 1

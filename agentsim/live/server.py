@@ -195,6 +195,10 @@ class LiveRealizer:
         self.audio_lock = threading.Lock()
         #: bytes of audio released with their blocks, since the start
         self.audio_released = 0
+        #: what was synthesised for each block read and not yet submitted (by ``id(block)``)
+        self.prepared: dict[int, list] = {}
+        #: blocks refused because another client's block of the same id had not ended
+        self.refused_taken = 0
         self.thread = threading.Thread(target=self.run, name="agentsim-realizer", daemon=True)
 
     # ------------------------------------------------------------------------------------------- threads
@@ -354,37 +358,63 @@ class LiveRealizer:
             weighed.append((utterance, int(audio.nbytes) if audio is not None else 0))
         if weighed:
             with self.audio_lock:
-                self.audio.setdefault(block.id, []).extend(weighed)
+                self.prepared[id(block)] = weighed
         return True
 
     @property
     def audio_bytes(self) -> int:
-        """Bytes of synthesised audio held for blocks that have not ended."""
+        """Bytes of synthesised audio held for blocks that have not ended (or not yet started)."""
         with self.audio_lock:
-            return sum(n for held in self.audio.values() for _, n in held)
+            return sum(n for store in (self.audio, self.prepared) for held in store.values() for _, n in held)
 
-    def release(self, block_id: str) -> None:
-        """A block ended (or was refused): its speeches' audio is let go, wherever the realizer keeps them."""
+    def release(self, block_id: str, only: list | None = None) -> None:
+        """A block ended (or was refused): its speeches' audio (``only`` these of them) is let go, wherever
+        the realizer keeps them."""
         with self.audio_lock:
-            held = self.audio.pop(block_id, ())
+            if only is None:
+                held = self.audio.pop(block_id, [])
+            else:  # (by identity: utterances compare by their fields, audio and all)
+                mine = {id(utterance) for utterance, _ in only}
+                kept = self.audio.pop(block_id, [])
+                held = [entry for entry in kept if id(entry[0]) in mine]
+                kept = [entry for entry in kept if id(entry[0]) not in mine]
+                if kept:
+                    self.audio[block_id] = kept
         for utterance, n in held:
             utterance.audio = None
             self.audio_released += n
-        for fn in self.on_release:
-            fn(block_id)
+        if only is None:
+            for fn in self.on_release:
+                fn(block_id)
 
     def submit(self, block, reply: Callable[[dict], None], sender: object = None) -> None:
-        """Submit a block that was read (in the realizer's thread)."""
+        """Submit a block that was read (in the realizer's thread). A block whose id is that of another
+        client's block that has not ended is refused, to its sender alone: the other block's feedback still
+        goes to whom it went to."""
+        with self.audio_lock:
+            weighed = self.prepared.pop(id(block), [])
+            if weighed:
+                self.audio.setdefault(block.id, []).extend(weighed)
+        running = any(run.id == block.id for run in self.realizer.scheduler.runs)
+        if running and block.id in self.senders and self.senders[block.id] != sender:
+            self.release(block.id, weighed)
+            self.refused_taken += 1
+            reply(fb.warning(block.id, "PARSING_FAILURE", f"block refused: another client's block {block.id!r} "
+                             "has not ended; give yours an id of its own", self.env.now, block.character_id))
+            return
         self.senders[block.id] = sender
         self.senders.move_to_end(block.id)
         while len(self.senders) > KEEP_SENDERS:
             self.senders.popitem(last=False)
         try:
-            self.realizer.submit(block)
+            run = self.realizer.submit(block)
         except Exception as exc:
-            self.release(block.id)
+            self.release(block.id, weighed)
             reply(fb.warning(block.id, "IMPOSSIBLE_TO_SCHEDULE", f"block refused: the realizer failed to plan it "
                              f"({type(exc).__name__}: {exc})", self.env.now, block.character_id))
+            return
+        if run is None:  # refused (with a warning): what was synthesised for it goes
+            self.release(block.id, weighed)
 
     def emit(self, item: dict) -> None:
         block_id = str(item.get("id", "")).split(":", 1)[0]
@@ -793,7 +823,8 @@ class Server:
     def status(self) -> dict:
         """The reply to ``{"status": true}``: clients, messages sent, and what was refused, dropped or failed."""
         status = {"type": "status", "clients": len(self.clients), "sent": self.sent, **self.counters,
-                  "refused_long_blocks": self.live.refused_long, "speech_audio_bytes": self.live.audio_bytes,
+                  "refused_long_blocks": self.live.refused_long, "refused_taken_ids": self.live.refused_taken,
+                  "speech_audio_bytes": self.live.audio_bytes,
                   "speech_audio_released": self.live.audio_released,
                   "realizer_faults": dict(self.live.faults), "time": self.live.env.now}
         for source in self.status_sources:
