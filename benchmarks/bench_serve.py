@@ -13,11 +13,25 @@ latency within 100 ms.
     python benchmarks/bench_serve.py SECONDS --slow-readers N
 
 The slow-readers case: ``N`` clients (bare sockets, their buffers as the system makes them) subscribe to the
-poses (30 fps) and then read nothing for ``SECONDS``; prints the server's RSS before, during (every second; the
+poses (30 fps) and then read nothing; each one the server closes is replaced by a new one, so that ``N`` are
+there for all of ``SECONDS``; prints the server's RSS before, during (every second; the
 peak) and after, a fresh client's connection and block latency before, during and after (the time from
 sending a block to its start feedback, and its feedback's lateness spread), and when the server closed the
 slow readers. Target: RSS within 50 MB of the baseline, the fresh client's latency within 1.5 times its own
 before.
+
+    python benchmarks/bench_serve.py --duration 300 --slow-readers 20
+    python benchmarks/bench_serve.py SECONDS --churn 200
+    python benchmarks/bench_serve.py --large-speech 4
+
+``--duration`` gives SECONDS as an option. The churn case: ``N`` clients (in a process of their own) that for SECONDS
+connect (one connection in four subscribes to the poses), send a block, read its feedback for 1 to 5 s and
+leave, over and over; prints their handshake times, the server's RSS and a fresh client's latency
+before, during and after, and whether the server forgot every client. The large-speech case: ``N`` messages
+of a 10,000-word speech each (some 60 kB, an hour of speech), first under the default limits (refused), then
+with limits raised to take them (synthesised, started, interrupted and ended); prints the RSS before, at its
+peak and after each part, the audio the server held and released, and a fresh client's latency meanwhile.
+Targets: RSS within 100 MB of the baseline once they have ended.
 
 With ``--audio`` the speech also plays on that device and feedback waits for it to be heard (the lateness
 then centres on the service's ``delay_ms``, printed too); with ``--fps`` a viewer's poses are evaluated and
@@ -60,6 +74,14 @@ def fresh_client(url: str, live, name: str) -> dict:
     """A new client connects and runs a short block: connection time, the time from sending the block to its
     start feedback, and the lateness spread of its feedback (ms)."""
     started = time.monotonic()
+    try:
+        return _fresh_client(url, live, name, started)
+    except TimeoutError:  # said in the figures: the client had nothing within 10 s
+        return {"connect_ms": None, "start_ms": None, "lateness_spread_ms": None, "timed_out": True,
+                "waited_ms": round(1000 * (time.monotonic() - started), 2)}
+
+
+def _fresh_client(url: str, live, name: str, started: float) -> dict:
     with connect(url, open_timeout=10, max_size=2 ** 22) as ws:
         connected = time.monotonic()
         ws.send(f'<bml {NS} id="{name}"><wait id="w" start="0" end="0.6"/>'
@@ -83,6 +105,203 @@ def fresh_client(url: str, live, name: str) -> dict:
             "lateness_spread_ms": round(1000 * float(np.ptp(lateness)), 2) if lateness else None}
 
 
+def median(values):
+    values = [v for v in values if v is not None]
+    return round(float(np.median(values)), 2) if values else None
+
+
+def fresh_summary(runs: list[dict]) -> dict:
+    started = [f["start_ms"] for f in runs if f["start_ms"] is not None]
+    connected = [f["connect_ms"] for f in runs if f["connect_ms"] is not None]
+    return {"start_ms_median": median(started), "start_ms_max": max(started, default=None),
+            "connect_ms_median": median(connected), "connect_ms_max": max(connected, default=None),
+            "timed_out": sum(1 for f in runs if f.get("timed_out")), "runs": runs}
+
+
+class Watch:
+    """Samples the server's RSS every second and has a fresh client run a block every ``every`` s, while
+    something goes on (``with Watch(service, "d") as watch: ...``)."""
+
+    def __init__(self, service, prefix: str, every: float = 10.0):
+        self.service, self.prefix, self.every = service, prefix, every
+        self.samples: list[tuple[float, float]] = []
+        self.fresh: list[dict] = []
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self.run, daemon=True)
+
+    def run(self) -> None:
+        started = time.monotonic()
+        k = 0
+        while not self.stop.is_set():
+            at = round(time.monotonic() - started, 1)
+            self.samples.append((at, round(rss_mb(), 1)))
+            if k % int(self.every) == 1:
+                self.fresh.append({"at_s": at, **fresh_client(self.service.url, self.service.service.live,
+                                                              f"{self.prefix}{k}")})
+            k += 1
+            self.stop.wait(max(0.0, started + k - time.monotonic()))
+
+    def __enter__(self) -> "Watch":
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop.set()
+        self.thread.join(30)
+
+    def summary(self) -> dict:
+        return {"rss_mb_peak": max((r for _, r in self.samples), default=None),
+                "rss_mb_end": self.samples[-1][1] if self.samples else None, "rss_samples": self.samples[::5],
+                "fresh": fresh_summary(self.fresh)}
+
+
+def settled(service, prefix: str, runs: int = 3) -> dict:
+    """The RSS and a fresh client's latency with nothing else going on."""
+    live = service.service.live
+    return {"rss_mb": round(rss_mb(), 1),
+            "fresh": fresh_summary([fresh_client(service.url, live, f"{prefix}{i}") for i in range(runs)])}
+
+
+def churning_clients(url: str, n: int, seconds: float, out) -> None:
+    """``n`` clients, each in a thread of its own, that for ``seconds`` connect (one connection in four subscribes to
+    the poses), send a block (a nod), hear its feedback, read what comes for 1 to 5 s (seeded) and
+    leave, over and over; in a process
+    of its own (the server's RSS is then the server's alone). Puts (handshake times, errors) on ``out``."""
+    handshakes, errors = [], []
+    deadline = time.monotonic() + seconds
+
+    def client(i: int) -> None:
+        rng = np.random.default_rng([25, i])
+        k = 0
+        while time.monotonic() < deadline:
+            try:
+                t0 = time.monotonic()
+                with connect(url, open_timeout=10, max_size=2 ** 22) as ws:
+                    handshakes.append(time.monotonic() - t0)
+                    if k % 4 == 0:
+                        ws.send(json.dumps({"subscribe": "poses"}))
+                    ws.send(f'<bml {NS} id="c{i}_{k}"><head id="h" lexeme="NOD"/></bml>')
+                    leave = time.monotonic() + rng.uniform(1.0, 5.0)
+                    while time.monotonic() < leave:
+                        try:
+                            ws.recv(timeout=max(0.01, leave - time.monotonic()))
+                        except TimeoutError:
+                            break
+            except Exception as exc:
+                errors.append(f"{type(exc).__name__}: {exc}")
+            k += 1
+
+    threads = [threading.Thread(target=client, args=(i,), daemon=True) for i in range(n)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    out.put((handshakes, errors))
+
+
+def churn(seconds: float, n: int) -> dict:
+    """``n`` clients connecting and disconnecting for ``seconds``."""
+    import multiprocessing
+
+    with Background(Service(port=0, audio="none", fps=30.0, tts=EspeakBackend())) as service:
+        server = service.service.server
+        fresh_client(service.url, service.service.live, "warm")
+        time.sleep(1.0)
+        before = settled(service, "a")
+        context = multiprocessing.get_context("spawn")
+        out = context.Queue()
+        clients = context.Process(target=churning_clients, args=(service.url, n, seconds, out))
+        with Watch(service, "d", every=5.0) as watch:
+            clients.start()
+            handshakes, errors = out.get(timeout=seconds + 120)
+            clients.join(30)
+            time.sleep(2.0)
+        during = watch.summary()
+        time.sleep(3.0)
+        after = settled(service, "z")
+        counters = dict(server.counters)
+        left = {"clients": len(server.clients), "outboxes": len(server.outboxes), "subscribers": len(server.subscribers)}
+    ms = np.array(handshakes) * 1000.0
+    return {
+        "benchmark": "serve-churn", "clients": n, "seconds": seconds, "connections": len(handshakes),
+        "client_errors": len(errors), "client_error_kinds": sorted(set(e.split(":")[0] for e in errors)),
+        "load_average": [round(x, 2) for x in os.getloadavg()],
+        "handshake_ms": {"p50": round(float(np.percentile(ms, 50)), 2), "p95": round(float(np.percentile(ms, 95)), 2),
+                         "max": round(float(ms.max()), 2)} if ms.size else None,
+        "rss_mb": {"before": before["rss_mb"], "peak_during": during["rss_mb_peak"], "after": after["rss_mb"]},
+        "rss_samples": during["rss_samples"],
+        "fresh_client": {"before": before["fresh"], "during": during["fresh"], "after": after["fresh"]},
+        "left_behind_after": left, "counters": counters,
+    }
+
+
+def ten_thousand_words(seed: int) -> str:
+    """A 10,000-word text of ordinary words, in sentences (some 60 kB)."""
+    words = ("the keeper of a lighthouse walked up hill at night and counted ships that passed by on "
+             "sea while wind blew over rocks near his small house with old lamp").split()
+    rng = np.random.default_rng(seed)
+    picked = rng.choice(words, size=10_000)
+    sentences = [" ".join(picked[i:i + 12]).capitalize() + "." for i in range(0, 10_000, 12)]
+    return " ".join(sentences)
+
+
+def large_speech(n: int) -> dict:
+    """``n`` messages of a 10,000-word speech each: refused under the default limits; taken under raised ones,
+    started, interrupted and ended."""
+    from agentsim.live.limits import Limits
+
+    with Background(Service(port=0, audio="none", fps=0, tts=EspeakBackend())) as service:
+        live = service.service.live
+        fresh_client(service.url, live, "warm")
+        time.sleep(1.0)
+        before = settled(service, "a")
+        texts = [ten_thousand_words(i) for i in range(n)]
+        parts = {}
+        for part, limits in (("default_limits", Limits()),
+                             ("raised_limits", Limits(speech_characters=100_000, speech_seconds=10_000,
+                                                      block_characters=100_000, block_seconds=10_000))):
+            live.limits = limits
+            started = time.monotonic()
+            held, warnings, ended = [], [], set()
+            with Watch(service, part[0]) as watch, connect(service.url, max_size=2 ** 22) as ws:
+                for i, text in enumerate(texts):
+                    ws.send(f'<bml {NS} id="{part}{i}"><speech id="s1"><text>{text}</text></speech></bml>')
+                started_ids = set()
+                deadline = time.monotonic() + 900
+                while len(ended) + len(warnings) < n and time.monotonic() < deadline:
+                    try:
+                        item = json.loads(ws.recv(timeout=1.0))
+                    except TimeoutError:
+                        continue
+                    block_id = str(item.get("id", "")).split(":")[0]
+                    if item.get("type") == "warningFeedback" and item["description"].startswith("block refused"):
+                        warnings.append(item["description"])
+                    elif item.get("id") == f"{block_id}:s1:start" and block_id not in started_ids:
+                        started_ids.add(block_id)
+                        held.append(live.audio_bytes)
+                        time.sleep(1.0)
+                        ws.send(f'<bml {NS} id="x{block_id}"><bmla:interrupt id="i" target="{block_id}"/></bml>')
+                    elif item.get("id") == f"{block_id}:end" and block_id.startswith(part):
+                        ended.add(block_id)
+                time.sleep(2.0)
+            during = watch.summary()
+            time.sleep(3.0)
+            parts[part] = {"seconds": round(time.monotonic() - started, 1), "refused": len(warnings),
+                           "warnings": sorted(set(warnings)), "ended": len(ended),
+                           "audio_mb_held_at_starts": [round(b / 2 ** 20, 1) for b in held],
+                           "audio_mb_held_after": round(live.audio_bytes / 2 ** 20, 1),
+                           "audio_mb_released": round(live.audio_released / 2 ** 20, 1),
+                           "rss_mb_peak": during["rss_mb_peak"], "fresh_during": during["fresh"],
+                           "after": settled(service, f"{part[0]}z")}
+    return {
+        "benchmark": "serve-large-speech", "messages": n, "words_each": 10_000,
+        "characters_each": [len(t) for t in texts], "load_average": [round(x, 2) for x in os.getloadavg()],
+        "before": before, **parts,
+        "rss_mb_above_baseline_after": round(parts["raised_limits"]["after"]["rss_mb"] - before["rss_mb"], 1),
+        "targets": {"rss_above_baseline_after_mb": 100},
+    }
+
+
 def slow_readers(seconds: float, n: int) -> dict:
     import sys
 
@@ -94,49 +313,48 @@ def slow_readers(seconds: float, n: int) -> dict:
         fresh_client(service.url, live, "warm")
         time.sleep(1.0)
         before = {"rss_mb": round(rss_mb(), 1), "fresh": [fresh_client(service.url, live, f"a{i}") for i in range(3)]}
-        clients = []
-        for _ in range(n):
+        clients: list = []  # (RawClient, when it subscribed), oldest first
+        started = time.monotonic()
+
+        def add_slow_reader() -> None:
             client = RawClient(service.url)
             client.send(json.dumps({"subscribe": "poses"}))
-            clients.append(client)
-        started = time.monotonic()
-        samples, fresh, closes = [], [], []
+            clients.append((client, time.monotonic() - started))
+
+        for _ in range(n):
+            add_slow_reader()
+        samples, fresh, closes, lived = [], [], [], []
         k = 0
         while time.monotonic() - started < seconds:
             samples.append((round(time.monotonic() - started, 1), round(rss_mb(), 1)))
             closed = server.counters["closed_not_reading"]
-            if len(closes) < closed:
-                closes.extend([round(time.monotonic() - started, 1)] * (closed - len(closes)))
+            while len(closes) < closed:  # the server closes them in the order they stopped: the oldest
+                now = time.monotonic() - started
+                closes.append(round(now, 1))
+                old, since = clients.pop(0)
+                old.close()
+                lived.append(now - since)
+                add_slow_reader()  # N slow readers there all the time
             if k % 10 == 5:
                 fresh.append({"at_s": samples[-1][0], **fresh_client(service.url, live, f"d{k}")})
             k += 1
             time.sleep(max(0.0, started + k - time.monotonic()))
-        for client in clients:
+        for client, _ in clients:
             client.close()
         counters = dict(server.counters)
         time.sleep(3.0)
         after = {"rss_mb": round(rss_mb(), 1), "fresh": [fresh_client(service.url, live, f"z{i}") for i in range(3)]}
-
-    def median(values):
-        values = [v for v in values if v is not None]
-        return round(float(np.median(values)), 2) if values else None
 
     return {
         "benchmark": "serve-slow-readers", "slow_readers": n, "seconds": seconds,
         "load_average": [round(x, 2) for x in os.getloadavg()],
         "rss_mb": {"before": before["rss_mb"], "peak_during": max(r for _, r in samples),
                    "end_of_during": samples[-1][1], "after": after["rss_mb"]},
-        "rss_samples": samples,
-        "fresh_client": {
-            "before": {"start_ms_median": median(f["start_ms"] for f in before["fresh"]),
-                       "connect_ms_median": median(f["connect_ms"] for f in before["fresh"]), "runs": before["fresh"]},
-            "during": {"start_ms_median": median(f["start_ms"] for f in fresh),
-                       "start_ms_max": max((f["start_ms"] for f in fresh if f["start_ms"] is not None), default=None),
-                       "connect_ms_median": median(f["connect_ms"] for f in fresh),
-                       "connect_ms_max": max(f["connect_ms"] for f in fresh) if fresh else None, "runs": fresh},
-            "after": {"start_ms_median": median(f["start_ms"] for f in after["fresh"]),
-                      "connect_ms_median": median(f["connect_ms"] for f in after["fresh"]), "runs": after["fresh"]}},
-        "slow_readers_closed_at_s": closes,
+        "rss_samples": samples[::10],
+        "fresh_client": {"before": fresh_summary(before["fresh"]), "during": fresh_summary(fresh),
+                         "after": fresh_summary(after["fresh"])},
+        "slow_readers_closed": len(closes), "slow_readers_closed_at_s": closes[:2 * n],
+        "slow_reader_closed_after_s": {"median": median(lived), "max": round(max(lived), 1) if lived else None},
         "counters": counters,
         "targets": {"rss_above_baseline_mb": 50, "fresh_latency_ratio": 1.5},
     }
@@ -148,9 +366,22 @@ def main() -> None:
     parser.add_argument("rate", nargs="?", type=float, default=20.0, help="blocks per second")
     parser.add_argument("--audio", default="none", help="output device for the speech (none)")
     parser.add_argument("--fps", type=float, default=0.0, help="poses per second for a subscribed viewer (0)")
+    parser.add_argument("--duration", type=float, metavar="SECONDS", help="SECONDS, as an option")
     parser.add_argument("--slow-readers", type=int, default=0, metavar="N",
                         help="instead: N clients that subscribe to the poses and read nothing for SECONDS")
+    parser.add_argument("--churn", type=int, default=0, metavar="N",
+                        help="instead: N clients that connect, send a block and leave (for at most SECONDS)")
+    parser.add_argument("--large-speech", type=int, default=0, metavar="N",
+                        help="instead: N messages of a 10,000-word speech each")
     args = parser.parse_args()
+    if args.duration is not None:
+        args.seconds = args.duration
+    if args.churn:
+        print(json.dumps(churn(args.seconds, args.churn), indent=2))
+        return
+    if args.large_speech:
+        print(json.dumps(large_speech(args.large_speech), indent=2))
+        return
     if args.slow_readers:
         print(json.dumps(slow_readers(args.seconds, args.slow_readers), indent=2))
         return
