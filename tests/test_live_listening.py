@@ -77,6 +77,7 @@ def test_without_a_metronome_welcome_loses_its_three_beats_with_warnings():
     (("--anticipator", "metronome,bpm=fast"), "parameter 'bpm' expects a number"),
     (("--anticipator", "nosuch"), "no anticipator named 'nosuch'"),
     (("--input", "no such input device"), "no audio input device 'no such input device'"),
+    (("--metronome", "100", "--anticipator", "metronome,bpm=90"), "two anticipators have the id 'metronome'"),
 ])
 def test_bad_listening_options_are_said_before_anything_starts(options, message):
     proc = subprocess.run([sys.executable, "-m", "agentsim.cli", "serve", "--port", "0", "--audio", "none",

@@ -175,6 +175,10 @@ def anticipators(args: argparse.Namespace, problems: list[str] | None = None) ->
     for spec in args.anticipator:
         name, anticipator_id, params = registry.parse_spec(spec)
         make(f"--anticipator {spec}", lambda: registry.create(name, anticipator_id, **params))
+    ids = [a.id for a in found]
+    for twice in sorted({i for i in ids if ids.count(i) > 1}):  # BML could reach only one of them
+        raise UsageError(f"two anticipators have the id {twice!r} (--metronome's is 'metronome', serve --input's "
+                         f"'beats'): give one another with --anticipator NAME:ID")
     return found
 
 

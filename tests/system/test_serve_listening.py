@@ -32,7 +32,7 @@ PAUSE = 0.15
 #: prediction error on a steady click (0 on the file offline), the difference of the two time bases fitted
 #: to the same monitor's stamps (the anticipator's, the least delayed stamp of the latest second; the
 #: recorder's, the median over half a second), PulseAudio's 4-block jitter of those stamps, up to 5.3 ms,
-#: and the feedback's way to the client (~1 ms). Measured over 3 runs: median -5.8 to -6.6 ms, largest 6.3 to 7.2 ms (16 strokes each).
+#: and the feedback's way to the client (~1 ms). Measured over 4 runs: median -5.8 to -6.7 ms, largest 6.3 to 7.4 ms (16 strokes each).
 AGREEMENT = 0.035
 
 
