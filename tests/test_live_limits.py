@@ -109,3 +109,23 @@ def test_limits_must_be_positive():
         Limits(block_seconds=0)
     with pytest.raises(UsageError, match="--max-speech-chars must be a positive number"):
         Limits(speech_characters=-1)
+
+
+def test_a_client_sending_many_long_speeches_delays_another_by_one_at_most(service):
+    """The reader takes each client's documents in turn: a block sent just after five long speeches of another
+    client is read after the first of them, not after all five (each takes a while to synthesise)."""
+    live = service.service.live
+    live.limits = Limits()
+    with connect(service.url) as greedy, connect(service.url) as other:
+        for i in range(5):
+            greedy.send(speeches(f"long{i}", 5000))
+        other.send(f'<bml {NS} id="quick"><head id="h" lexeme="NOD"/></bml>')
+        quick = receive(other, lambda m: m["id"] == "quick:start", timeout=60)[-1][1]["globalTime"]
+        started = {}
+        for _, m in receive(greedy, lambda m: m["id"] == "long4:start", timeout=60):
+            if m["type"] == "blockProgress" and m["id"].endswith(":start"):
+                started[m["id"].split(":")[0]] = m["globalTime"]
+        for i in range(5):
+            greedy.send(f'<bml {NS} id="stop{i}"><bmla:interrupt id="i" target="long{i}"/></bml>')
+        receive(greedy, lambda m: m["id"] == "long4:end", timeout=30)
+    assert started["long0"] <= quick < started["long1"], (quick, started)

@@ -141,10 +141,60 @@ class MediaDirectory:
         return path
 
 
+class TakeTurns:
+    """The documents waiting for the reader, taken in turn from each sender (round robin), at most ``maxsize``
+    in all: a client that sends many long speeches delays another client's next document by one of its own
+    at most, not by all of them. ``put_nowait(entry, sender)`` raises :class:`queue.Full`; ``get()`` waits,
+    and gives None once :meth:`close` was called."""
+
+    def __init__(self, maxsize: int):
+        self.maxsize = maxsize
+        self.lanes: dict[object, collections.deque] = {}
+        #: when each sender was last served (a count of documents taken); the least recently served goes next
+        self.served: collections.OrderedDict[object, int] = collections.OrderedDict()
+        self.taken = 0
+        self.count = 0
+        self.closed = False
+        self.changed = threading.Condition()
+
+    def put_nowait(self, entry, sender: object = None) -> None:
+        with self.changed:
+            if self.count >= self.maxsize:
+                raise queue.Full
+            self.lanes.setdefault(sender, collections.deque()).append(entry)
+            self.count += 1
+            self.changed.notify()
+
+    def get(self):
+        with self.changed:
+            while not self.count and not self.closed:
+                self.changed.wait()
+            if self.closed:
+                return None
+            sender = min(self.lanes, key=lambda s: self.served.get(s, -1))
+            lane = self.lanes[sender]
+            entry = lane.popleft()
+            self.count -= 1
+            if not lane:
+                del self.lanes[sender]
+            self.taken += 1
+            self.served[sender] = self.taken  # its next document after every other sender's
+            self.served.move_to_end(sender)
+            while len(self.served) > KEEP_SENDERS:
+                self.served.popitem(last=False)
+            return entry
+
+    def close(self) -> None:
+        with self.changed:
+            self.closed = True
+            self.changed.notify_all()
+
+
 class LiveRealizer:
     """A :class:`~agentsim.realizer.Realizer` on the real-time clock, in a thread of its own.
 
-    ``offer(text, reply, sender)`` hands it a BML document from any thread (False if the queue is full);
+    ``offer(text, reply, sender)`` hands it a BML document from any thread (False if the queue is full; the
+    reader takes each sender's documents in turn, :class:`TakeTurns`);
     what cannot be read is answered through ``reply(feedback)`` (in the reader's or the realizer's thread);
     every feedback goes to each function in :attr:`listeners` as ``listener(feedback, sender)``, ``sender``
     that of the block it is about (None if unknown; in the realizer's thread: they must not block). ``every(period,
@@ -167,7 +217,7 @@ class LiveRealizer:
         self.realizer.audio.planner.locate = MediaDirectory(media)
         self.realizer.feedback.keep = KEEP_FEEDBACK
         #: documents as clients sent them, for the reader; blocks read and ready, for the realizer
-        self.incoming: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.incoming = TakeTurns(queue_size)
         self.inbox: queue.Queue = queue.Queue()
         self.poll = poll
         self.reader = threading.Thread(target=self.read, name="agentsim-reader", daemon=True)
@@ -230,7 +280,7 @@ class LiveRealizer:
 
     def close(self, timeout: float = 5.0) -> None:
         self.closing = True
-        self.incoming.put(None)
+        self.incoming.close()
         self.thread.join(timeout)
         self.reader.join(timeout)
 
@@ -279,7 +329,7 @@ class LiveRealizer:
     def offer(self, text: str | bytes, reply: Callable[[dict], None], sender: object = None) -> bool:
         """Hand a document to the realizer; False if the queue is full."""
         try:
-            self.incoming.put_nowait((text, reply, sender))
+            self.incoming.put_nowait((text, reply, sender), sender)
             return True
         except queue.Full:
             return False
