@@ -268,7 +268,7 @@ def test_missing_festival_is_one_line_naming_the_packages(tmp_path):
     assert INSTALL_HINT == "apt-get install festival festvox-us-slt-hts festvox-kallpc16k"
 
 
-def test_unknown_and_missing_voices(monkeypatch):
+def test_unknown_and_missing_voices(monkeypatch, tmp_path):
     with pytest.raises(ValueError, match="us-slt-hts or kal"):
         voice_name("nosuch")
     assert voice_name(None) == "us-slt-hts" and voice_name("slt") == "us-slt-hts" and voice_name("KAL") == "kal"
@@ -279,8 +279,9 @@ def test_unknown_and_missing_voices(monkeypatch):
     monkeypatch.setattr(process, "voices", frozenset({"kal_diphone"}))
     assert FestivalBackend().voice == "kal"  # the default is the HTS voice only where it is installed
     proc = cli("speech", "export", str(Path(__file__).parent.parent / "examples" / "story.txt"), "--tts", "festival",
-               "--voice", "nosuch", "--textgrid", "/dev/null")
+               "--voice", "nosuch", "--textgrid", str(tmp_path / "story.TextGrid"))
     assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0 and "us-slt-hts or kal" in proc.stderr
+    assert not (tmp_path / "story.TextGrid").exists()
 
 
 def test_a_run_with_festival_plays_its_audio_on_the_feedback_axis():
