@@ -24,7 +24,7 @@ def add_parsers(commands) -> None:
                     "out; timing errors; real-time factor in CPU time).")
     beats.add_argument("audio", nargs="?", help="audio file (WAV, FLAC, ...)")
     beats.add_argument("--tracker", default="causal",
-                       help="causal (default), baseline, aubio (when installed) or librosa_offline")
+                       help="causal (default), causal-net, causal-comb, baseline, aubio (when installed) or librosa_offline")
     beats.add_argument("--json", action="store_true", help="print JSON")
     beats.add_argument("--beats-out", metavar="FILE", help="write the committed beats, one time (s) a line")
     beats.add_argument("--reference", metavar="BEATS.txt", help="true beat times, one per line, to score against")

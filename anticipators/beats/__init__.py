@@ -10,6 +10,7 @@ Modules, front end first:
 ``onsets``      the salient onset near an expected time, timed on the waveform
 ``follower``    the Kalman beat follower: hypothesis switching, confidence, prediction
 ``dbn``         the joint tempo-phase filter: a beat-pointer network filtered forward over a beat activation
+``network``     a small learned causal beat activation (dilated convolutions over per-band flux), numpy
 ``tracking``    :class:`~anticipators.beats.tracking.CausalBeatTracker`, which combines them, and the
                 tracker registry (``make_tracker``, ``TRACKER_NAMES``)
 ``baselines``   the inter-onset-interval baseline and librosa's offline beat tracker

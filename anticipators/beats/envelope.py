@@ -154,6 +154,8 @@ class SpectralFluxEnvelope:
         How much onset strength history is kept.
     keep_audio_seconds : float
         How much raw audio history is kept (for precise onset timing).
+    fmax : float
+        Highest frequency of the mel bands (at most half the sample rate), Hz.
     """
 
     def __init__(
@@ -164,6 +166,7 @@ class SpectralFluxEnvelope:
         n_mels: int = 40,
         keep_seconds: float = 12.0,
         keep_audio_seconds: float = 1.0,
+        fmax: float = 16000.0,
     ) -> None:
         if sample_rate < 4000:
             raise ValueError("sample_rate must be at least 4000 Hz")
@@ -172,7 +175,7 @@ class SpectralFluxEnvelope:
         self.n_fft = int(2 ** round(math.log2(frame_seconds * sample_rate)))
         self.fps = self.sample_rate / self.hop
         self.window = np.hanning(self.n_fft + 1)[:-1].astype(np.float32)
-        mel = mel_filters(self.sample_rate, self.n_fft, n_mels, fmin=30.0, fmax=min(16000.0, sample_rate / 2))
+        mel = mel_filters(self.sample_rate, self.n_fft, n_mels, fmin=30.0, fmax=min(float(fmax), sample_rate / 2))
         self.mel_t = np.ascontiguousarray(mel.T.astype(np.float32))
         self._keep = max(int(keep_seconds * self.fps), 64)
         self._odf = np.zeros(2 * self._keep, np.float64)
@@ -265,8 +268,12 @@ class SpectralFluxEnvelope:
         np.subtract(logmel[1:], logmel[:-1], out=diff[1:])
         self._prev = logmel[-1].copy()
         np.maximum(diff, 0.0, out=diff)
-        self._append(diff.sum(axis=1))
+        self._append_bands(diff)
         return count
+
+    def _append_bands(self, diff: np.ndarray) -> None:
+        """Keep the onset strength of new frames from their rectified flux per mel band ``(frames, bands)``."""
+        self._append(diff.sum(axis=1))
 
     def push(self, x: np.ndarray) -> int:
         """Append mono float32 samples and compute all frames they complete; returns how many."""

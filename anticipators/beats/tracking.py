@@ -52,7 +52,8 @@ Measured (``benchmarks/bench_beats.py``; FluidSynth ensembles of drums, bass, pi
 within +-0.3 ms, real-time factor 0.0027 at 22.05 kHz and 0.0030 at 44.1 kHz in CPU time on one core of a
 busy machine (load 2.8-3.6; :meth:`CausalBeatTracker.track`, as ``track_file`` runs it), of which the joint
 filter's forward step is about 0.0005. ``benchmarks/bench_beats_real.py`` (real recordings and ASAP
-renders, committed 200 ms ahead): F 0.760 and 0.329 (``causal-comb``: 0.725 and 0.285).
+renders, committed 200 ms ahead): F 0.760 and 0.329 (``causal-comb``: 0.725 and 0.285; ``causal-net``, the
+learned activation of :mod:`anticipators.beats.network` as the joint filter's observation: 0.462 and 0.311).
 
 All times are seconds from the first sample heard.
 """
@@ -67,6 +68,7 @@ from anticipators.beats.baselines import AubioTracker, IOIBaselineTracker, libro
 from anticipators.beats.dbn import BeatPointerFilter, FluxActivation
 from anticipators.beats.envelope import EnvelopeSource, SpectralFluxEnvelope, mono_samples
 from anticipators.beats.follower import BeatFollower
+from anticipators.beats.network import BandFluxEnvelope, NetworkActivation
 from anticipators.beats.onsets import WAVEFORM_AFTER, OnsetPicker
 from anticipators.beats.phase import comb_phase, comb_score
 from anticipators.beats.tempo import TempoEstimate, TempoEstimator
@@ -145,6 +147,16 @@ class CausalBeatTracker:
         three beats is at least this many times that of the filter's (a sudden change found first).
     dbn_hysteresis : float
         The filter's chosen interval changes once another holds this many times its posterior.
+    observation : {"flux", "network"}
+        What the joint filter observes: the onset strength turned into an activation (``"flux"``,
+        :class:`~anticipators.beats.dbn.FluxActivation`) or the learned causal beat activation
+        (``"network"``, :class:`~anticipators.beats.network.NetworkActivation`, the tracker ``causal-net``;
+        the envelope must keep the flux per band, as :class:`~anticipators.beats.network.BandFluxEnvelope`
+        does, the default then).
+    network_options : dict, optional
+        Keyword arguments for :class:`~anticipators.beats.network.NetworkActivation` (floor 0.01).
+    network_mix : float
+        With the network observation, the weight of the flux activation mixed into it (0: the network alone).
     envelope : anticipators.beats.envelope.EnvelopeSource, optional
         The onset-envelope front end the blocks are fed to (for instance an
         :class:`~anticipators.beats.envelope.ArrayEnvelope` of hand-made onset strength); its sample rate
@@ -212,7 +224,12 @@ class CausalBeatTracker:
         agree_phase: float = 0.05,
         follower_margin: float = 1.5,
         dbn_hysteresis: float = 2.0,
+        observation: str = "flux",
+        network_options: dict | None = None,
+        network_mix: float = 0.0,
     ) -> None:
+        if observation not in ("flux", "network"):
+            raise ValueError(f"observation must be 'flux' or 'network', not {observation!r}")
         if sync not in ("dbn", "comb"):
             raise ValueError(f"sync must be 'dbn' or 'comb', not {sync!r}")
         self.sync = sync
@@ -224,8 +241,12 @@ class CausalBeatTracker:
         self.prior_bpm = float(prior_bpm)
         self.prior_octaves = float(prior_octaves)
         self.fast_pulse_check = bool(fast_pulse_check)
+        use_network = observation == "network" and sync == "dbn"
         if envelope is None:
-            envelope = SpectralFluxEnvelope(self.sample_rate, keep_seconds=max(12.0, tempo_window + 4.0))
+            make = BandFluxEnvelope if use_network else SpectralFluxEnvelope
+            envelope = make(self.sample_rate, keep_seconds=max(12.0, tempo_window + 4.0))
+        elif use_network and not hasattr(envelope, "bands"):
+            raise ValueError("the network observation needs an envelope that keeps the flux per band (BandFluxEnvelope)")
         elif int(envelope.sample_rate) != self.sample_rate:
             raise ValueError(f"the envelope's sample rate {envelope.sample_rate} is not {self.sample_rate}")
         self.envelope = envelope
@@ -259,6 +280,9 @@ class CausalBeatTracker:
                        "prior_octaves": 1.0, **(dbn_options or {})}
             self.dbn = BeatPointerFilter(fps, **options)
             self.activation = FluxActivation(fps, **{"scale": 20.0, "floor": 0.01, **(activation_options or {})})
+            #: the learned activation (observation="network"), or None
+            self.network = NetworkActivation(**(network_options or {})) if use_network else None
+            self.network_mix = float(network_mix)
             # with the fast-pulse flag on, the grid waits for init_seconds, as the flag needs some estimates
             start = max(dbn_init_seconds, init_seconds) if self.fast_pulse_check else dbn_init_seconds
             self._dbn_init_frames = int(round(start * fps))
@@ -444,7 +468,11 @@ class CausalBeatTracker:
         envelope.update()
         dbn = self.dbn
         if dbn is not None and dbn.n_frames < envelope.n_frames:
-            dbn.step(self.activation(envelope.values(dbn.n_frames, envelope.n_frames)))
+            a = self.activation(envelope.values(dbn.n_frames, envelope.n_frames))
+            if self.network is not None:
+                learned = self.network(envelope.bands(dbn.n_frames, envelope.n_frames))
+                a = learned if self.network_mix <= 0.0 else (1.0 - self.network_mix) * learned + self.network_mix * a
+            dbn.step(a)
         if envelope.n_samples >= self._next_tempo_sample:
             self._next_tempo_sample = envelope.n_samples + self._tempo_every_samples
             self._estimate_tempo()
@@ -682,22 +710,25 @@ class CausalBeatTracker:
             self._restart(lag_k, keep_period=period)
 
 
-TRACKER_NAMES = ("causal", "causal-comb", "baseline", "aubio", "librosa_offline")
+TRACKER_NAMES = ("causal", "causal-net", "causal-comb", "baseline", "aubio", "librosa_offline")
 """Tracker names accepted by :func:`anticipators.beats.evaluation.track_file` (all but the last also by
 :func:`make_tracker`; ``"aubio"`` needs the optional aubio package; ``"librosa_offline"`` needs the
 whole audio at once)."""
 
 
 def make_tracker(name: str, sample_rate: int, **kwargs):
-    """Make a causal tracker by name: ``"causal"`` (:class:`CausalBeatTracker`), ``"baseline"``
+    """Make a causal tracker by name: ``"causal"`` (:class:`CausalBeatTracker`), ``"causal-net"`` (the same,
+    ``observation="network"``), ``"causal-comb"`` (``sync="comb"``), ``"baseline"``
     (:class:`~anticipators.beats.baselines.IOIBaselineTracker`) or ``"aubio"``
     (:class:`~anticipators.beats.baselines.AubioTracker`; ImportError without aubio)."""
     if name == "causal":
         return CausalBeatTracker(sample_rate, **kwargs)
+    if name == "causal-net":
+        return CausalBeatTracker(sample_rate, **{"observation": "network", **kwargs})
     if name == "causal-comb":
         return CausalBeatTracker(sample_rate, **{"sync": "comb", **kwargs})
     if name == "baseline":
         return IOIBaselineTracker(sample_rate, **kwargs)
     if name == "aubio":
         return AubioTracker(sample_rate, **kwargs)
-    raise ValueError(f"unknown causal tracker {name!r}; choose from 'causal', 'baseline', 'aubio'")
+    raise ValueError(f"unknown causal tracker {name!r}; choose from {', '.join(TRACKER_NAMES[:-1])}")
