@@ -166,11 +166,13 @@ def ensemble_clip(i: int, rng: np.random.Generator) -> dict:
     parts = [p for p in ("drums", "bass", "piano", "strings") if rng.random() < 0.6] or ["piano"]
     hihat = str(rng.choice(["eighths", "beats"]))
     seed = int(rng.integers(1 << 30))
-    key = f"ens_{i}_{seed}"
+    lead_in = round(float(rng.uniform(0.1, 1.0)), 3)
+    # every draw is made whether or not the render is cached, so that the same seed gives the same data
+    key = f"ens_{i}_{seed}_{lead_in}"
     cached = cache_dir() / f"{key}.npz"
     if not cached.is_file():
         r = render_ensemble_full(bpm, meter, bars, ramp=ramp, steps=steps, rubato=rubato, seed=seed, sample_rate=SR,
-                                 parts=parts, hihat=hihat, lead_in=float(rng.uniform(0.1, 1.0)))
+                                 parts=parts, hihat=hihat, lead_in=lead_in)
         np.savez(cached, x=band_flux(r.audio, SR).astype(np.float16), beats=r.beat_times)
     data = np.load(cached)
     x = data["x"].astype(np.float32)

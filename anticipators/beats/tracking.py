@@ -53,7 +53,7 @@ within +-0.3 ms, real-time factor 0.0027 at 22.05 kHz and 0.0030 at 44.1 kHz in 
 busy machine (load 2.8-3.6; :meth:`CausalBeatTracker.track`, as ``track_file`` runs it), of which the joint
 filter's forward step is about 0.0005. ``benchmarks/bench_beats_real.py`` (real recordings and ASAP
 renders, committed 200 ms ahead): F 0.760 and 0.329 (``causal-comb``: 0.725 and 0.285; ``causal-net``, the
-learned activation of :mod:`anticipators.beats.network` as the joint filter's observation: 0.462 and 0.311).
+learned activation of :mod:`anticipators.beats.network` as the joint filter's observation: 0.457 and 0.309).
 
 All times are seconds from the first sample heard.
 """
