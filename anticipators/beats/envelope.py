@@ -370,3 +370,43 @@ class ArrayEnvelope:
         """Count samples heard and make available the frames they reach; returns how many."""
         self.append(x)
         return self.update()
+
+
+BAND_FMAX = 11025.0
+"""Highest frequency of :class:`BandFluxEnvelope`'s mel bands (Hz): half of 22.05 kHz, at which the learned
+activation was trained."""
+
+
+class BandFluxEnvelope(SpectralFluxEnvelope):
+    """:class:`~anticipators.beats.envelope.SpectralFluxEnvelope` that also keeps each mel band's rectified flux.
+
+    :meth:`bands` gives the ``(frames, n_mels)`` flux of absolute frames (the same history as
+    :meth:`values`, whose frame values are their sums).
+    """
+
+    def __init__(self, *args, **kwargs) -> None:
+        # the bands of a 22.05 kHz recording at every sample rate: the learned activation (:mod:`anticipators.beats.network`) learned on those
+        kwargs.setdefault("fmax", BAND_FMAX)
+        super().__init__(*args, **kwargs)
+        self.n_mels = self.mel_t.shape[1]
+        self._bands = np.zeros((self._odf.size, self.n_mels), np.float32)
+
+    def bands(self, start: int, stop: int) -> np.ndarray:
+        """Rectified flux per mel band of absolute frames ``start .. stop - 1`` (clipped to what is kept)."""
+        start = max(int(start), self._odf_start)
+        stop = min(int(stop), self.n_frames)
+        if stop <= start:
+            return self._bands[:0]
+        return self._bands[start - self._odf_start : stop - self._odf_start]
+
+    def _append_bands(self, diff: np.ndarray) -> None:
+        old_start, old_frames = self._odf_start, self.n_frames
+        self._append(diff.sum(axis=1))  # the onset strength, as SpectralFluxEnvelope keeps it
+        start = self._odf_start
+        if start != old_start or self._bands.shape[0] != self._odf.size:  # the history moved back or grew
+            bands = self._bands
+            if bands.shape[0] != self._odf.size:
+                bands = np.zeros((self._odf.size, self.n_mels), np.float32)
+            bands[: old_frames - start] = self._bands[start - old_start : old_frames - old_start]
+            self._bands = bands
+        self._bands[old_frames - start : self.n_frames - start] = diff
