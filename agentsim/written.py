@@ -31,11 +31,12 @@ import shutil
 import stat
 import tempfile
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 from agentsim.errors import UsageError
 
-__all__ = ["written", "check_output", "save_figure", "staged_folder", "clear_staged", "clear_partials", "RUN_FILES"]
+__all__ = ["written", "check_output", "save_figure", "staged_folder", "staged_page", "check_folder", "clear_staged", "clear_stale",
+           "clear_partials", "RUN_FILES"]
 
 #: The files one of which a run's folder holds (a run's figures): a folder with none of them that is not
 #: empty is someone else's, which a run never replaces.
@@ -90,22 +91,69 @@ def written(path: str | Path) -> Iterator[Path]:
     once it is whole; if the writing fails (a full disk), the temporary file is removed and ``path`` is left
     as it was. ``path`` is refused (:class:`UsageError`) if it is a device, a FIFO or a folder.
 
+    The writer holds a lock on its temporary file (:func:`fcntl.flock`) while it writes: the temporary files
+    of ``path`` whose lock can be got are those of killed writers, and are removed first
+    (:func:`clear_stale`). The file is made as :func:`open` would make it (``0666`` less the umask), not
+    ``0600`` as :func:`tempfile.mkstemp` makes it.
+
     >>> with written("out.txt") as tmp:  # doctest: +SKIP
     ...     tmp.write_text("whole")
     """
     path = Path(path)
-    check_output(path)
-    parent = path.parent if str(path.parent) else Path(".")
-    fd, name = tempfile.mkstemp(dir=parent, prefix=f".{path.stem}.partial-", suffix=path.suffix)
-    os.close(fd)
-    tmp = Path(name)
-    try:
+    with _temporary(path) as tmp:
         yield tmp
         os.replace(tmp, path)
+
+
+@contextlib.contextmanager
+def _temporary(path: Path) -> Iterator[Path]:
+    """The temporary file of :func:`written` for ``path``, locked while the body runs and removed if it
+    raises; the body renames it into place."""
+    import fcntl
+
+    check_output(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    clear_stale(path)
+    fd, name = tempfile.mkstemp(dir=parent, prefix=f".{path.stem}.partial-", suffix=path.suffix)
+    tmp = Path(name)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # held until the file is renamed into place or removed
+        os.fchmod(fd, 0o666 & ~_umask())
+        yield tmp
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+    finally:
+        os.close(fd)
+
+
+def clear_stale(path: str | Path) -> list[Path]:
+    """Remove the temporary files of :func:`written` for ``path`` (``.STEM.partial-XXXX.SUFFIX`` beside it)
+    whose writer is dead: those whose lock can be got at once. A writer still going holds its lock, and its
+    file is left alone. Returns what was removed."""
+    import fcntl
+
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    removed = []
+    for leftover in parent.glob(f".{glob.escape(path.stem)}.partial-*{glob.escape(path.suffix)}"):
+        try:
+            fd = os.open(leftover, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+        except OSError:  # gone, a planted link, or not ours to read
+            continue
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:  # its writer is alive
+                continue
+            leftover.unlink(missing_ok=True)
+            removed.append(leftover)
+        finally:
+            os.close(fd)
+    return removed
 
 
 def clear_partials(folder: str | Path) -> list[Path]:
@@ -203,18 +251,29 @@ def _replaceable(out: Path, marks: Iterable[str]) -> bool:
     return not entries or any(name in entries for name in marks)
 
 
-@contextlib.contextmanager
-def staged_folder(out: str | Path, inputs: Iterable[str | Path | None] = (),
-                  marks: Iterable[str] = RUN_FILES) -> Iterator[Path]:
-    """Stage a run's folder: the body writes into the folder yielded (beside ``out``), which replaces
-    ``out`` once the body has returned; if it raises, the staging folder is removed and ``out`` is left as it
-    was. ``out`` is refused (:class:`UsageError`) if it is a file, holds one of ``inputs``, or holds files
-    that are no run's (a folder that is neither empty nor holds one of ``marks`` is never replaced)."""
+def check_folder(out: str | Path, inputs: Iterable[str | Path | None] = (), marks: Iterable[str] = RUN_FILES) -> None:
+    """Raise :class:`UsageError` (one line) if :func:`staged_folder` may not replace ``out``: it is a file,
+    holds one of ``inputs``, or holds files that are no run's (it is neither empty nor holds one of
+    ``marks``)."""
     out = Path(out)
     check_output(out, inputs, folder=out.is_dir())
     if not _replaceable(out, marks):
         raise UsageError(f"cannot write the output folder {out}: it holds files that are not an agentsim run's "
                          f"(name a new or empty folder)")
+
+
+@contextlib.contextmanager
+def staged_folder(out: str | Path, inputs: Iterable[str | Path | None] = (),
+                  marks: Iterable[str] = RUN_FILES, before_swap: Callable[[], None] | None = None,
+                  after_swap: Callable[[], None] | None = None) -> Iterator[Path]:
+    """Stage a run's folder: the body writes into the folder yielded (beside ``out``), which replaces
+    ``out`` once the body has returned; if it raises, the staging folder is removed and ``out`` is left as it
+    was. ``out`` is refused (:class:`UsageError`) if it is a file, holds one of ``inputs``, or holds files
+    that are no run's (a folder that is neither empty nor holds one of ``marks`` is never replaced).
+    ``before_swap`` is called once the body has returned, just before the swap; ``after_swap`` once the new
+    folder is in place, before the old one is removed."""
+    out = Path(out)
+    check_folder(out, inputs, marks)
     parent = out.parent if str(out.parent) else Path(".")
     try:
         parent.mkdir(parents=True, exist_ok=True)
@@ -226,19 +285,42 @@ def staged_folder(out: str | Path, inputs: Iterable[str | Path | None] = (),
         try:
             yield staging
             os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes it 0700; a run's folder is as mkdir makes it
+            if before_swap is not None:
+                before_swap()
+            after = after_swap or (lambda: None)
             if not out.exists():
                 os.rename(staging, out)
+                after()
             elif _exchange(staging, out):
+                after()
                 shutil.rmtree(staging, ignore_errors=True)  # the old run, now under the staging name
             else:
                 aside = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out.name}.old-"))
                 with _held(aside):
                     os.replace(out, aside)
                     os.rename(staging, out)
+                    after()
                     shutil.rmtree(aside, ignore_errors=True)
         except BaseException:
             shutil.rmtree(staging, ignore_errors=True)
             raise
+
+
+@contextlib.contextmanager
+def staged_page(page: str | Path, folder: str | Path, inputs: Iterable[str | Path | None] = (),
+                marks: Iterable[str] = ()) -> Iterator[tuple[Path, Path]]:
+    """Stage a page and the folder of the files it loads, so that the pair is whole or absent: the body
+    writes the page to the temporary file and the files into the staging folder yielded (``(page, folder)``,
+    as :func:`written` and :func:`staged_folder` make them). Once the body has returned, the old page is
+    removed, the folder swapped in, and the new page renamed into place, in that order: a kill between two
+    of these steps leaves no page (the report is absent), never a page over another run's files. If the
+    body raises, both are removed and the old pair is left as it was. ``folder`` is refused as
+    :func:`staged_folder` refuses it (``marks``: the files of which one marks it as such a folder)."""
+    page, folder = Path(page), Path(folder)
+    with _temporary(page) as tmp, staged_folder(folder, inputs, marks,
+                                                before_swap=lambda: page.unlink(missing_ok=True),
+                                                after_swap=lambda: os.replace(tmp, page)) as staging:
+        yield tmp, staging
 
 
 def _umask() -> int:

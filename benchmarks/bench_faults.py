@@ -5,10 +5,12 @@ earlier run, killed -9 (its whole process group) at times drawn by a seeded nump
 of a whole run; after each kill the folder must hold the earlier run or the new one, whole (every file
 parses, the BVH has all its frames, the PNGs end, the seed-dependent files match one of the two runs), with
 nothing beside it but staging folders; the next run must clear those. The same for a sweep of four points
-(results.csv whole or absent, every cached point whole). Also: the memory and time of refusing an endless
-standard input and a behaviour a million seconds in.
+(results.csv whole or absent, every cached point whole). The same for ``realize --report --bvh`` over an
+earlier report: the page and its folder must be of one run (or the page absent), the BVH whole, and the next
+run must clear the staging folders and the temporary files of killed writers. Also: the memory and time of
+refusing an endless standard input and a behaviour a million seconds in.
 
-    python benchmarks/bench_faults.py [--runs 20] [--sweeps 20] [--seed 28]
+    python benchmarks/bench_faults.py [--runs 20] [--sweeps 20] [--reports 20] [--seed 28]
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=20, help="storyteller runs to kill (20)")
     parser.add_argument("--sweeps", type=int, default=20, help="sweeps to kill (20)")
+    parser.add_argument("--reports", type=int, default=20, help="realize --report runs to kill (20)")
     parser.add_argument("--seed", type=int, default=28, help="seed of the kill times (28)")
     args = parser.parse_args()
     report: dict = {}
@@ -73,6 +76,21 @@ def main() -> None:
             "damaged_points": sum(k["bad_points"] for k in seen),
             "kills_leaving_temporaries": sum(bool(k["hidden"]) for k in seen),
             "next_sweep": {"exit": sweep["final_status"], **sweep["final"]}}
+    if args.reports:
+        with tempfile.TemporaryDirectory() as folder:
+            pages = faults.report_kills(Path(folder), args.reports, args.seed)
+        seen = pages["seen"]
+        report["report"] = {
+            "runs": len(seen), "whole_run_s": round(pages["whole_s"], 2),
+            "killed": sum(k["status"] is None for k in seen),
+            "left_the_pair_before_it": sum(k["page"] == k["before"] for k in seen),
+            "left_its_own_pair": sum(k["page"] != k["before"] and k["page"] == "b.xml" for k in seen),
+            "kills_over_the_first_run": sum(k["before"] == "a.xml" for k in seen),
+            "left_no_page": sum(k["page"] is None for k in seen),
+            "left_a_page_over_other_files": sum(k["page"] not in (None, "a.xml", "b.xml") for k in seen),
+            "left_a_broken_bvh": sum(k["bvh"] == -1 for k in seen),
+            "kills_leaving_hidden_files": sum(bool(k["hidden"]) for k in seen),
+            "left_after_the_next_run": pages["final"]["hidden"]}
     with open("/dev/zero", "rb") as zero:
         report["endless_stdin"] = refusal(["realize", "--tts", "builtin", "-"], stdin=zero)
     report["bvh_a_million_seconds_in"] = refusal(["realize", "--tts", "builtin", "--bvh", "far.bvh", "far.xml"])

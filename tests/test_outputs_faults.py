@@ -387,3 +387,185 @@ def test_a_killed_sweep_leaves_whole_results_or_none(tmp_path):
 @pytest.mark.system
 def test_twenty_killed_sweeps(tmp_path):
     check_sweep(sweep_kills(tmp_path, runs=20))
+
+
+# ----------------------------------------------------------------------------------------------------
+# realize --report (and --bvh) under kill -9: the page and its folder whole or absent as a pair.
+
+
+def report_document(gestures: int) -> str:
+    beats = "".join(f'<gesture id="g{i}" lexeme="BEAT" start="{i}"/>' for i in range(gestures))
+    return f'<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="b1" characterId="agent">{beats}</bml>'
+
+
+def report_command(document: str) -> list[str]:
+    return [sys.executable, "-m", "agentsim", "realize", "--tts", "builtin", "--report", "out/run.html",
+            "--bvh", "out/run.bvh", document]
+
+
+def report_state(folder: Path) -> dict:
+    """What ``folder`` holds of a report: the run its page is of (the page's title, when the page is whole
+    and its folder's data, poses and every file it loads are of the same run: else ``"mismatch"``), None
+    without a page; the BVH's frames (None if absent, -1 if not whole); the hidden names beside them."""
+    import re
+
+    from agentsim.media.report import data as report_data
+
+    state = {"page": None, "bvh": None, "hidden": sorted(p.name for p in folder.iterdir() if p.name.startswith("."))}
+    page, files = folder / "run.html", folder / "run_files"
+    if page.exists():
+        try:
+            text = page.read_text()
+            assert text.rstrip().endswith("</html>")
+            title = re.search(r"<title>(.*)</title>", text).group(1)
+            data = report_data.read_js_assignment((files / "data.js").read_text(), "REPORT_DATA")
+            poses = report_data.read_js_assignment((files / "poses.js").read_text(), "REPORT_POSES")
+            assert data["title"] == title and data["motion"]["sent"] == poses["count"]
+            assert all((folder / src).is_file() for src in re.findall(r'src="([^"]+)"', text))
+            state["page"] = title
+        except (OSError, ValueError, KeyError, TypeError, AttributeError, AssertionError):
+            state["page"] = "mismatch"
+    if (folder / "run.bvh").exists():
+        bvh = (folder / "run.bvh").read_text()
+        try:
+            frames = int(bvh.split("Frames: ", 1)[1].split("\n", 1)[0])
+            whole = len(bvh.split("Frame Time: ", 1)[1].strip().splitlines()) == frames + 1  # its own line too
+        except (IndexError, ValueError):
+            whole = False
+        state["bvh"] = frames if whole else -1
+    return state
+
+
+def report_kills(tmp_path: Path, runs: int, seed: int = 28) -> dict:
+    """A complete report of a.xml, then ``runs`` reports of b.xml over it killed at random times, then one
+    to the end; returns what was seen after each kill."""
+    (tmp_path / "a.xml").write_text(report_document(12))
+    (tmp_path / "b.xml").write_text(report_document(30))
+    started = time.perf_counter()
+    assert subprocess.run(report_command("a.xml"), cwd=tmp_path, env=env(), capture_output=True).returncode == 0
+    whole = time.perf_counter() - started
+    first = report_state(tmp_path / "out")
+    assert first["page"] == "a.xml" and first["bvh"] > 0 and first["hidden"] == []
+    rng = np.random.default_rng(seed)
+    seen = []
+    for at in rng.uniform(0.0, whole * 1.1, runs):
+        before = report_state(tmp_path / "out")["page"]
+        seen.append({"at": at, "before": before, "status": killed_after(report_command("b.xml"), tmp_path, at),
+                     **report_state(tmp_path / "out")})
+    assert subprocess.run(report_command("b.xml"), cwd=tmp_path, env=env(), capture_output=True).returncode == 0
+    return {"first": first, "seen": seen, "final": report_state(tmp_path / "out"), "whole_s": whole}
+
+
+def check_reports(outcome: dict) -> None:
+    frames = {outcome["first"]["bvh"], outcome["final"]["bvh"]}
+    for kill in outcome["seen"]:
+        assert kill["page"] in (None, kill["before"], "b.xml"), kill  # never a page over another run's files
+        assert kill["bvh"] in frames, kill  # the old BVH or the new, whole
+        assert all(n.startswith((".run_files.staging-", ".run.partial-")) for n in kill["hidden"]), kill
+    assert outcome["final"]["page"] == "b.xml" and outcome["final"]["bvh"] > outcome["first"]["bvh"]
+    assert outcome["final"]["hidden"] == []  # the next run cleared the staging folders and temporaries
+
+
+def test_a_killed_report_leaves_the_old_pair_or_the_new(tmp_path):
+    check_reports(report_kills(tmp_path, runs=4))
+
+
+@pytest.mark.system
+def test_twenty_killed_reports(tmp_path):
+    outcome = report_kills(tmp_path, runs=20)
+    check_reports(outcome)
+    assert any(k["status"] is None for k in outcome["seen"])  # the loop did kill runs midway
+
+
+KILLED_WRITER = """
+import os, signal, sys
+from agentsim.written import written
+with written(sys.argv[1]) as tmp:
+    tmp.write_bytes(b"half")
+    print(tmp.name, flush=True)
+    if sys.argv[2] == "kill":
+        os.kill(os.getpid(), signal.SIGKILL)
+    sys.stdin.readline()  # alive, writing, until told to go on
+"""
+
+
+def test_the_next_write_removes_the_temporaries_of_killed_writers_only(tmp_path):
+    """A writer killed -9 leaves its temporary file; the next write to the same path removes it, and leaves
+    the temporary of a writer still going (it holds its lock) and those of other paths."""
+    (tmp_path / "out.wav").write_bytes(b"old")
+    alive = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, "out.wav", "wait"], cwd=tmp_path, env=env(),
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        going = tmp_path / alive.stdout.readline().strip()
+        killed = [subprocess.run([sys.executable, "-c", KILLED_WRITER, "out.wav", "kill"], cwd=tmp_path, env=env(),
+                                 capture_output=True, text=True) for _ in range(2)]
+        assert [k.returncode for k in killed] == [-signal.SIGKILL] * 2
+        stale = [tmp_path / k.stdout.strip() for k in killed]
+        other = subprocess.run([sys.executable, "-c", KILLED_WRITER, "other.wav", "kill"], cwd=tmp_path, env=env(),
+                               capture_output=True, text=True)
+        assert not stale[0].exists()  # the second killed writer removed the first one's
+        assert stale[1].is_file() and going.is_file() and (tmp_path / "out.wav").read_bytes() == b"old"
+        with written(tmp_path / "out.wav") as tmp:
+            tmp.write_bytes(b"new")
+        assert not any(p.exists() for p in stale) and going.is_file()  # the live writer's file is its own
+        assert (tmp_path / other.stdout.strip()).is_file()  # another path's: left to that path's next write
+        alive.communicate("\n", timeout=60)
+    finally:
+        alive.kill()
+    assert alive.returncode == 0 and (tmp_path / "out.wav").read_bytes() == b"half"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["out.wav", other.stdout.strip()])
+    assert stat.S_IMODE((tmp_path / "out.wav").stat().st_mode) == 0o666 & ~current_umask()  # as open() makes it
+
+
+def current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+KILLED_PAGE = """
+import os, signal, sys
+from agentsim.written import staged_page
+with staged_page("run.html", "run_files", marks=("data.js",)) as (page, folder):
+    (folder / "data.js").write_text("new")
+    page.write_text("new page")
+    os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_a_page_and_its_folder_are_swapped_in_together(tmp_path):
+    """staged_page: a writer killed before the swap leaves the old pair; a failing one leaves it too; the
+    next one clears what the killed one staged and puts its pair in place."""
+    from agentsim.written import staged_page
+
+    (tmp_path / "run_files").mkdir()
+    (tmp_path / "run_files" / "data.js").write_text("old")
+    (tmp_path / "run.html").write_text("old page")
+    killed = subprocess.run([sys.executable, "-c", KILLED_PAGE], cwd=tmp_path, env=env(), capture_output=True)
+    assert killed.returncode == -signal.SIGKILL
+    left = sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("."))
+    assert [n.split("-")[0] for n in left] == [".run.partial", ".run_files.staging"]
+    assert (tmp_path / "run.html").read_text() == "old page"
+    assert (tmp_path / "run_files" / "data.js").read_text() == "old"
+    with pytest.raises(RuntimeError), staged_page(tmp_path / "run.html", tmp_path / "run_files",
+                                                  marks=("data.js",)) as (page, folder):
+        (folder / "data.js").write_text("failed")
+        raise RuntimeError("the run failed")
+    assert (tmp_path / "run.html").read_text() == "old page"
+    assert (tmp_path / "run_files" / "data.js").read_text() == "old"
+    with staged_page(tmp_path / "run.html", tmp_path / "run_files", marks=("data.js",)) as (page, folder):
+        (folder / "data.js").write_text("new")
+        page.write_text("new page")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.html", "run_files"]
+    assert (tmp_path / "run.html").read_text() == "new page"
+    assert (tmp_path / "run_files" / "data.js").read_text() == "new"
+
+
+def test_a_report_folder_of_someone_elses_files_is_refused_before_work(tmp_path):
+    (tmp_path / "g.xml").write_text(GOOD.format(start=0))
+    (tmp_path / "run_files").mkdir()
+    (tmp_path / "run_files" / "mine.txt").write_text("mine")
+    proc = cli("realize", "--tts", "builtin", "--report", "run.html", "g.xml", cwd=tmp_path)
+    assert proc.returncode == 2 and "run_files: it holds files that are not an agentsim run's" in one_line(proc)
+    assert proc.stdout == "" and not (tmp_path / "run.html").exists()  # before the run: no feedback
+    assert (tmp_path / "run_files" / "mine.txt").read_text() == "mine"

@@ -180,8 +180,13 @@ def check_outputs(args: argparse.Namespace) -> None:
     """Say, before any work, which output cannot be written."""
     from agentsim.media.files import check_writable
 
-    check_writable([args.wav, args.bvh, args.poses, args.textgrid, args.report], [args.csv],
-                   inputs=[resolve(f) for f in args.files])
+    inputs = [resolve(f) for f in args.files]
+    check_writable([args.wav, args.bvh, args.poses, args.textgrid, args.report], [args.csv], inputs=inputs)
+    if args.report:  # its folder too: never one that holds someone else's files or the input
+        from agentsim.media.report.page import OWN_FILES, report_paths
+        from agentsim.written import check_folder
+
+        check_folder(report_paths(args.report)[1], inputs, OWN_FILES)
 
 
 def read_document(path: str) -> str | bytes:

@@ -14,6 +14,9 @@
 Everything is loaded by ``<script src>`` and ``<audio src>`` relative to the HTML file, because a browser
 refuses ``fetch()`` and ES modules from ``file://``; nothing is fetched from the network. The HTML itself
 holds only the page's structure, the title and notes, and a two-line error catcher: no data.
+
+The page and its folder are whole or absent as a pair: the folder is staged and swapped in, then the page
+renamed into place (:func:`~agentsim.written.staged_page`); a killed run leaves the old report or none.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from urllib.parse import quote
 
 import numpy as np
 
-from agentsim.written import written
+from agentsim.written import staged_page, written
 from agentsim.media import AXIS
 from agentsim.media.files import write_text
 from agentsim.media.report.data import (FACE, js_assignment, point_names, run_duration, stroke_times,
@@ -127,7 +130,15 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         Lines shown under the title (what was run, with which settings).
     audio : Future, optional
         The track's sound already being written (:func:`start_audio` with the same ``path`` and
-        ``track``): waited for instead of encoding the track here.
+        ``track``): waited for instead of encoding the track here. The report is then written in place,
+        for a report inside a run's folder that is staged whole
+        (:func:`~agentsim.written.staged_folder`).
+
+    Without ``audio``, the page and its folder are whole or absent as a pair
+    (:func:`~agentsim.written.staged_page`): the files are written into a staging folder beside the folder,
+    which is swapped in once the report is whole, and the page is renamed into place last (the old page
+    removed just before the swap), so that a killed run leaves the old report, or none, and never a page over
+    another run's files; the next report there clears what a killed one staged.
 
     Returns
     -------
@@ -137,18 +148,30 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     if hasattr(recording, "recording") and callable(recording.recording):
         recording = recording.recording()
     path, folder = report_paths(path)
-    folder.mkdir(parents=True, exist_ok=True)
-    for name in OWN_FILES:
-        if audio is None or name not in AUDIO_FILES:  # a sound being written is kept
-            (folder / name).unlink(missing_ok=True)
     if track is not None and track.length == 0:
         track = None
     if stream is not None and stream.n_frames == 0:
         stream = None
-    gestures = list(gestures)
-    title = title or path.stem
-    notes = [str(n) for n in notes]
+    content = (recording, stream, track, list(gestures), title or path.stem, [str(n) for n in notes])
+    if audio is None:  # the page and its folder staged, swapped in together once whole (staged_page)
+        with staged_page(path, folder, marks=OWN_FILES) as (page, staging):
+            _write_into(page, staging, folder.name, *content, audio=None)
+        return path
+    # the sound already being written into the folder itself: a report inside a run's folder, which the run
+    # stages whole (staged_folder), written in place
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in OWN_FILES:
+        if name not in AUDIO_FILES:  # the sound being written is kept
+            (folder / name).unlink(missing_ok=True)
+    with written(path) as page:
+        _write_into(page, folder, folder.name, *content, audio=audio)
+    return path
 
+
+def _write_into(page: Path, folder: Path, name: str, recording, stream, track, gestures, title, notes,
+                audio) -> None:
+    """Write the report's files into ``folder`` and its HTML into ``page``, which loads them from the folder
+    ``name`` beside it."""
     for source in (VENDOR / "three.min.js", VENDOR / "LICENSE-three.txt", ASSETS / "report.js",
                    ASSETS / "report.css"):
         with written(folder / source.name) as tmp:  # never through a link planted at the name
@@ -166,8 +189,7 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     write_text(folder / "data.js", js_assignment(
         "REPORT_DATA", data, f"agentsim run report: timeline and tables of {title!r}, see "
         "agentsim.media.report.data"))
-    write_text(path, page_html(folder.name, title, notes, data))
-    return path
+    page.write_text(page_html(name, title, notes, data), encoding="utf-8")
 
 
 def _page_data(recording, stream, track, gestures, title, notes, folder: Path) -> dict:
