@@ -93,6 +93,8 @@ class Utterance:
     marks: list[Mark] = field(default_factory=list)
     sentences: list[float] = field(default_factory=list)
     sample_rate: int = 22050
+    #: float32 mono in [-1, 1): an array, or 16-bit samples standing in for one
+    #: (:class:`~speech_timing.samples.Pcm16`: length, dtype, slicing and ``np.asarray`` as the array's)
     audio: np.ndarray | None = None
     backend: str = ""
 

@@ -1031,8 +1031,11 @@ class EspeakBackend:
                 onset = _first_sound_after(events, i)
                 sentences.append((event.sample if onset is None else onset) / rate)
 
-        del pcm  # a view of the buffer, which to_float empties
-        audio = buffer.to_float()  # the 16-bit samples given back as they are converted
+        # the 16-bit samples kept as they are (half the memory of their float32 array), read as float32 a
+        # stretch at a time by whoever mixes them
+        from speech_timing.samples import Pcm
+
+        audio = Pcm(pcm)
         return Utterance(text=text, duration=duration, words=words, phonemes=phonemes, marks=marks,
                          sentences=sentences, sample_rate=rate, audio=audio, backend=self.name)
 

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from speech_timing.backend import Mark, Phoneme, SpeechText, Utterance, Word
-from speech_timing.samples import BLOCK, PcmFile
+from speech_timing.samples import BLOCK, Pcm16, PcmFile
 from agentsim.written import written
 
 #: 16-bit samples read from (and written to) a cache file at a time.
@@ -258,7 +258,7 @@ class CachedBackend:
         self.cache_dir.mkdir(parents=True, exist_ok=True)
         has_audio = utt.audio is not None
         if has_audio:
-            audio = utt.audio if isinstance(utt.audio, PcmFile) else np.asarray(utt.audio)
+            audio = utt.audio if isinstance(utt.audio, Pcm16) else np.asarray(utt.audio)
             # processes that write at once: a temporary file each (written)
             with written(audio_path) as tmp, open(tmp, "wb") as f:  # the file np.save writes, a block at a time
                 # (no 16-bit copy held whole)
