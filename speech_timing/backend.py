@@ -215,23 +215,27 @@ class Spoken:
             if speech in self._kept:
                 return self._kept[speech]
             self._kept[speech] = utterance
-            self.bytes += _weight(utterance)
+            self.bytes += audio_bytes(utterance)
             while self._kept and (len(self._kept) > self.size or self.bytes > self.max_bytes):
                 _, forgotten = self._kept.popitem(last=False)
-                self.bytes -= _weight(forgotten)
+                self.bytes -= audio_bytes(forgotten)
             return utterance
 
     def forget(self, speech: SpeechText) -> None:
         with self._lock:
             forgotten = self._kept.pop(speech, None)
             if forgotten is not None:
-                self.bytes -= _weight(forgotten)
+                self.bytes -= audio_bytes(forgotten)
 
 
-def _weight(utterance: "Utterance") -> int:
-    """Bytes of audio an utterance holds."""
-    audio = utterance.audio
-    return int(audio.nbytes) if audio is not None else 0
+def audio_bytes(utterance: "Utterance") -> int:
+    """Bytes of memory an utterance's audio holds (an array's, or the 16-bit samples a
+    :class:`~speech_timing.samples.Pcm16` stands in for)."""
+    audio = getattr(utterance, "audio", None)
+    if audio is None:
+        return 0
+    held = getattr(audio, "held_bytes", None)
+    return int(held if held is not None else audio.nbytes)
 
 
 def check_prosody(speech: SpeechText) -> list[Prosody]:

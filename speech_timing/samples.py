@@ -32,6 +32,8 @@ class Pcm16:
     dtype = np.dtype(np.float32)
     ndim = 1
     length = 0
+    #: bytes of memory the samples hold (those read from a file when asked for hold none)
+    held_bytes = 0
 
     def read(self, first: int, last: int) -> np.ndarray:
         """Samples ``first .. last - 1`` (clipped to the samples) as float32."""
@@ -98,6 +100,7 @@ class Pcm(Pcm16):
             raise ValueError("not 16-bit mono samples")
         self.pcm = pcm
         self.length = int(len(pcm))
+        self.held_bytes = int(pcm.nbytes)
 
     def read(self, first: int, last: int) -> np.ndarray:
         first, last = max(0, int(first)), min(self.length, int(last))

@@ -420,11 +420,11 @@ def test_what_is_remembered_is_weighed_in_bytes(monkeypatch):
     backend = EspeakBackend()
     texts = [SpeechText(f"The {word} keeper walked up the hill at night.") for word in ("first", "second", "third")]
     first = backend.synthesize(texts[0])
-    size = first.audio.nbytes
+    size = first.audio.held_bytes
     monkeypatch.setattr(backend._spoken, "max_bytes", int(2.5 * size))
     kept = [first] + [backend.synthesize(t) for t in texts[1:]]
     # the three together pass the bound: the first one is forgotten, the other two are what is weighed
-    assert backend.remembered_bytes == kept[1].audio.nbytes + kept[2].audio.nbytes <= 2.5 * size
+    assert backend.remembered_bytes == kept[1].audio.held_bytes + kept[2].audio.held_bytes <= 2.5 * size
     assert backend.synthesize(texts[2]) is kept[2] and backend.synthesize(texts[0]) is not first
     monkeypatch.setattr(backend._spoken, "max_bytes", size // 2)
     big = SpeechText("A sentence a good deal longer than any of the ones before, said only once.")

@@ -91,10 +91,10 @@ def test_a_blocks_audio_is_weighed_and_released_when_it_ends(service):
         (speech,) = prediction["behaviours"]
         seconds = speech["globalEnd"] - speech["globalStart"]
         held = status(ws)["speech_audio_bytes"]
-        # float32 samples at espeak-ng's 22,050 Hz: the speech's length, weighed
-        assert held == pytest.approx(seconds * 22050 * 4, rel=0.01)
+        # 16-bit samples at espeak-ng's 22,050 Hz: the speech's length, weighed
+        assert held == pytest.approx(seconds * 22050 * 2, rel=0.01)
         (started,) = [s for s in live.realizer.speech._started if s[0].block_id == "talk"]
-        assert started[1].audio is not None and started[1].audio.nbytes == held
+        assert started[1].audio is not None and started[1].audio.held_bytes == held
         ws.send(f'<bml {NS} id="stop"><bmla:interrupt id="i" target="talk"/></bml>')
         receive(ws, lambda m: m["id"] == "talk:end")
         after = status(ws)

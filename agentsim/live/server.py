@@ -54,6 +54,7 @@ from agentsim.core import feedback as fb
 from agentsim.core.clock import make_environment
 from agentsim.errors import AgentsimError, ScheduleError, UsageError
 from agentsim.live.limits import Limits
+from speech_timing.backend import audio_bytes
 
 #: How often the realizer's thread takes what clients sent (s): a block waits at most this long.
 POLL = 0.005
@@ -404,8 +405,7 @@ class LiveRealizer:
         weighed = []
         for behaviour, utterance in made:
             planner.set_utterance(behaviour, utterance)
-            audio = getattr(utterance, "audio", None)
-            weighed.append((utterance, int(audio.nbytes) if audio is not None else 0))
+            weighed.append((utterance, audio_bytes(utterance)))
         if weighed:
             with self.audio_lock:
                 self.prepared[id(block)] = weighed
