@@ -20,7 +20,7 @@ It combines the parts of this package:
     5. Tempo and phase (``sync="dbn"``, the default, tracker ``causal``): a joint tempo-phase filter
        (:class:`~anticipators.beats.dbn.BeatPointerFilter`, a beat-pointer network filtered forward over
        onset strength turned into a beat activation) holds the posterior over (beat interval, position
-       in the beat) from the first frame. From 1.5 s on its most probable interval and phase (with
+       in the beat) from the first frame. From 1 s on its most probable interval and phase (with
        hysteresis) set the beat grid; whenever the follower's grid differs from the filter's (tempo by
        more than 2 %, phase by more than 5 % of a beat) the filter's grid is predicted, and the follower
        restarts on it, unless the follower's last three beats hold ``follower_margin`` times the onset
@@ -52,7 +52,7 @@ Measured (``benchmarks/bench_beats.py``; FluidSynth ensembles of drums, bass, pi
 within +-0.3 ms, real-time factor 0.0027 at 22.05 kHz and 0.0030 at 44.1 kHz in CPU time on one core of a
 busy machine (load 2.8-3.6; :meth:`CausalBeatTracker.track`, as ``track_file`` runs it), of which the joint
 filter's forward step is about 0.0005. ``benchmarks/bench_beats_real.py`` (real recordings and ASAP
-renders, committed 200 ms ahead): F 0.760 and 0.329 (``causal-comb``: 0.725 and 0.285; ``causal-net``, the
+renders, committed 200 ms ahead): F 0.769 and 0.329 (``causal-comb``: 0.725 and 0.285; ``causal-net``, the
 learned activation of :mod:`anticipators.beats.network` as the joint filter's observation: 0.457 and 0.309).
 
 All times are seconds from the first sample heard.
@@ -132,7 +132,9 @@ class CausalBeatTracker:
         Keyword arguments for :class:`~anticipators.beats.dbn.FluxActivation` (scale 20, floor 0.01).
     dbn_init_seconds : float
         Audio heard before the joint filter's grid is used (with ``fast_pulse_check``, at least
-        ``init_seconds``).
+        ``init_seconds``). 1 s: the filter's grid is unsure so early, but an unsure grid finds the first
+        beats sooner than none (real recordings: median time to 4 correct beats 5.64 s with 1.5 s, 5.12 s
+        with 1 s, 5.17 s with 0.5 s; 0.5 s also delays the conductor's recovery past its bar).
     dbn_patience : int
         Tempo estimates (every ``tempo_interval``) on which the filter's grid must be the better one before
         the follower restarts on it.
@@ -217,7 +219,7 @@ class CausalBeatTracker:
         sync: str = "dbn",
         dbn_options: dict | None = None,
         activation_options: dict | None = None,
-        dbn_init_seconds: float = 1.5,
+        dbn_init_seconds: float = 1.0,
         dbn_patience: int = 1,
         dbn_predict: bool = True,
         agree_tempo: float = 0.02,
