@@ -295,3 +295,48 @@ def test_bvh_carries_the_lip_joints_and_reads_back_with_an_independent_reader(tm
             edge = pos + rot * glm.vec3(by_name[name].EndSite)
             ours = fk[name][1][0] + fk[name][0][0] @ np.asarray(s.body.joint[name].end_site)
             assert np.array(edge) == pytest.approx(ours, abs=1e-4), (t, name)
+
+
+# --------------------------------------------------------------------------------------------- while speaking
+SPEECH = ('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="b1"><speech id="s">'
+          '<text>Bob met a man, papa.</text></speech></bml>')
+
+
+def test_the_mouth_while_speaking_follows_the_visemes_of_its_phonemes():
+    from agentsim.animation.lips import SPEECH_BLEND, speech_visemes
+
+    r = Realizer()
+    r.submit(SPEECH)
+    r.run()
+    assert not r.feedback.warnings(), r.feedback.warnings()
+    recording = r.recording()
+    s = evaluate_poses(recording, fps=FPS)
+    body = Body()
+    rows = speech_visemes(recording)  # the phonemes as heard, on the run's clock
+    start = recording.behaviour("b1:s").start
+
+    def at(row):
+        """The jaw (degrees) and the lips' opening (m) at the frame nearest the phoneme's middle."""
+        k = int(round(0.5 * (row.start_s + row.end_s) * FPS))
+        assert s.writer(k, JAW) == "b1:s"
+        p = lip_points(body, mouth(s, k))
+        return float(s.channel(JAW)[k]), float(p["upper_lip"][1] - p["lower_lip"][1])
+
+    rest_gap = lip_points(body, {})["upper_lip"][1] - lip_points(body, {})["lower_lip"][1]
+    opened = [at(row) for row in rows if row.viseme == "Aa"]
+    # the bilabials once the mouth has blended in from the pose it found
+    closed = [at(row) for row in rows if row.phoneme in ("p", "b", "m") and row.start_s > start + SPEECH_BLEND]
+    assert len(opened) >= 2 and len(closed) >= 5
+    jaw_open, jaw_closed = min(j for j, _ in opened), max(j for j, _ in closed)
+    gap_open, gap_closed = min(g for _, g in opened), max(g for _, g in closed)
+    print(f"/a/: jaw {jaw_open:.1f} deg or more, lips {gap_open * 1000:.1f} mm apart or more; /p b m/: jaw "
+          f"{jaw_closed:.1f} deg or less, lips at most {gap_closed * 1000:.2f} mm apart (rest {rest_gap * 1000:.1f} mm)")
+    # measured: /a/ 13.5 deg and 11.3 mm, /p b m/ 1.5 deg and -0.76 mm (the lower lip pressed on the upper)
+    assert jaw_open > jaw_closed + 8.0
+    assert gap_open > 3 * rest_gap and gap_closed < 0.1 * rest_gap
+    # co-articulation: the mouth moves smoothly from one shape to the next (a step from /m/ to /a/ is 12 deg
+    # of jaw in one frame)
+    k = frames(s, start, recording.behaviour("b1:s").end)
+    steps = {d: float(np.abs(np.diff(s.channel(d)[k])).max()) for d in MOUTH_DOFS}
+    print("largest change in one frame:", {d: round(v, 2) for d, v in steps.items()})
+    assert max(steps.values()) < 5.0

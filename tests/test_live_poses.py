@@ -18,6 +18,7 @@ from websockets.sync.client import connect
 
 import agentsim.live.poses as live_poses
 from agentsim.animation.body import Body
+from agentsim.animation.lips import speech_visemes
 from agentsim.core.clock import make_environment
 from agentsim.live.poses import LivePoses
 from agentsim.live.service import Background, Service
@@ -67,9 +68,10 @@ class SimulatedLive:
         return t
 
 
-def simulate(period: float, until: float):
-    """The STORY run for ``until`` s with a snapshot every ``period`` s, each followed by the worker's step:
-    the poses, the messages (first frame, frames) and the live realizer."""
+def simulate(period: float, until: float, blocks=(STORY, APPENDED), later=LATER):
+    """The STORY run (or ``blocks``, and ``later`` at 14 s if given) for ``until`` s with a snapshot every
+    ``period`` s, each followed by the worker's step: the poses, the messages (first frame, frames) and the
+    live realizer."""
     sim = SimulatedLive()
     poses = LivePoses(sim, FPS)
     messages = []
@@ -81,9 +83,10 @@ def simulate(period: float, until: float):
             messages.extend(poses.catch_up(now, poses.records(now), subscribed=True))
 
     sim.env.process(snapshots())
-    sim.realizer.submit(STORY)
-    sim.realizer.submit(APPENDED)
-    sim.realizer.submit_at(14.0, LATER)
+    for block in blocks:
+        sim.realizer.submit(block)
+    if later is not None:
+        sim.realizer.submit_at(14.0, later)
     sim.env.run(until=until)
     return poses, messages, sim
 
@@ -116,6 +119,30 @@ def test_frames_evaluated_window_by_window_are_the_whole_runs(period):
     lean = np.linalg.norm(head - rest)
     print(f"the head {lean * 1000:.0f} mm from rest at {(n - 1) / FPS:.1f} s, still leaning forward")
     assert lean > 0.05
+
+
+def test_the_live_mouth_shows_the_speechs_visemes_as_the_whole_run_does():
+    # the speech's record carries its phonemes, so the live windows animate the same visemes
+    block = f'<bml {NS} id="v"><speech id="s"><text>Papa, mama, baba.</text></speech></bml>'
+    poses, messages, sim = simulate(0.1, 2.5, blocks=(block,), later=None)
+    frames = np.vstack([f for _, f in messages])
+    n = len(frames)
+    recording = sim.realizer.recording()
+    assert recording.behaviour("v:s").phonemes
+    whole = whole_run_points(poses, recording, np.arange(n) / FPS).reshape(n, -1)
+    error = np.abs(frames - whole).max()
+    points = frames.reshape(n, -1, 3)
+    upper, lower = poses.names.index("upper_lip.end"), poses.names.index("lower_lip.end")
+    gap = {}
+    for row in speech_visemes(recording):  # the lips' opening at each phoneme's middle, in the live frames
+        k = int(round(0.5 * (row.start_s + row.end_s) * FPS))
+        gap.setdefault(row.phoneme, []).append(points[k, upper, 1] - points[k, lower, 1])
+    print(f"live frames {error * 1000:.4f} mm from the whole run's; lips open at /a/ "
+          f"{min(gap['a']) * 1000:.1f}-{max(gap['a']) * 1000:.1f} mm, at /p b m/ at most "
+          f"{max(max(gap[c]) for c in 'pbm') * 1000:.1f} mm")
+    assert error < MM
+    # (measured: /a/ 6.8-8.8 mm open, /p b m/ -1.0 to -0.3 mm, the lower lip pressed on the upper; at rest 3 mm)
+    assert min(gap["a"]) > 0.005 and max(max(gap[c]) for c in "pbm") < 0.0003
 
 
 def test_the_skeleton_message_names_the_points_the_frames_hold():

@@ -201,6 +201,21 @@ def test_key_frames_are_met_at_their_times(tmp_path):
     assert elbow[2] < -0.25  # pitched 100 degrees about X: the upper arm points backwards
 
 
+def test_asaps_face_key_frames_close_both_eyes_at_their_times(tmp_path):
+    # its morph target is the eyes' closure of Asap's character: here both eyelids at CLOSE_EYES times weight/100
+    from agentsim.animation.pose import FACE_LEXEMES
+
+    result, fk = run(tmp_path, (ASAP / "murmlfacekeyframe.xml").read_text().split("id=\"bml1\">", 1)[1]
+                     .rsplit("</bml>")[0])
+    assert result.warnings == []
+    start = result.t("face1:start")
+    closed = FACE_LEXEMES["CLOSE_EYES"]["l_eyelid.pitch"]
+    for side in "lr":
+        column = fk.column[(f"{side}_eyelid", "Xrotation")]
+        for ftime, weight in ((0.5, 100.0), (1.0, 0.0), (1.5, 100.0), (2.0, 0.0)):
+            assert abs(fk.data[fk.time(start + ftime), column] - closed * weight / 100) < 0.01, (side, ftime)
+
+
 def test_a_stroke_pegged_to_a_speech_mark_is_reported_there_and_reached_there(tmp_path):
     where = "LocChest LocCenterRight LocNorm"
     body = ('<speech id="s1"><text>Look at <sync id="m1"/>this tall tower over there</text></speech>'

@@ -21,7 +21,7 @@ import numpy as np
 from agentsim.animation.arms import GESTURE_FORMS, GestureDriver, PointingDriver, conducting_meter, conducting_path
 from agentsim.animation.drivers import PRIORITY
 from agentsim.animation.head import GazeDriver, HeadDriver, HeadTurnDriver
-from agentsim.animation.lips import LipsDriver, curves_driver, lips_values
+from agentsim.animation.lips import LipsDriver, SpeechMouthDriver, curves_driver, lips_values
 from agentsim.animation.manager import DriverManager
 from agentsim.animation.lexicon import murml_form
 from agentsim.animation.motion import KeyTimes, ReplacementGroup
@@ -129,7 +129,11 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
             lips_items.append((record, keys, info, common))
             continue
         if b.type == "speech":
-            drv = manager.add(SpeechJawDriver(name, keys, **common))
+            phonemes = getattr(record, "phonemes", ())
+            if phonemes:  # the visemes of what it said; without phonemes, the jaw at syllable rate
+                drv = manager.add(SpeechMouthDriver(name, keys, phonemes, record.preferred, **common))
+            else:
+                drv = manager.add(SpeechJawDriver(name, keys, **common))
         elif b.type == "head":
             try:
                 amount = float(b.attributes.get("amount", "0.5"))

@@ -375,3 +375,95 @@ def speech_visemes(recording) -> list[VisemeRow]:
             word = words[p.word_index].text if 0 <= p.word_index < len(words) else ""
             rows.append(VisemeRow(heard.block, heard.behaviour, word, p.symbol, phoneme_viseme(p.symbol), a, b))
     return sorted(rows, key=lambda r: r.start_s)
+
+
+# ------------------------------------------------------------------------------------ the mouth while speaking
+#: Dominance of a viseme over the mouth while speaking (co-articulation, Cohen & Massaro's dominance
+#: functions): the lips must close for a bilabial and touch the teeth for a labiodental, so those dominate;
+#: vowels and the rounded and postalveolar consonants shape the lips less firmly; the tongue consonants
+#: leave the lips to their neighbours. Names not listed have :data:`DOMINANCE_DEFAULT`.
+DOMINANCE = {"pbm": 2.0, "bmp": 2.0, "fv": 1.5, "f": 1.5, "w": 0.7, "shch": 0.6, "uw": 0.6, "oh": 0.6,
+             "d": 0.3, "n": 0.3, "k": 0.3, "l": 0.35, "z": 0.4, "th": 0.35, "_": 0.6}
+DOMINANCE_DEFAULT = 0.5
+#: How fast a viseme's dominance falls off on either side of its phoneme's middle (s per factor of e).
+COARTICULATION = 0.035
+#: A gap this long (s) between phonemes (a pause) is silence: the mouth goes towards rest.
+PAUSE = 0.08
+#: The speaking mouth blends from the pose it finds over this long after the speech's start (s), and back
+#: to the pose it hands over to by the end.
+SPEECH_BLEND = MIN_RAMP
+
+
+def speech_segments(phonemes: Sequence[tuple[str, float, float]]) -> list[tuple[str, float, float]]:
+    """The visemes a speech shows, ``(viseme, start, end)`` in seconds on its timeline: one per phoneme
+    (:func:`phoneme_viseme`), and silence ``_`` in every pause of at least :data:`PAUSE` s."""
+    out: list[tuple[str, float, float]] = []
+    last = None
+    for symbol, a, b in phonemes:
+        if last is not None and a - last >= PAUSE:
+            out.append(("_", last, a))
+        name = "_" if symbol.strip().startswith("_") else phoneme_viseme(symbol)
+        out.append((name, float(a), float(b)))
+        last = float(b) if last is None else max(last, float(b))
+    return out
+
+
+def viseme_track(phonemes: Sequence[tuple[str, float, float]], u) -> dict[str, np.ndarray]:
+    """The mouth DOF values (degrees) at times ``u`` (seconds on the speech's timeline) while the phonemes
+    are spoken, with co-articulation: each viseme's shape is weighted by its dominance
+    ``alpha * exp(-|u - middle| / COARTICULATION)`` and the shapes are averaged by weight, so each viseme
+    shows most at its phoneme's middle and colours its neighbours (rounding comes early, a bilabial
+    still closes the lips between two open vowels)."""
+    u = np.asarray(u, dtype=float)
+    segments = speech_segments(phonemes)
+    out = {d: np.zeros(u.shape) for d in MOUTH_DOFS}
+    if not segments:
+        return out
+    total = np.zeros(u.shape)
+    weights = []
+    for name, a, b in segments:
+        low = name.lower()
+        w = DOMINANCE.get(low, DOMINANCE_DEFAULT) * np.exp(-np.abs(u - 0.5 * (a + b)) / COARTICULATION)
+        weights.append(w)
+        total += w
+    total = np.maximum(total, 1e-300)
+    for (name, _, _), w in zip(segments, weights):
+        shape = viseme_shape(name) or NEUTRAL
+        share = w / total
+        for d, v in shape.dofs().items():
+            if v:
+                out[d] += share * v
+    return out
+
+
+class SpeechMouthDriver(MotionDriver):
+    """The mouth while speech plays (start to end): the visemes of its phonemes (:func:`viseme_track`),
+    placed on the driver's time by linear time warping between the speech's sync points (``preferred``:
+    their times on the speech's own timeline), so the mouth stays with the words wherever its sync points
+    went. It blends from the pose it finds over :data:`SPEECH_BLEND` s and back to it by the end."""
+
+    def __init__(self, name: str, keys: KeyTimes, phonemes: Sequence[tuple[str, float, float]],
+                 preferred: Sequence[float], **kw):
+        super().__init__(name, keys, PRIORITY["speech"], list(MOUTH_DOFS), **kw)
+        self.release_key = keys.sync_ids[-1]
+        self.phonemes = [(str(s), float(a), float(b)) for s, a, b in phonemes]
+        pref = np.asarray(preferred, dtype=float)
+        if len(pref) != len(keys.times):
+            pref = np.asarray(keys.times, dtype=float) - keys.times[0]
+        self.preferred = np.maximum.accumulate(pref)
+
+    def release_time(self) -> float:
+        return self.keys.end
+
+    def speech_time(self, t: np.ndarray) -> np.ndarray:
+        """Seconds on the speech's timeline at driver times ``t``."""
+        times = np.asarray(self.keys.times, dtype=float)
+        if times[-1] - times[0] <= EPSILON:
+            return np.asarray(t, dtype=float) - times[0]
+        return np.interp(t, times, self.preferred)
+
+    def on_tick(self, t: np.ndarray) -> None:
+        t0, t1 = self.keys.start, self.keys.end
+        env = np.clip(np.minimum(t - t0, t1 - t) / SPEECH_BLEND, 0, 1)
+        track = viseme_track(self.phonemes, self.speech_time(t))
+        self.write_held({d: self.start_value(d) * (1 - env) + track[d] * env for d in MOUTH_DOFS})

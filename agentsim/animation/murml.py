@@ -322,8 +322,13 @@ class MurmlDriver(MotionDriver):
 def keyframe_channels(form: dict, body) -> tuple[dict[str, list[tuple[float, float]]], list[str]]:
     """DOF name -> [(ftime, degrees)] of a key frame animation, and the names it has that this body has
     not. Three values of a joint are its rotations about X, Y and Z (pitch, yaw, roll); one value is a
-    DOF (``l_eyebrow.pitch``) or a viseme or face channel of :mod:`agentsim.animation.lips` (weight 0..100)."""
+    DOF (``l_eyebrow.pitch``), a viseme or face channel of :mod:`agentsim.animation.lips` or a morph target of
+    the symbol table's ``morph_targets`` (weight 0..100: that face lexeme's values times weight / 100)."""
     from agentsim.animation.lips import CHANNELS
+    from agentsim.animation.murml_form import symbols
+    from agentsim.animation.pose import FACE_LEXEMES
+
+    morphs = {name: FACE_LEXEMES[lexeme] for name, lexeme in symbols().get("morph_targets", {}).items()}
 
     channels: dict[str, list[tuple[float, float]]] = {}
     unknown: list[str] = []
@@ -338,6 +343,9 @@ def keyframe_channels(form: dict, body) -> tuple[dict[str, list[tuple[float, flo
             elif len(v) == 1 and joint.lower() in CHANNELS:
                 for dof, x in CHANNELS[joint.lower()].dofs(v[0] / 100.0).items():
                     channels.setdefault(dof, []).append((frame["ftime"], x))
+            elif len(v) == 1 and joint in morphs:
+                for dof, x in morphs[joint].items():
+                    channels.setdefault(dof, []).append((frame["ftime"], x * float(v[0]) / 100.0))
             elif joint not in unknown:
                 unknown.append(joint)
     return channels, unknown

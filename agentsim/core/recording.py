@@ -45,6 +45,9 @@ class BehaviourRecord:
         Whether an interruption cut it short (its skipped sync points have no time).
     parameters : tuple of (param, start, end, kind, initial, target)
         BMLA parameter changes that applied to it, in the order they started.
+    phonemes : tuple of (symbol, start, end)
+        A speech's phonemes as spoken, in seconds on its own timeline (the axis of ``preferred``), once it
+        started; the mouth shows their visemes. Empty for every other behaviour.
     """
 
     block: str
@@ -61,6 +64,7 @@ class BehaviourRecord:
     tied_to: tuple[str, ...] = ()
     interrupted: bool = False
     parameters: tuple[tuple[str, float | None, float | None, str, float, float], ...] = ()
+    phonemes: tuple[tuple[str, float, float], ...] = ()
 
     @property
     def type(self) -> str:
@@ -193,5 +197,5 @@ def record_behaviours(timed: Iterable[TimedBehaviour]) -> list[BehaviourRecord]:
             block=t.block_id, id=t.id, behaviour=t.behaviour, sync_ids=tuple(t.sync_ids),
             times=tuple(times), passed=tuple(p is not None for p in t.passed), preferred=tuple(t.preferred),
             state=t.state, stopped=t.stopped, order=t.order, peg_groups=tuple(peg_groups), tied_to=tied,
-            interrupted=t.interrupted, parameters=parameters))
+            interrupted=t.interrupted, parameters=parameters, phonemes=tuple(getattr(t, "phonemes", ()))))
     return records

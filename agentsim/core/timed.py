@@ -72,6 +72,9 @@ class TimedBehaviour:
         self.skipped: set[int] = set()  # sync points an interruption means will never come
         #: parameter changes (BMLA parametervaluechange) that apply to it, in the order they started
         self.parameters: list = []
+        #: a speech's phonemes as it was spoken, ``(symbol, start, end)`` in seconds on its own timeline
+        #: (the axis of ``preferred``), set by the speech engine when it starts: what the mouth shows
+        self.phonemes: tuple = ()
 
     @property
     def id(self) -> str:

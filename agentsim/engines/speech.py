@@ -332,6 +332,7 @@ class SpeechEngine(Engine):
                 self.play(timed, time)
                 playback = self.playbacks[-1]
                 self._started.append((timed, playback.utterance, time, playback))
+            timed.phonemes = tuple((p.symbol, p.start, p.end) for p in self._started[-1][1].phonemes)
             if self.listeners:
                 heard = self.heard_one(*self._started[-1])
                 for listener in self.listeners:

@@ -33,7 +33,8 @@ MAX_FPS = 30.0
 #: Leaf joints whose end site the page draws as a point of its own (head top, jaw, finger and thumb tips, toes,
 #: the brows and the mouth corners, which move by turning about their joint).
 END_SITES = ("skullbase", "temporomandibular", *(f"{s}_{f}3" for s in "lr" for f in ("thumb", *FINGERS)),
-             "l_ankle", "r_ankle", "l_eyebrow", "r_eyebrow", "l_lip_corner", "r_lip_corner")
+             "l_ankle", "r_ankle", "l_eyebrow", "r_eyebrow", "l_lip_corner", "r_lip_corner",
+             "upper_lip", "lower_lip")  # the lips' edges: the visemes show in the mouth's opening
 #: Joints of the face and of the hands: drawn smaller.
 FACE = ("temporomandibular", "lower_lip", "upper_lip", "l_lip_corner", "r_lip_corner", "l_eyeball", "r_eyeball",
         "l_eyelid", "r_eyelid", "l_eyebrow", "r_eyebrow", *(f"{s}_{j}" for s in "lr" for j in HAND_JOINTS))
