@@ -42,9 +42,9 @@ def figure(value: float) -> str:
 
 
 def storyteller_strategies() -> str:
-    with tempfile.TemporaryDirectory() as out:
+    with tempfile.TemporaryDirectory() as tmp:  # the run's folder and its speech cache side by side
         proc = subprocess.run([sys.executable, "-m", "agentsim", "run", "storytelling", "--compare", "--json",
-                               "--out", out, "--cache", str(Path(out) / "cache")],
+                               "--out", str(Path(tmp) / "run"), "--cache", str(Path(tmp) / "cache")],
                               capture_output=True, text=True, timeout=1800)
     if proc.returncode != 0:
         raise SystemExit(f"readme_figures: run storytelling --compare failed: {proc.stderr.strip()}")
