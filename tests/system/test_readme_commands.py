@@ -137,7 +137,9 @@ def test_every_readme_command_works_from_an_empty_folder(user_environment, pulse
     assert re.search(r"^syncPointProgress welcome:beat1:stroke [0-9.]+$", proc.stdout, re.M), proc.stdout[:2000]
     assert "run_files/" in (folder / "run.html").read_text() and (folder / "run_files" / "poses.js").stat().st_size > 0
     # what the commands wrote is where the README says, in the folder they ran in
-    for written in ("out/conductor/metrics.json", "out/storytelling/metrics.json", "welcome.bvh",
+    # (run storytelling --compare, after the single run, replaces out/storytelling whole with its own files)
+    for written in ("out/conductor/metrics.json", "out/storytelling/compare.json",
+                    "out/storytelling/best/metrics.json", "welcome.bvh",
                     "timeline.png", "talk.TextGrid", "tables/gestures.csv", "story.wav", "errors.png",
                     "out/sweeps/conductor/results.parquet", "agentsim-pulse/pyproject.toml"):
         assert (folder / written).stat().st_size > 0, written
