@@ -5,6 +5,7 @@ on their times."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from pathlib import Path
@@ -15,7 +16,12 @@ import pytest
 from helpers import BvhFk, realize
 
 from agentsim.animation import evaluate_poses, write_bvh
+from agentsim.animation.body import Body, default_joints
+from agentsim.animation.murml import hand_matrix
+from agentsim.realizer import Realizer
+from anticipators.metronome import Metronome
 from speech_timing.builtin import BuiltinBackend
+from speech_timing.choice import named
 
 ASAP = Path(__file__).resolve().parent / "bml-examples-asap" / "murml"
 NS = "http://www.bml-initiative.org/bml/bml-1.0"
@@ -136,6 +142,73 @@ def test_symmetrical_mirrors_the_dominant_arm(tmp_path):
     assert right[0] < -0.1
 
 
+def test_absolute_coordinates_put_the_wrist_at_that_point_of_the_body(tmp_path):
+    # three numbers: X the character's left, Y up from the floor, Z forward (metres)
+    result, fk = run(tmp_path, gesture('<static slot="HandLocation" value="-0.25 1.30 0.35"/>'))
+    assert result.warnings == []
+    floor = -fk.position("HumanoidRoot")[0][1]  # the root's height at rest, below it in the root's frame
+    got = body_point(fk, "r_wrist", fk.time(result.t("g1:stroke")))
+    assert np.linalg.norm(got - np.array([-0.25, 1.30 + floor, 0.35])) < 0.01, got
+
+
+def scaled_body(factor: float) -> Body:
+    """The default figure with every length times ``factor``."""
+    joints = [dataclasses.replace(j, offset=tuple(factor * x for x in j.offset),
+                                  end_site=None if j.end_site is None else tuple(factor * x for x in j.end_site))
+              for j in default_joints()]
+    return Body(joints, hip_height=0.95 * factor)
+
+
+def test_the_symbols_are_scaled_to_the_body(tmp_path):
+    # the same gesture on a figure 1.2 times and 0.8 times as big: the wrist's height below the shoulders and
+    # its distance from the body's axis scale with it
+    form = gesture('<static slot="HandLocation" value="LocStomach LocCenterRight LocFar"/>')
+    result = realize(f'<bml xmlns="{NS}" id="b1">{form}</bml>'.encode())
+    placed = {}
+    for factor in (1.0, 1.2, 0.8):
+        write_bvh(tmp_path / "scaled.bvh", evaluate_poses(result.realizer.recording(), fps=FPS, body=scaled_body(factor)))
+        fk = BvhFk(tmp_path / "scaled.bvh")
+        wrist = body_point(fk, "r_wrist", fk.time(result.t("g1:stroke")))
+        placed[factor] = np.array([wrist[1] - body_point(fk, "r_shoulder", 0)[1], math.hypot(wrist[0], wrist[2])])
+    drop, reach = placed[1.0]
+    assert drop == pytest.approx(SYMBOLS["heights"]["LocStomach"], abs=0.005) and reach > 0.4
+    for factor in (1.2, 0.8):
+        assert np.abs(placed[factor] - factor * placed[1.0]).max() < 0.003, (factor, placed)
+
+
+def test_a_sequence_moves_the_hand_from_one_location_to_the_next(tmp_path):
+    # as Asap prepares each part of a sequence from where the hand is: no jump between the parts
+    a, b = "LocChest LocCenterRight LocFar", "LocShoulder LocRight LocClose"
+    result, fk = run(tmp_path, gesture(f'<sequence><static slot="HandLocation" value="{a}"/>'
+                                       f'<static slot="HandLocation" value="{b}"/></sequence>'))
+    assert result.warnings == []
+    at = {s: fk.time(result.t(f"g1:{s}")) for s in ("ready", "strokeStart", "strokeEnd", "relax")}
+    want_a, want_b = expected_location(*a.split(), fk), expected_location(*b.split(), fk)
+    gap = float(np.linalg.norm(want_b - want_a))
+    assert gap > 0.2
+    for sync in ("ready", "strokeStart"):
+        assert np.linalg.norm(body_point(fk, "r_wrist", at[sync]) - want_a) < 0.01, sync
+    for sync in ("strokeEnd", "relax"):
+        assert np.linalg.norm(body_point(fk, "r_wrist", at[sync]) - want_b) < 0.01, sync
+    path = np.array([body_point(fk, "r_wrist", k) for k in range(at["ready"], at["relax"] + 1)])
+    steps = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    assert steps.max() < 0.25 * gap, steps.max()  # a 10 ms frame moves it a fraction of the way, never all of it
+    to_b = np.linalg.norm(path - want_b, axis=1)
+    assert np.all(np.diff(to_b) < 1e-3)  # and it only ever comes nearer the second location
+
+
+def test_a_sequence_of_hand_shapes_closes_the_hand_gradually(tmp_path):
+    result, fk = run(tmp_path, gesture('<sequence><static slot="HandShape" value="BSflat"/>'
+                                       '<static slot="HandShape" value="BSfist"/></sequence>'))
+    a, b = fk.time(result.t("g1:strokeStart")), fk.time(result.t("g1:strokeEnd"))
+    reach = np.mean([np.linalg.norm(fk.position(f"r_{d}3.end") - fk.position("r_wrist"), axis=1) for d in DIGITS],
+                    axis=0)
+    closing = reach[a:b + 1]
+    assert closing[0] - closing[-1] > 0.07  # flat at the stroke's start, a fist at its end
+    assert np.abs(np.diff(closing)).max() < 0.25 * (closing[0] - closing[-1])
+    assert np.all(np.diff(closing) < 1e-4)
+
+
 # --------------------------------------------------------------------------------------------- hand
 def palm_normal(fk: BvhFk, side: str, k: int) -> np.ndarray:
     """The palm's normal from the hand's points: the fingers' direction crossed with the knuckle line
@@ -186,6 +259,49 @@ def test_a_fist_brings_the_finger_tips_much_closer_to_the_wrist_than_a_flat_hand
     assert all(reach["BSifinger"][d] < 0.7 * reach["BSflat"][d] for d in DIGITS[1:])
 
 
+@pytest.mark.parametrize("direction, want", [("DirA", (0, 0, 1)), ("DirU", (0, 1, 0)), ("DirAU", (0, 1, 1)),
+                                             ("DirL", (1, 0, 0))])
+def test_the_extended_fingers_point_where_ext_finger_orientation_says(tmp_path, direction, want):
+    # DirL on the right hand: the fingers across the body, along the palm's default direction (towards the
+    # middle), which then faces down
+    result, fk = run(tmp_path, gesture('<parallel><static slot="HandLocation" value="LocChest LocCenterRight LocNorm"/>'
+                                       f'<static slot="ExtFingerOrientation" value="{direction}"/>'
+                                       '<static slot="HandShape" value="BSflat"/></parallel>'))
+    assert result.warnings == []
+    k = fk.time(result.t("g1:stroke"))
+    fingers = body_point(fk, "r_middle3.end", k) - body_point(fk, "r_wrist", k)
+    want = np.array(want, dtype=float)
+    assert fingers @ want / np.linalg.norm(fingers) / np.linalg.norm(want) > 0.99
+
+
+def test_a_hand_of_fingers_without_a_direction_or_a_palm_along_them_is_still_a_hand():
+    # what a movement between opposite directions passes through, or a palm given along the fingers: a
+    # rotation all the same (the fingers away from the body; the palm towards the middle, or down)
+    fingers = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+    palm = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+    for side, middle in (("r", (1.0, 0.0, 0.0)), ("l", (-1.0, 0.0, 0.0))):
+        m = hand_matrix(side, fingers, palm)
+        assert np.allclose(m @ np.transpose(m, (0, 2, 1)), np.eye(3), atol=1e-9)
+        assert np.allclose(np.linalg.det(m), 1.0)
+        pointing = -m[:, :, 1]  # the fingers point along the hand's -Y
+        assert np.allclose(pointing, [[0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0]])
+        facing = -m[:, :, 0] * (1.0 if side == "l" else -1.0)  # the palm: the left hand's -X
+        assert np.allclose(facing[2], middle) and np.allclose(facing[1], [0, -1, 0]) and np.allclose(facing[3], [0, -1, 0])
+
+
+def test_a_thumb_modifier_stretches_the_thumb_of_a_fist(tmp_path):
+    tips = {}
+    for shape in ("BSfist", "BSfist (ThExt)"):
+        result, fk = run(tmp_path, gesture(f'<static slot="HandShape" value="{shape}"/>'))
+        assert result.warnings == []
+        k = fk.time(result.t("g1:stroke"))
+        tips[shape] = {d: fk.position(f"r_{d}3.end")[k] - fk.position("r_wrist")[k] for d in ("thumb", *DIGITS)}
+    fist, stretched = tips["BSfist"], tips["BSfist (ThExt)"]
+    apart = {name: float(np.linalg.norm(t["thumb"] - t["index"])) for name, t in tips.items()}
+    assert apart["BSfist (ThExt)"] - apart["BSfist"] > 0.015, apart
+    assert all(np.linalg.norm(fist[d] - stretched[d]) < 1e-4 for d in DIGITS)  # the fingers stay closed
+
+
 # --------------------------------------------------------------------------------------------- timing
 def test_key_frames_are_met_at_their_times(tmp_path):
     result, fk = run(tmp_path, (ASAP / "murmlbodykeyframe.xml").read_text().split("id=\"bml1\">", 1)[1]
@@ -216,16 +332,91 @@ def test_asaps_face_key_frames_close_both_eyes_at_their_times(tmp_path):
             assert abs(fk.data[fk.time(start + ftime), column] - closed * weight / 100) < 0.01, (side, ftime)
 
 
-def test_a_stroke_pegged_to_a_speech_mark_is_reported_there_and_reached_there(tmp_path):
+@pytest.mark.parametrize("tts", ["builtin", "espeak"])
+def test_a_stroke_pegged_to_a_speech_mark_is_reported_there_and_reached_there(tmp_path, tts):
     where = "LocChest LocCenterRight LocNorm"
     body = ('<speech id="s1"><text>Look at <sync id="m1"/>this tall tower over there</text></speech>'
             + gesture(f'<static slot="HandLocation" value="{where}"/>', stroke="s1:m1"))
-    result, fk = run(tmp_path, body, tts=BuiltinBackend())
+    result, fk = run(tmp_path, body, tts=named(tts))
     assert result.warnings == []
     mark = result.t("s1:m1")
-    assert result.t("g1:stroke") == pytest.approx(mark, abs=1e-9)
+    assert mark > 0.2 and result.t("g1:stroke") == pytest.approx(mark, abs=1e-9)
     got = body_point(fk, "r_wrist", fk.time(mark))
     assert np.linalg.norm(got - expected_location(*where.split(), fk)) < 0.01
+
+
+def test_sync_points_tied_to_other_behaviours_are_met(tmp_path):
+    # start at the end of a nod, stroke on a word of the speech that follows it, relax at the speech's end:
+    # the hand is at its location from ready to relax and back down after the end
+    where = "LocChest LocCenterRight LocNorm"
+    body = ('<head id="h1" lexeme="NOD" start="0.1"/>'
+            '<speech id="s1" start="h1:end"><text>Look at <sync id="m1"/>this tall tower over there, it is very old'
+            '</text></speech>'
+            + gesture(f'<static slot="HandLocation" value="{where}"/>', start="h1:end", stroke="s1:m1",
+                      relax="s1:end"))
+    result, fk = run(tmp_path, body, tts=named("espeak"))
+    assert result.warnings == []
+    t = result.t
+    assert t("g1:start") == pytest.approx(t("h1:end"), abs=1e-9)
+    assert t("g1:stroke") == pytest.approx(t("s1:m1"), abs=1e-9)
+    assert t("g1:relax") == pytest.approx(t("s1:end"), abs=1e-9)
+    order = [t(f"g1:{s}") for s in GESTURE_SYNCS]
+    assert order == sorted(order) and t("g1:relax") - t("g1:stroke") > 1.0
+    want = expected_location(*where.split(), fk)
+    for sync in ("ready", "stroke", "strokeEnd", "relax"):
+        assert np.linalg.norm(body_point(fk, "r_wrist", fk.time(t(f"g1:{sync}"))) - want) < 0.01, sync
+    for sync in ("start", "end"):
+        assert np.linalg.norm(body_point(fk, "r_wrist", fk.time(t(f"g1:{sync}"))) - want) > 0.3, sync
+
+
+def test_a_tempo_change_while_the_gesture_plays_warps_its_phases(tmp_path):
+    # the stroke on the metronome's fourth beat (1.5 s at 120 BPM); at 1.1 s, in the gesture's preparation,
+    # the tempo drops to 60 BPM: 20 % of the beat after beat 3 (1.0 s) has gone, the rest of the new 1 s
+    # beat brings beat 4 to 1.9 s. The stroke is reported there and the wrist reaches its location there.
+    where = "LocChest LocCenterRight LocNorm"
+    metronome = Metronome("metronome", bpm=120)
+    realizer = Realizer(anticipators=[metronome], tts=BuiltinBackend())
+    realizer.submit(f'<bml xmlns="{NS}" id="b1">'
+                    + gesture(f'<static slot="HandLocation" value="{where}"/>', stroke="anticipators:metronome:beat4")
+                    + '</bml>')
+
+    def change():
+        yield realizer.env.timeout(1.1)
+        metronome.set_tempo(60)
+
+    realizer.env.process(change())
+    realizer.run()
+    assert realizer.feedback.warnings() == []
+    t = {k.split(":", 1)[1]: v for k, v in realizer.feedback.sync_times().items()}
+    assert t["g1:start"] == pytest.approx(0.9, abs=1e-9)  # passed before the change: kept
+    assert t["g1:stroke"] == pytest.approx(1.9, abs=1e-9)
+    assert 1.1 < t["g1:ready"] < t["g1:strokeStart"] < t["g1:stroke"]
+    write_bvh(tmp_path / "warped.bvh", evaluate_poses(realizer.recording(), fps=FPS))
+    fk = BvhFk(tmp_path / "warped.bvh")
+    want = expected_location(*where.split(), fk)
+    assert np.linalg.norm(body_point(fk, "r_wrist", fk.time(1.9)) - want) < 0.01
+    assert np.linalg.norm(body_point(fk, "r_wrist", fk.time(t["g1:ready"])) - want) < 0.01
+    assert np.linalg.norm(body_point(fk, "r_wrist", fk.time(1.5)) - want) > 0.05  # the old stroke: still on its way
+
+
+def test_a_gesture_co_articulates_into_the_next_one(tmp_path):
+    # the second gesture begins in the first one's post-stroke hold: the hand goes from the first location
+    # straight to the second, at shoulder height, without going down to rest between them
+    a, b = "LocShoulder LocCenterRight LocNorm", "LocShoulder LocRight LocFar"
+    body = (gesture(f'<static slot="HandLocation" value="{a}"/>', gid="g1", start="0.2")
+            + gesture(f'<static slot="HandLocation" value="{b}"/>', gid="g2", start="g1:strokeEnd+0.05"))
+    result, fk = run(tmp_path, body)
+    assert result.warnings == []
+    want_a, want_b = expected_location(*a.split(), fk), expected_location(*b.split(), fk)
+    first, second = fk.time(result.t("g1:strokeEnd")), fk.time(result.t("g2:ready"))
+    assert np.linalg.norm(body_point(fk, "r_wrist", first) - want_a) < 0.01
+    assert np.linalg.norm(body_point(fk, "r_wrist", second) - want_b) < 0.01
+    path = np.array([body_point(fk, "r_wrist", k) for k in range(first, second + 1)])
+    chord = (want_b - want_a) / np.linalg.norm(want_b - want_a)
+    off = path - want_a - np.outer((path - want_a) @ chord, chord)
+    assert np.linalg.norm(off, axis=1).max() < 0.03  # within 3 cm of the straight line between them
+    assert path[:, 1].min() > min(want_a[1], want_b[1]) - 0.03
+    assert fk.time(result.t("g1:end")) > second  # the first gesture's own retraction would still be under way
 
 
 # --------------------------------------------------------------------------------------------- bad input

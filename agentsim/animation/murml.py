@@ -4,10 +4,11 @@ motion units.
 A form gives each arm it names four slots: the wrist's location, the palm's and the extended fingers'
 directions and the hand's shape, each as a value through the stroke (a static constraint holds one; a
 dynamic one moves from its start to its end, along a line or a curve; a sequence shares the stroke among
-its parts; a symmetrical constraint mirrors the dominant arm's onto the other). The symbols are those of
-``data/murml_symbols.toml``, lengths scaled to the body's arms. An arm a form names but leaves a slot of
-empty gets a default: the wrist in front of the lower chest on its own side, the fingers pointing away
-from the body with the palm towards the middle, a neutral hand.
+its parts, each moving on from where the one before left the hand; a symmetrical constraint mirrors the
+dominant arm's onto the other). The symbols are those of ``data/murml_symbols.toml``, lengths scaled to
+the body's arms. An arm a form names but leaves a slot of empty gets a default: the wrist in front of the
+lower chest on its own side, the fingers pointing away from the body with the palm towards the middle, a
+neutral hand.
 
 The motion unit (:class:`MurmlDriver`) follows Kendon's phases on the unit's keys: the preparation
 (start to ready) blends from the pose it finds into the form at the stroke's beginning; the pre-stroke
@@ -135,7 +136,10 @@ def hand_dofs(side: str) -> list[str]:
 
 # --------------------------------------------------------------------------------------------- the form
 class Track:
-    """One slot of one arm through the stroke: segments (u0, u1, start, end, curve) over u in [0, 1]."""
+    """One slot of one arm through the stroke: segments (u0, u1, start, end, curve) over u in [0, 1]. A
+    segment that begins where an earlier one has ended starts from that one's end and comes to its own
+    path by its end (a static value is moved to, a dynamic path joined), as AsapRealizer prepares each
+    part of a sequence from where the hand is: the hand never jumps between the parts of a sequence."""
 
     def __init__(self):
         self.segments: list[tuple[float, float, object, object, tuple | None]] = []
@@ -143,22 +147,36 @@ class Track:
     def add(self, u0: float, u1: float, a, b, curve=None) -> None:
         self.segments.append((u0, u1, a, b, curve))
 
+    def _ordered(self):
+        """The segments by their beginning, each with the end value of the latest one ended by then (None
+        for a segment at the stroke's beginning or with none before it)."""
+        segments = sorted(self.segments, key=lambda s: s[0])
+        out = []
+        for k, (u0, u1, a, b, curve) in enumerate(segments):
+            before = [s for s in segments[:k] if s[1] <= u0 + 1e-9]
+            prev = max(before, key=lambda s: s[1])[3] if before and u0 > 1e-9 else None
+            out.append((u0, u1, a, b, curve, prev))
+        return out
+
     def at(self, u: np.ndarray):
         """The slot's values at stroke fractions ``u`` (n,): an array (n, 3) for vectors, a dict of arrays
         for a hand shape."""
-        segments = sorted(self.segments, key=lambda s: s[0])
+        segments = self._ordered()
         first = segments[0]
         if isinstance(first[2], dict):
             names = list(first[2])
             out = {k: np.full(len(u), float(first[2][k])) for k in names}
-            for u0, u1, a, b, _ in segments:
+            for u0, u1, a, b, _, prev in segments:
                 w = EASE(frac(u, u0, u1)) if u1 > u0 else (u >= u0).astype(float)
                 inside = u >= u0
                 for k in names:
-                    out[k] = np.where(inside, a.get(k, 0.0) + (b.get(k, 0.0) - a.get(k, 0.0)) * w, out[k])
+                    v = a.get(k, 0.0) + (b.get(k, 0.0) - a.get(k, 0.0)) * w
+                    if prev is not None:
+                        v = v + (prev.get(k, 0.0) - a.get(k, 0.0)) * (1.0 - w)
+                    out[k] = np.where(inside, v, out[k])
             return out
         out = np.tile(np.asarray(first[2], dtype=float), (len(u), 1))
-        for u0, u1, a, b, curve in segments:
+        for u0, u1, a, b, curve, prev in segments:
             a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
             f = frac(u, u0, u1) if u1 > u0 else (u >= u0).astype(float)
             w = EASE(f)
@@ -176,6 +194,8 @@ class Track:
                     if shape in ("UpC", "DownC"):
                         side = normal * (0.5 * extension * np.linalg.norm(chord)) * (1 if shape == "UpC" else -1)
                     p = p + np.multiply.outer(bulge, side)
+            if prev is not None:
+                p = p + np.multiply.outer(1.0 - w, np.asarray(prev, dtype=float) - a)
             out = np.where((u >= u0)[:, None], p, out)
         return out
 
@@ -257,17 +277,28 @@ class Form:
         fixed("HandShape", shape_values("BSneutral", side))
 
 
-def hand_matrix(side: str, fingers: np.ndarray, palm: np.ndarray) -> np.ndarray:
+def hand_matrix(side: str, fingers: np.ndarray, palm: np.ndarray, frame: np.ndarray | None = None) -> np.ndarray:
     """World rotations (n, 3, 3) of a hand whose extended fingers point along ``fingers`` and whose palm
-    faces ``palm`` (n, 3 each; the palm is made perpendicular to the fingers)."""
-    f = fingers / np.maximum(np.linalg.norm(fingers, axis=1), 1e-12)[:, None]
-    n = palm - np.sum(palm * f, axis=1)[:, None] * f
-    norm = np.linalg.norm(n, axis=1)
-    # a palm along the fingers: face the middle of the body instead
-    fallback = np.array([-side_sign(side), 0.0, 0.0])
-    fallback = fallback - (f @ fallback)[:, None] * f
-    n = np.where(norm[:, None] > 1e-6, n / np.maximum(norm, 1e-12)[:, None],
-                 fallback / np.maximum(np.linalg.norm(fallback, axis=1), 1e-12)[:, None])
+    faces ``palm`` (n, 3 each; the palm is made perpendicular to the fingers). Fingers of no direction (a
+    movement between opposite directions passes through none) point away from the body; a palm along the
+    fingers faces the middle of the body instead or, fingers pointing across the body, down. ``frame``
+    (n, 3, 3) is the body's rotation, in which these directions are meant (none: the world's axes)."""
+    rot = np.tile(np.eye(3), (len(fingers), 1, 1)) if frame is None else frame
+
+    def unit(v):
+        return v / np.maximum(np.linalg.norm(v, axis=1), 1e-12)[:, None]
+
+    def body_axis(v):
+        return rot @ np.asarray(v, dtype=float)
+
+    def across(v, f):
+        return v - np.sum(v * f, axis=1)[:, None] * f
+
+    f = np.where(np.linalg.norm(fingers, axis=1)[:, None] > 1e-6, unit(fingers), body_axis([0.0, 0.0, 1.0]))
+    n = across(palm, f)
+    for fallback in ([-side_sign(side), 0.0, 0.0], [0.0, -1.0, 0.0]):
+        n = np.where(np.linalg.norm(n, axis=1)[:, None] > 1e-6, n, across(body_axis(fallback), f))
+    n = unit(n)
     s = side_sign(side)
     col0, col1 = -s * n, -f  # the hand's X axis and Y axis (its fingers point along -Y, the left palm -X)
     return np.stack([col0, col1, np.cross(col0, col1)], axis=2)
@@ -302,7 +333,8 @@ class MurmlDriver(MotionDriver):
         values = body.arm_ik(side, aim)
         # the hand's orientation: what is left after the upper arm and the elbow's bend, as a twist of the
         # forearm (elbow yaw, about its own axis) and the wrist's roll and pitch
-        target = hand_matrix(side, np.einsum("nij,nj->ni", root_rot, fingers), np.einsum("nij,nj->ni", root_rot, palm))
+        target = hand_matrix(side, np.einsum("nij,nj->ni", root_rot, fingers), np.einsum("nij,nj->ni", root_rot, palm),
+                             root_rot)
         upper = sc_rot @ euler_matrix(values[f"{side}_shoulder.roll"], values[f"{side}_shoulder.pitch"],
                                       values[f"{side}_shoulder.yaw"])
         bent = upper @ euler_matrix(np.zeros(len(t)), values[f"{side}_elbow.pitch"], np.zeros(len(t)))
