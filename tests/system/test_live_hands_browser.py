@@ -1,6 +1,8 @@
 """The hands in the live viewer, in headless Chromium: ``agentsim serve``'s page draws the fingers of a MURML
 gesture as the live poses send them (a fist's tips near its wrist, an open hand's far from it), where the whole
-run's poses put them; a screenshot is taken."""
+run's poses put them; a screenshot is taken. The hands are read in a frame drawn while the gesture holds its
+stroke (ready to relax, 0.5 s): a loaded machine may draw no frame within some tens of milliseconds of the
+stroke itself."""
 
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ def test_the_live_viewer_draws_the_hands(browser, tmp_path):
         for name in WATCHED:
             browser.evaluate(f"report.watch({name!r})")
         times = feedback_until(server.url, BML.replace('start="0.3"', 'start="0.5"'), "b1:end")
-        stroke = times["b1:g1:stroke"]
+        stroke, ready, relax = (times[f"b1:g1:{s}"] for s in ("stroke", "ready", "relax"))
         browser.wait_for(f"report.time() > {times['b1:end'] + 0.3}", timeout=15)
         drawn = {n: np.array(browser.evaluate(f"report.watched({n!r})")) for n in WATCHED}
         shot = browser.screenshot(tmp_path / "live-hands.png")
@@ -36,17 +38,22 @@ def test_the_live_viewer_draws_the_hands(browser, tmp_path):
         poses = server.service.poses
     finally:
         server.close()
-    # each point as drawn nearest the stroke (each one's watch has rows of its own), and the whole run's there
-    rows = {n: drawn[n][int(np.argmin(np.abs(drawn[n][:, 0] - stroke)))] for n in WATCHED}
+    # each point as drawn nearest the stroke within the hold (each one's watch has rows of its own), and the
+    # whole run's there
+    def nearest(rows):
+        held = rows[(rows[:, 0] >= ready) & (rows[:, 0] <= relax)]
+        assert len(held), (ready, relax, rows[:, 0])
+        return held[int(np.argmin(np.abs(held[:, 0] - stroke)))]
+
+    rows = {n: nearest(drawn[n]) for n in WATCHED}
     at = {n: row[1:4] for n, row in rows.items()}
     reach = {s: np.mean([np.linalg.norm(at[f"{s}_{tip}"] - at[f"{s}_wrist"]) for tip in TIPS]) for s in "lr"}
     error = max(float(np.abs(at[n] - whole_run_points(poses, recording, np.array([row[0]]))[0][poses.names.index(n)])
                       .max()) for n, row in rows.items())
-    t, k = drawn["r_wrist"][:, 0], int(np.argmin(np.abs(drawn["r_wrist"][:, 0] - stroke)))
-    print(f"at the stroke ({t[k]:.3f} s, {stroke:.3f} s fed back) the fist's tips {reach['r'] * 1000:.0f} mm from "
-          f"its wrist, the open hand's {reach['l'] * 1000:.0f} mm; drawn {error * 1000:.2f} mm from the whole "
-          f"run's poses; screenshot {shot}")
-    assert abs(t[k] - stroke) < 0.05
+    t = rows["r_wrist"][0]
+    print(f"in the stroke's hold ({t:.3f} s, stroke {stroke:.3f} s fed back) the fist's tips "
+          f"{reach['r'] * 1000:.0f} mm from its wrist, the open hand's {reach['l'] * 1000:.0f} mm; drawn "
+          f"{error * 1000:.2f} mm from the whole run's poses; screenshot {shot}")
     assert reach["r"] < 0.6 * reach["l"] and reach["l"] > 0.15
     assert error <= 0.0015  # frames are sent rounded to the millimetre
     assert shot.stat().st_size > 10_000
