@@ -145,6 +145,36 @@ def test_facs_units_realize_on_the_side_named(tmp_path, side):
         assert two > one + 1e-3
 
 
+@pytest.mark.parametrize("side", ["LEFT", "RIGHT"])
+def test_every_facs_unit_with_a_side_moves_that_side_alone(tmp_path, side):
+    # each unit against the same run at amount 0 (the background's blinks and gaze the same): the points of
+    # the other half stay to a hundredth of a millimetre through the whole window; the named half, or the
+    # middle of the mouth for a unit that has no halves, moves
+    units = sorted(FACS_UNITS)
+    runs = []
+    for amount in (1, 0):
+        folder = tmp_path / f"amount{amount}"
+        folder.mkdir()
+        result, reader, sites = face_run(folder, [
+            f'<faceFacs id="u{au}" au="{au}" side="{side}" amount="{amount}" start="{{start}}" '
+            f'attackPeak="{{peak}}" relax="{{relax}}" end="{{end}}"/>' for au in units])
+        assert result.warnings == []
+        runs.append((reader, sites))
+    named, other = ("l", "r") if side == "LEFT" else ("r", "l")
+    for k, au in enumerate(units):
+        window = range(round(k * SLOT * FPS), round((k + 1) * SLOT * FPS))
+        peak = round((k * SLOT + 0.8) * FPS)
+
+        def moved(joint, f):
+            return float(np.linalg.norm(site(*runs[0], joint, f) - site(*runs[1], joint, f))) * 1000
+
+        lateral = any(dof[:2] in ("l_", "r_") for dof in FACS_UNITS[au])
+        assert max(moved(j, f) for j in POINTS if j.startswith(other + "_") for f in window) < 0.01, (au, side)
+        shown = [j for j in POINTS if j.startswith(named + "_")] if lateral else \
+            [j for j in POINTS if not j.startswith(("l_", "r_"))]
+        assert max(moved(j, peak) for j in shown) > 1.5, (au, side)
+
+
 def test_every_facs_unit_and_face_lexeme_is_known_to_the_reader():
     from agentsim.bml.lexemes import fallback
 
