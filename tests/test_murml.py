@@ -304,17 +304,48 @@ def test_a_thumb_modifier_stretches_the_thumb_of_a_fist(tmp_path):
 
 # --------------------------------------------------------------------------------------------- timing
 def test_key_frames_are_met_at_their_times(tmp_path):
+    # (l_shoulder 3 100 0 0): as AsapRealizer reads a posture, roll 100 degrees about the joint's Z axis
     result, fk = run(tmp_path, (ASAP / "murmlbodykeyframe.xml").read_text().split("id=\"bml1\">", 1)[1]
                      .rsplit("</bml>")[0])
     start = result.t("gesture1:start")
-    column = fk.column[("l_shoulder", "Xrotation")]
+    column = fk.column[("l_shoulder", "Zrotation")]
     for ftime, value in ((0.5, 100.0), (1.0, 0.0), (1.5, 100.0), (2.0, 0.0)):
         assert abs(fk.data[fk.time(start + ftime), column] - value) < 0.01, ftime
+        for axis in ("Xrotation", "Yrotation"):
+            assert abs(fk.data[fk.time(start + ftime), fk.column[("l_shoulder", axis)]]) < 0.01, (ftime, axis)
     # between frames the value stays between them (no overshoot), and the elbow goes where the frame says
     assert fk.data[:, column].max() <= 100.0 + 1e-6
     k = fk.time(start + 0.5)
-    elbow = fk.position("l_elbow")[k] - fk.position("l_shoulder")[k]
-    assert elbow[2] < -0.25  # pitched 100 degrees about X: the upper arm points backwards
+    elbow = body_point(fk, "l_elbow", k) - body_point(fk, "l_shoulder", k)
+    assert elbow[0] > 0.25 and elbow[1] > 0.0  # turned 100 degrees about the forward axis: out to the side, up
+
+
+def rotation(axis: str, degrees: float) -> np.ndarray:
+    a = math.radians(degrees)
+    c, s = math.cos(a), math.sin(a)
+    i, j = {"X": (1, 2), "Y": (2, 0), "Z": (0, 1)}[axis]
+    m = np.eye(3)
+    m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
+    return m
+
+
+def test_a_posture_of_three_values_turns_the_joint_as_asap_reads_it(tmp_path):
+    # AsapRealizer: Quat4f.setFromRollPitchYawDegrees(q, v1, v2, v3), the rotation Ry(v3) Rx(v2) Rz(v1); the
+    # joint's rotation relative to its parent, composed here from the BVH's channels, is that one
+    frames = "".join(f'<frame ftime="{t}"><posture>Humanoid (r_shoulder 3 {r} {p} {y}) (l_elbow 3 0 -60 0)'
+                     '</posture></frame>' for t, (r, p, y) in ((0.5, (-40, -30, 20)), (1.0, (-70, 25, -35))))
+    body = ('<murmlgesture xmlns="' + MURML + '" id="k1" start="0.2"><murml-description><dynamic><keyframing>'
+            f'<phase>{frames}</phase></keyframing></dynamic></murml-description></murmlgesture>')
+    result, fk = run(tmp_path, body)
+    assert result.warnings == []
+    start = result.t("k1:start")
+    for ftime, (r, p, y) in ((0.5, (-40, -30, 20)), (1.0, (-70, 25, -35))):
+        k = fk.time(start + ftime)
+        parent = fk.world["r_sternoclavicular"][0][k]
+        local = parent.T @ fk.world["r_shoulder"][0][k]
+        want = rotation("Y", y) @ rotation("X", p) @ rotation("Z", r)
+        assert np.abs(local - want).max() < 1e-4, (ftime, local, want)
+        assert abs(fk.data[k, fk.column[("l_elbow", "Xrotation")]] + 60.0) < 0.01
 
 
 def test_asaps_face_key_frames_close_both_eyes_at_their_times(tmp_path):

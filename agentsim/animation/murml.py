@@ -36,7 +36,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from agentsim.animation.arms import side_sign
-from agentsim.animation.body import FINGERS, euler_matrix
+from agentsim.animation.body import FINGERS, euler_matrix, matrix_euler
 from agentsim.animation.drivers import PRIORITY
 from agentsim.animation.motion import EASE, KeyTimes, MotionDriver, blend_in, frac
 from agentsim.animation.murml_form import direction_letters, parse_shape, symbols
@@ -351,11 +351,27 @@ class MurmlDriver(MotionDriver):
 
 
 # --------------------------------------------------------------------------------------------- key frames
+def posture_angles(values) -> tuple[float, float, float]:
+    """A joint's three values of a MURML posture as AsapRealizer reads them (roll about Z, pitch about X, yaw
+    about Y, in degrees; the joint turned by Ry(yaw) Rx(pitch) Rz(roll), as its Quat4f.setFromRollPitchYaw
+    makes it) as this body's (roll, pitch, yaw), which turn a joint by Rz(roll) Rx(pitch) Ry(yaw). A turn
+    about one axis keeps its value exactly."""
+    roll, pitch, yaw = (float(v) for v in values)
+    if sum(v != 0.0 for v in (roll, pitch, yaw)) <= 1:
+        return roll, pitch, yaw
+    zero = np.zeros(1)
+    m = (euler_matrix(zero, zero, zero + yaw) @ euler_matrix(zero, zero + pitch, zero)
+         @ euler_matrix(zero + roll, zero, zero))
+    r, p, y = matrix_euler(m[0])
+    return float(r), float(p), float(y)
+
+
 def keyframe_channels(form: dict, body) -> tuple[dict[str, list[tuple[float, float]]], list[str]]:
     """DOF name -> [(ftime, degrees)] of a key frame animation, and the names it has that this body has
-    not. Three values of a joint are its rotations about X, Y and Z (pitch, yaw, roll); one value is a
-    DOF (``l_eyebrow.pitch``), a viseme or face channel of :mod:`agentsim.animation.lips` or a morph target of
-    the symbol table's ``morph_targets`` (weight 0..100: that face lexeme's values times weight / 100)."""
+    not. Three values of a joint are its rotation as AsapRealizer reads them: roll about Z, pitch about X,
+    yaw about Y (:func:`posture_angles`); one value is a DOF (``l_eyebrow.pitch``), a viseme or face channel of
+    :mod:`agentsim.animation.lips` or a morph target of the symbol table's ``morph_targets`` (weight 0..100:
+    that face lexeme's values times weight / 100)."""
     from agentsim.animation.lips import CHANNELS
     from agentsim.animation.murml_form import symbols
     from agentsim.animation.pose import FACE_LEXEMES
@@ -368,8 +384,8 @@ def keyframe_channels(form: dict, body) -> tuple[dict[str, list[tuple[float, flo
     for frame in form["keyframing"]["frames"]:
         for joint, v in frame["values"].items():
             if len(v) == 3 and joint in body.joint:
-                for axis, x in zip(("pitch", "yaw", "roll"), v):
-                    channels.setdefault(f"{joint}.{axis}", []).append((frame["ftime"], float(x)))
+                for axis, x in zip(("roll", "pitch", "yaw"), posture_angles(v)):
+                    channels.setdefault(f"{joint}.{axis}", []).append((frame["ftime"], x))
             elif len(v) == 1 and joint in names:
                 channels.setdefault(joint, []).append((frame["ftime"], float(v[0])))
             elif len(v) == 1 and joint.lower() in CHANNELS:

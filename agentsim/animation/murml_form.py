@@ -16,9 +16,10 @@ A description holds either movement constraints or a key frame animation:
   ``<symmetrical dominant="right_arm" symmetry="SymMS">`` (the other arm mirrors the dominant one:
   ``SymMS`` left and right, ``SymMT`` up and down, ``SymMF`` front and back, and their combinations);
 * ``<keyframing><phase><frame ftime="t"><posture>Humanoid (joint n v1 .. vn) ...</posture></frame>...``:
-  joint values at times (seconds from the start): three values are a joint's rotations in degrees about
-  its X, Y and Z axes (our ``pitch``, ``yaw`` and ``roll``), one value a face channel (a DOF such as
-  ``l_eyebrow.pitch``, or a viseme or face channel of :mod:`agentsim.animation.lips`, at weights 0..100).
+  joint values at times (seconds from the start): three values are a joint's rotation in degrees as
+  AsapRealizer reads them, roll about its Z axis, pitch about X and yaw about Y (the joint turned by
+  Ry(yaw) Rx(pitch) Rz(roll)); one value a face channel (a DOF such as ``l_eyebrow.pitch``, or a viseme or
+  face channel of :mod:`agentsim.animation.lips`, at weights 0..100).
 
 :func:`read_description` returns the form as plain JSON-able values or raises :class:`MurmlError` with a
 one-line reason naming the element and the symbol.
