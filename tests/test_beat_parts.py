@@ -347,3 +347,48 @@ def test_default_tracker_is_the_joint_filter_and_the_comb_tracker_stays_availabl
     assert b.sync == "comb" and b.dbn is None
     with pytest.raises(ValueError):
         CausalBeatTracker(22050, sync="other")
+
+
+def _log_mel(env: SpectralFluxEnvelope, x: np.ndarray) -> np.ndarray:
+    """The envelope's log-mel frames of ``x``, computed here frame by frame."""
+    n = (x.size - env.n_fft) // env.hop + 1
+    frames = np.stack([x[i * env.hop : i * env.hop + env.n_fft] for i in range(n)])
+    spec = np.abs(np.fft.rfft(frames * env.window, axis=1)).astype(np.float32)
+    return np.log1p(100.0 * (spec @ env.mel_t))
+
+
+def test_joint_filter_observes_the_flux_mixed_with_the_increase_over_four_frames():
+    rng = np.random.default_rng(7)
+    sr = 22050
+    t = np.arange(3 * sr) / sr
+    # a tone swelling over 80 ms every 0.5 s, over quiet noise: an onset that rises over several frames
+    swell = np.clip((t % 0.5) / 0.08, 0.0, 1.0) * np.exp(-(t % 0.5) * 4.0)
+    x = (0.5 * swell * np.sin(2 * np.pi * 440.0 * t) + 0.01 * rng.standard_normal(t.size)).astype(np.float32)
+    env = SpectralFluxEnvelope(sr, far_lag=4, far_weight=0.3, keep_seconds=1.0)
+    for a in range(0, x.size, 1000):  # blocks that do not line up with frames; history shifted (1 s kept)
+        env.push(x[a : a + 1000])
+    s = _log_mel(env, x)
+    prev = np.vstack([s[:1], s[:-1]])
+    far = np.vstack([np.repeat(s[:1], 4, axis=0), s[:-4]])
+    flux = np.maximum(s - prev, 0).sum(axis=1)
+    expected = (flux + 0.3 * np.maximum(s - far, 0).sum(axis=1)) / 1.3
+    start = env.first_kept
+    assert start > 0 and env.n_frames == s.shape[0]
+    np.testing.assert_allclose(env.values(start, env.n_frames), flux[start:], rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(env.observation_values(start, env.n_frames), expected[start:], rtol=1e-4, atol=1e-4)
+    # the swell's onset counts more in the observation than in the flux: its increase spans frames
+    rising = np.rint(env.frame_index(np.arange(0.5, 3.0, 0.5)[:, None] + np.arange(0.03, 0.075, 0.01))).astype(int)
+    assert np.all(expected[rising] > flux[rising]) and np.mean(expected[rising] / flux[rising]) > 1.2
+    # without far_lag the observation is the onset strength
+    plain = SpectralFluxEnvelope(sr)
+    plain.push(x)
+    assert plain.observation_values(0, plain.n_frames) is not None
+    np.testing.assert_array_equal(plain.observation_values(0, plain.n_frames), plain.values(0, plain.n_frames))
+    with pytest.raises(ValueError):
+        SpectralFluxEnvelope(sr, far_lag=-1)
+
+
+def test_default_tracker_observes_the_four_frame_flux_and_the_comb_tracker_does_not():
+    assert CausalBeatTracker(22050).envelope.far_lag == 4
+    assert make_tracker("causal-comb", 22050).envelope.far_lag == 0
+    assert CausalBeatTracker(22050, far_lag=0).envelope.far_lag == 0

@@ -156,6 +156,14 @@ class SpectralFluxEnvelope:
         How much raw audio history is kept (for precise onset timing).
     fmax : float
         Highest frequency of the mel bands (at most half the sample rate), Hz.
+    far_lag : int
+        0, or frames back for a second, slower flux kept beside the onset strength for the joint
+        tempo-phase filter to observe (:meth:`observation_values`): ``(flux + far_weight * far) / (1 +
+        far_weight)`` with ``far = sum_b max(0, S[i, b] - S[i - far_lag, b])``, the increase over
+        ``far_lag`` frames, which also counts onsets that rise over several frames (a piano note, a
+        swelling chord) and are weak in the frame-to-frame flux.
+    far_weight : float
+        Weight of the slower flux in :meth:`observation_values`.
     """
 
     def __init__(
@@ -167,6 +175,8 @@ class SpectralFluxEnvelope:
         keep_seconds: float = 12.0,
         keep_audio_seconds: float = 1.0,
         fmax: float = 16000.0,
+        far_lag: int = 0,
+        far_weight: float = 0.3,
     ) -> None:
         if sample_rate < 4000:
             raise ValueError("sample_rate must be at least 4000 Hz")
@@ -180,6 +190,14 @@ class SpectralFluxEnvelope:
         self._keep = max(int(keep_seconds * self.fps), 64)
         self._odf = np.zeros(2 * self._keep, np.float64)
         self._odf_start = 0  # absolute index of _odf[0]
+        if int(far_lag) < 0 or float(far_weight) < 0:
+            raise ValueError("far_lag and far_weight must not be negative")
+        self.far_lag = int(far_lag)
+        self.far_weight = float(far_weight)
+        # the observation for the joint filter, frame for frame beside _odf (far_lag > 0)
+        self._obs = np.zeros_like(self._odf) if self.far_lag > 0 else None
+        self._history = None  # the last far_lag log-mel frames
+        self._pending_obs = None
         self.n_frames = 0  # absolute number of frames computed
         self._prev = None  # log-mel of the previous frame
         self._keep_audio = max(int(keep_audio_seconds * self.sample_rate), self.n_fft + self.hop)
@@ -216,6 +234,18 @@ class SpectralFluxEnvelope:
         if stop <= start:
             return self._odf[:0]
         return self._odf[start - self._odf_start : stop - self._odf_start]
+
+    def observation_values(self, start: int, stop: int) -> np.ndarray:
+        """What the joint tempo-phase filter observes for absolute frames ``start .. stop - 1``: the onset
+        strength mixed with the slower flux over ``far_lag`` frames (the onset strength itself when
+        ``far_lag`` is 0); a view, clipped to what is kept."""
+        if self._obs is None:
+            return self.values(start, stop)
+        start = max(int(start), self._odf_start)
+        stop = min(int(stop), self.n_frames)
+        if stop <= start:
+            return self._obs[:0]
+        return self._obs[start - self._odf_start : stop - self._odf_start]
 
     def audio(self, t0: float, t1: float) -> np.ndarray | None:
         """Raw samples between ``t0`` and ``t1`` seconds, or None when not (or no longer) available."""
@@ -268,6 +298,13 @@ class SpectralFluxEnvelope:
         np.subtract(logmel[1:], logmel[:-1], out=diff[1:])
         self._prev = logmel[-1].copy()
         np.maximum(diff, 0.0, out=diff)
+        if self.far_lag > 0:
+            k = self.far_lag
+            history = self._history if self._history is not None else np.repeat(logmel[:1], k, axis=0)
+            both = np.concatenate([history, logmel])
+            far = np.maximum(logmel - both[:count], 0.0)  # both[i] is the frame far_lag before logmel[i]
+            self._history = both[-k:].copy()
+            self._pending_obs = (diff.sum(axis=1) + self.far_weight * far.sum(axis=1)) / (1.0 + self.far_weight)
         self._append_bands(diff)
         return count
 
@@ -283,15 +320,23 @@ class SpectralFluxEnvelope:
     def _append(self, values: np.ndarray) -> None:
         k = values.size
         used = self.n_frames - self._odf_start
+        obs = self._obs
         if used + k > self._odf.size:
             keep = min(self._keep, used)
             if keep + k > self._odf.size:
                 self._odf = np.concatenate([self._odf[used - keep : used], np.zeros(k + self._keep)])
+                if obs is not None:
+                    obs = self._obs = np.concatenate([obs[used - keep : used], np.zeros(k + self._keep)])
             else:
                 self._odf[:keep] = self._odf[used - keep : used]
+                if obs is not None:
+                    obs[:keep] = obs[used - keep : used]
             self._odf_start = self.n_frames - keep
             used = keep
         self._odf[used : used + k] = values
+        if obs is not None:
+            obs[used : used + k] = self._pending_obs
+            self._pending_obs = None
         self.n_frames += k
 
 
