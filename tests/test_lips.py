@@ -340,3 +340,31 @@ def test_the_mouth_while_speaking_follows_the_visemes_of_its_phonemes():
     steps = {d: float(np.abs(np.diff(s.channel(d)[k])).max()) for d in MOUTH_DOFS}
     print("largest change in one frame:", {d: round(v, 2) for d, v in steps.items()})
     assert max(steps.values()) < 5.0
+
+
+def test_the_speaking_mouth_counts_the_visemes_near_each_time_and_gives_the_same_value_however_it_is_cut():
+    """viseme_track weighs each time by the visemes within its reach (REACH beyond the nearest middle; those
+    further add less than e^-50 of the nearest): it is the average over every viseme of the speech to 1e-12
+    degrees, and a time's value does not depend on which other times are computed with it (a frame, a live
+    tick of a few frames, a window of a long run)."""
+    from agentsim.animation.lips import COARTICULATION, DOMINANCE, DOMINANCE_DEFAULT, speech_segments, viseme_track
+    from speech_timing.backend import SpeechText
+    from speech_timing.builtin import BuiltinBackend
+
+    text = "Bob met a man, papa. " * 40 + "Would you show me the way to the fish market?"
+    utterance = BuiltinBackend().synthesize(SpeechText(text, ()))
+    phonemes = [(p.symbol, p.start, p.end) for p in utterance.phonemes]
+    phonemes += [(s, a + 30.0, b + 30.0) for s, a, b in phonemes[-20:]]  # after 30 s of silence
+    u = np.arange(-0.5, phonemes[-1][2] + 0.5, 1 / 60)
+    whole = viseme_track(phonemes, u)
+    # every viseme, weighed at every time (what the track was before it was cut into reaches)
+    segments = speech_segments(phonemes)
+    weights = np.array([DOMINANCE.get(n.lower(), DOMINANCE_DEFAULT) * np.exp(-np.abs(u - 0.5 * (a + b)) / COARTICULATION)
+                        for n, a, b in segments])
+    share = weights / weights.sum(axis=0)
+    for i, d in enumerate(MOUTH_DOFS):
+        every = sum(share[k] * (VISEMES.get(n.lower()) or NEUTRAL).dofs()[d] for k, (n, _, _) in enumerate(segments))
+        assert np.abs(whole[d] - every).max() < 1e-12, d
+    for width in (1, 7, 600):
+        cut = [viseme_track(phonemes, u[a:a + width]) for a in range(0, len(u), width)]
+        assert all(np.array_equal(np.concatenate([c[d] for c in cut]), whole[d]) for d in MOUTH_DOFS), width

@@ -98,7 +98,8 @@ class DriverManager:
         Returns the pose array (frames x DOFs) and, for every value, the uid of the driver that wrote it
         (-1 where nobody held the DOF and it kept its last value). With ``sink``, the frames are handed to
         ``sink(first, values, writers)`` in order, about ``window`` frames at a time (the arrays are reused
-        afterwards: copy or write them out), none are held and None is returned.
+        afterwards: copy or write them out), none are held and None is returned; a segment longer than
+        ``window`` (the frames between two events) is then ticked ``window`` frames at a time.
         """
         if self._evaluated:
             raise RuntimeError("a DriverManager evaluates one run of frames; make a new one to evaluate again")
@@ -121,7 +122,11 @@ class DriverManager:
             j = int(np.searchsorted(times, t_next - EPSILON, side="left")) if t_next < math.inf else n
             self.segment_bounds = (t_prev, t_next)
             if j > i or t_prev > -math.inf:
-                arb.tick_segment(i, j, times, self.drivers)
+                # with a sink, a long segment (a long speech, an empty stretch before a late behaviour) is
+                # ticked a window at a time: the drivers write functions of time, so the frames are the same
+                step = window if sink is not None and window > 0 else max(j - i, 1)
+                for a in range(i, j, step) if j > i else (i,):
+                    arb.tick_segment(a, min(a + step, j), times, self.drivers)
             i = j
             if not events or (i >= n and t_next > t_end):
                 break
