@@ -67,7 +67,8 @@ def check_output(path: str | Path, inputs: Iterable[str | Path | None] = (), fol
     if mode is not None:
         kind = _kind(mode)
         if kind:
-            raise UsageError(f"cannot write {path}: it is {kind}, not a file (name a regular file)")
+            meant = "folder (name a folder)" if folder else "file (name a regular file)"
+            raise UsageError(f"cannot write {path}: it is {kind}, not a {meant}")
         if stat.S_ISDIR(mode) and not folder:
             raise UsageError(f"cannot write {path}: it is a folder")
         if not stat.S_ISDIR(mode) and folder:
@@ -256,7 +257,7 @@ def check_folder(out: str | Path, inputs: Iterable[str | Path | None] = (), mark
     holds one of ``inputs``, or holds files that are no run's (it is neither empty nor holds one of
     ``marks``)."""
     out = Path(out)
-    check_output(out, inputs, folder=out.is_dir())
+    check_output(out, inputs, folder=True)
     if not _replaceable(out, marks):
         raise UsageError(f"cannot write the output folder {out}: it holds files that are not an agentsim run's "
                          f"(name a new or empty folder)")

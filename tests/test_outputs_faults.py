@@ -75,6 +75,16 @@ def test_the_command_line_refuses_a_device_or_the_input_as_output_before_work(tm
     assert bml.read_bytes() == before and stat.S_ISCHR(os.stat("/dev/null").st_mode)
 
 
+def test_a_device_where_a_run_folder_is_meant_is_refused_as_not_a_folder(tmp_path):
+    os.mkfifo(tmp_path / "pipe")
+    for target, kind in (("/dev/null", "a character device"), ("pipe", "a FIFO")):
+        proc = cli("run", "storytelling", "--tts", "builtin", "--no-cache", "--out", target, cwd=tmp_path)
+        assert proc.returncode == 2 and not proc.stdout
+        assert one_line(proc) == f"agentsim: cannot write {target}: it is {kind}, not a folder (name a folder)"
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode) and stat.S_ISFIFO(os.stat(tmp_path / "pipe").st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe"]
+
+
 def test_a_planted_link_at_a_temporary_name_is_not_followed(tmp_path):
     victim = tmp_path / "victim.txt"
     victim.write_text("mine")

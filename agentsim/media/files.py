@@ -58,7 +58,7 @@ def check_writable(files: Iterable[str | Path | None] = (), folders: Iterable[st
         if name is None:
             continue
         path = Path(name)
-        check_output(path, inputs, folder=path.is_dir())
+        check_output(path, inputs, folder=True)
         try:
             path.mkdir(parents=True, exist_ok=True)
         except FileExistsError:
