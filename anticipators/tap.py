@@ -17,16 +17,15 @@ _BEAT = re.compile(r"^beat(\d{1,9})$")
 
 def read_taps(path: str | Path) -> list[float]:
     """Tap times from a text file: one time in seconds per line (blank lines and # comments ignored)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"no tap file {str(path)!r}")
-    times = []
-    from agentsim.core.inputs import TooLarge, read_text
+    from agentsim.core.inputs import read_text
+    from agentsim.errors import UsageError
 
-    try:
-        text = read_text(path, what=f"the tap file {str(path)!r}", errors="replace")
-    except TooLarge as exc:
-        raise ValueError(str(exc)) from None
+    path = Path(path)
+    if not path.is_file():  # an input the command line names: a usage error, as every missing input
+        raise UsageError(f"no tap file {str(path)!r}")
+    times = []
+    # past 8 MB it is refused unread (TooLarge, a usage error: exit status 2)
+    text = read_text(path, what=f"the tap file {str(path)!r}", errors="replace")
     for number, line in enumerate(text.splitlines(), 1):
         line = line.split("#", 1)[0].strip()
         if line:

@@ -335,9 +335,13 @@ class KeyframeDriver(MotionDriver):
 def use_lexicon(path: str | Path) -> list[str]:
     """Add the lexemes of a lexicon file (replacing those of the same name) for the rest of the process;
     returns their names."""
+    from agentsim.core.inputs import read_text
+
     path = Path(path)
-    try:
-        text = path.read_text()
+    try:  # weighed before it is read, as every input: past 8 MB it is refused unread
+        text = read_text(path, what=f"the lexicon {path}")
+    except UnicodeDecodeError as exc:
+        raise UsageError(f"cannot read the lexicon {path}: it is not UTF-8 text ({exc.reason})") from None
     except OSError as exc:
         raise UsageError(f"cannot read the lexicon {path}: {exc.strerror or exc}") from None
     lexicon = lexicon_data.read_lexicon(text, str(path))

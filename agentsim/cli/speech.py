@@ -106,7 +106,13 @@ def speech_sync(args: argparse.Namespace) -> int:
     if args.model:
         if not Path(args.model).is_file():
             raise AgentsimError(f"no linear model {args.model!r}: make one with 'agentsim speech calibrate'")
-        model = LinearModel.load(args.model)
+        from agentsim.core.inputs import read_text as read_limited
+
+        try:  # weighed before it is read, as every input
+            model = LinearModel.from_json(read_limited(args.model, what=f"the linear model {args.model!r}"))
+        except (ValueError, TypeError, AttributeError) as exc:  # not JSON, not a model's fields or values
+            raise UsageError(f"the linear model {args.model!r} is not one 'agentsim speech calibrate' writes "
+                             f"({exc})") from None
     text, tts = read_text(args.text), options.backend(args.tts, args.voice)
     results = []
     stages = Stages()  # on a terminal: which strategy is under way (with 'all', a bar of them)

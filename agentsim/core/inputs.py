@@ -1,7 +1,7 @@
-"""Inputs weighed before they are read: every file a command reads (BML, stories, texts, tap files,
-sweep specs, configurations) and standard input are read with a limit, ``limit + 1`` bytes at most, and
-refused past it without reading the rest; audio files are weighed by the samples their header declares
-and read no further than the limit either.
+"""Inputs weighed before they are read: every file a command reads (BML, stories and their TextGrids, texts,
+tap files, lexicons, linear models, sweep specs, configurations) and standard input are read with a limit,
+``limit + 1`` bytes at most, and refused past it without reading the rest; audio files are weighed by the
+samples their header declares and read no further than the limit either.
 
 =====================  ==============================================================================
 :data:`MAX_INPUT`      8 MB: the most a text input (BML document, story, text, spec, tap file) may hold

@@ -67,6 +67,9 @@ def import_textgrid(path: str | Path, words_tier: str = "words", gestures_tier: 
     path = Path(path)
     if not path.is_file():
         raise StoryError(f"no TextGrid file {str(path)!r}")
+    from agentsim.core.inputs import read_limited
+
+    read_limited(path, what=f"the TextGrid {str(path)!r}")  # weighed first: past 8 MB refused, unread
     try:
         grid = textgrid.openTextgrid(str(path), includeEmptyIntervals=False)
     except Exception as exc:  # praatio raises several types for malformed files
