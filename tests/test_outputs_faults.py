@@ -288,9 +288,18 @@ def test_a_read_only_folder_is_said_before_work(tmp_path):
 
 
 def test_usage_errors_of_a_sweep_and_a_seed_are_one_line_before_work(tmp_path):
-    proc = cli("eval", "speech-sync", "--tts", "builtin", "--seed", "-1", cwd=tmp_path)
-    assert proc.returncode == 2
-    assert proc.stderr.splitlines()[-1].endswith("argument --seed: a seed is a whole number from 0, got -1")
+    # a usage error is one line, as every error is (no usage block above it), and nothing runs
+    for command in (["eval", "speech-sync"], ["realize", "g.xml"], ["run", "storytelling"]):
+        proc = cli(*command, "--tts", "builtin", "--seed", "-1", cwd=tmp_path)
+        assert proc.returncode == 2 and proc.stdout == "" and not list(tmp_path.iterdir())
+        assert proc.stderr == (f"agentsim {command[0]} {command[1] if command[0] != 'realize' else ''}".rstrip()
+                               + ": error: argument --seed: a seed is a whole number from 0, got -1\n")
+    negative = tmp_path / "negative.toml"
+    negative.write_text('command = ["eval", "speech-sync"]\n[grid]\nseed = [0, -1]\n[fixed]\ntts = "builtin"\n')
+    proc = cli("sweep", "negative.toml", "--out", "sw", "--quiet", cwd=tmp_path)
+    assert proc.returncode == 2 and not (tmp_path / "sw").exists()
+    assert proc.stderr == ("agentsim: sweep spec 'negative.toml': argument --seed: a seed is a whole number from 0, "
+                           "got -1 (at seed=-1)\n")
     spec = tmp_path / "big.toml"
     spec.write_text('command = ["eval", "speech-sync"]\n[grid]\nseed = ' + json.dumps(list(range(1000)))
                     + '\njitter = ' + json.dumps([i / 1000 for i in range(11)]) + '\n[fixed]\ntts = "builtin"\n')

@@ -34,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from agentsim import __version__
 
-    parser = argparse.ArgumentParser(prog=work.PROG, description=work.DESCRIPTION)
+    parser = work.Parser(prog=work.PROG, description=work.DESCRIPTION)
     parser.add_argument("--version", action="version", version=f"agentsim {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
     work.add_parsers(commands)
