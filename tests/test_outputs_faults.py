@@ -191,6 +191,21 @@ def test_a_behaviour_a_million_seconds_in_is_refused_by_its_projected_size(tmp_p
     assert not list(tmp_path.glob("*.bvh")) and not list(tmp_path.glob(".*partial*"))
 
 
+def test_a_speech_a_million_seconds_in_is_refused_with_wav_and_report_by_their_projected_size(tmp_path):
+    """espeak-ng's speech at 999,999 s (the mixer had tried to allocate 82 GiB): --wav and --report are refused
+    from their projected sizes, in one line, before anything is written; the feedback of the run was printed."""
+    (tmp_path / "far.xml").write_text('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="b1"><speech '
+                                      'id="s" start="999999"><text>Hello there.</text></speech></bml>')
+    for flag, name, size in (("--wav", "far.wav", "41.1 GiB"), ("--report", "far.html", "50.5 GiB")):
+        proc = cli("realize", "--tts", "espeak", flag, name, "far.xml", cwd=tmp_path)
+        assert proc.returncode == 2
+        assert one_line(proc) == (f"agentsim: {flag} {name}: the run lasts 1000000 s, so the file would take {size}, "
+                                  f"more than the 4.0 GiB a run's file may take (a WAV cannot hold more): move what "
+                                  f"starts that late sooner")
+        assert '"id": "b1:s:end"' in proc.stdout
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["far.xml"]
+
+
 def test_a_late_gesture_and_a_long_speech_are_evaluated_a_window_at_a_time(tmp_path, monkeypatch):
     """The empty stretch before a gesture at 100 s and a speech of a minute are segments of thousands of frames
     with no event inside: evaluated into files with a window of 50 frames, no tick spans more than 50 frames
