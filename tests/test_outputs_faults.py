@@ -338,23 +338,34 @@ def test_the_local_cluster_talks_tls_and_refuses_a_client_without_its_credential
             distributed.Client(address, timeout="3s")  # no certificate: no connection
 
 
-def test_a_lost_worker_is_counted_in_the_attempts(tmp_path):
+def test_a_lost_worker_is_said_on_stderr_and_counted_in_the_attempts(tmp_path, monkeypatch, capsys):
+    """A sweep of two points whose first task kills its worker's process: the scheduler runs it again on another
+    worker, the sweep says so on stderr, and results.csv counts 2 attempts for it and 1 for the other."""
     pytest.importorskip("distributed")
-    from agentsim.cli.sweep.runner import attempts, connect
+    import pandas as pd
+
+    from agentsim.cli.sweep import runner, spec
 
     mark = tmp_path / "died-once"
 
-    def dies_once(path=str(mark)):
+    def dies_once(argv, out_at, keep, path=str(mark)):
         if not os.path.exists(path):
             Path(path).write_text("x")
             os._exit(1)  # the worker's process dies under the task
-        return 7
+        from agentsim.cli.sweep.point import run_point
 
-    with connect(2, None) as client:
-        futures = {client.submit(dies_once, key="dies-once", pure=False): "a",
-                   client.submit(lambda: 8, key="lives", pure=False): "b"}
-        assert [f.result(timeout=60) for f in futures] == [7, 8]
-        assert attempts(client, futures) == {"dies-once": 2, "lives": 1}
+        return run_point(argv, out_at, keep)
+
+    (tmp_path / "spec.toml").write_text('command = ["eval", "speech-sync"]\n[grid]\nseed = [0, 1]\n'
+                                        '[fixed]\ntts = "builtin"\n')
+    monkeypatch.setattr(runner, "run_point", dies_once)
+    outcome = runner.run(spec.load(tmp_path / "spec.toml"), tmp_path / "sw", workers=2, quiet=True)
+    assert (outcome.points, outcome.failed) == (2, 0)
+    said = [line for line in capsys.readouterr().err.splitlines() if line.startswith("agentsim:")]
+    assert said == ["agentsim: a worker was lost under 1 point, run again on another worker (the 'attempts' "
+                    "column of results.csv counts the runs)"]
+    table = pd.read_csv(tmp_path / "sw" / "results.csv")
+    assert list(table["status"]) == ["ok", "ok"] and sorted(table["attempts"]) == [1, 2]
 
 
 # ----------------------------------------------------------------------------------------------------
