@@ -62,7 +62,8 @@ def onset_after_pause(samples: np.ndarray, rate: int, t: float) -> float:
 
 
 def paused_bml(words: list[str]) -> str:
-    text = words[0] + " " + " ".join(f'<sync id="w{i}"/>{w}' for i, w in enumerate(words[1:], 1))
+    """A speech of ``words`` with a mark before each, ``w0`` before the first."""
+    text = " ".join(f'<sync id="w{i}"/>{w}' for i, w in enumerate(words))
     return f'<bml {NS} id="b1"><speech id="s1"><text>{text}</text></speech></bml>'
 
 
@@ -75,8 +76,9 @@ def cli(*args, env=None, timeout=300) -> subprocess.CompletedProcess:
 
 
 def test_realize_with_festival_sounds_each_word_where_it_was_fed_back(tmp_path):
-    """``agentsim realize --tts festival --wav``: every word after the first sounds in the WAV within 15 ms of
-    its mark's feedback, and every mark's feedback is the onset of the word it precedes (the TextGrid's)."""
+    """``agentsim realize --tts festival --wav``: every word, the first after the speech's own silence at its
+    start, sounds in the WAV within 15 ms of its mark's feedback, and every mark's feedback is the onset of the
+    word it precedes (the TextGrid's)."""
     from praatio import textgrid
 
     bml = tmp_path / "paused.xml"
@@ -89,14 +91,47 @@ def test_realize_with_festival_sounds_each_word_where_it_was_fed_back(tmp_path):
              if f["type"] == "syncPointProgress"}
     samples, rate = soundfile.read(str(wav), dtype="float32")
     assert rate == 32000
-    marks = [syncs[f"b1:s1:w{i}"] for i in range(1, len(PAUSED))]
-    errors = {w: onset_after_pause(samples, rate, t) - t for w, t in zip(PAUSED[1:], marks)}
+    marks = [syncs[f"b1:s1:w{i}"] for i in range(len(PAUSED))]
+    assert syncs["b1:s1:start"] == 0.0 < marks[0]  # the first word after the silence Festival starts with
+    errors = {w: onset_after_pause(samples, rate, t) - t for w, t in zip(PAUSED, marks)}
     assert max(abs(e) for e in errors.values()) <= ONSET_TOLERANCE, errors
     grid = textgrid.openTextgrid(str(grid_path), includeEmptyIntervals=False)
     words = [(e.label, e.start) for e in grid.getTier("words").entries]
     assert [label for label, _ in words] == [w.rstrip(".") for w in PAUSED]
-    for (label, start), t in zip(words[1:], marks):
+    for (label, start), t in zip(words, marks):
         assert t == pytest.approx(start, abs=1e-6), label
+
+
+def test_a_story_sentence_realized_with_festival_has_every_mark_at_its_word(tmp_path):
+    """Running speech through ``realize --tts festival --wav``: a mark before a word in mid-phrase, after a comma
+    or after a full stop is fed back at that word's onset (the TextGrid's, to the microsecond), and those of
+    the words after a pause (200 ms or more) sound in the WAV within 15 ms of it (measured 0 to 4 ms)."""
+    from praatio import textgrid
+
+    text = ('The north wind and the sun were arguing. <sync id="m1"/>Which of them was <sync id="m2"/>stronger? '
+            '<sync id="m3"/>Then a traveller came along, <sync id="m4"/>wrapped in a <sync id="m5"/>warm cloak. '
+            '<sync id="m6"/>Maybe, <sync id="m7"/>said the <sync id="m8"/>sun.')
+    before = {"m1": "Which", "m2": "stronger", "m3": "Then", "m4": "wrapped", "m5": "warm", "m6": "Maybe",
+              "m7": "said", "m8": "sun"}
+    bml = tmp_path / "sentence.xml"
+    bml.write_text(f'<bml {NS} id="b1"><speech id="s1"><text>{text}</text></speech></bml>')
+    wav, grid_path = tmp_path / "run.wav", tmp_path / "run.TextGrid"
+    proc = cli("realize", str(bml), "--tts", "festival", "--wav", str(wav), "--textgrid", str(grid_path))
+    assert proc.returncode == 0, proc.stderr
+    syncs = {f["id"]: f["globalTime"] for f in map(json.loads, proc.stdout.splitlines())
+             if f["type"] == "syncPointProgress"}
+    grid = textgrid.openTextgrid(str(grid_path), includeEmptyIntervals=False)
+    words = [(e.label, e.start, e.end) for e in grid.getTier("words").entries]
+    samples, rate = soundfile.read(str(wav), dtype="float32")
+    after_pause = []
+    for name, word in before.items():
+        t = syncs[f"b1:s1:{name}"]
+        k = next(i for i, (label, start, _) in enumerate(words) if abs(start - t) < 1e-6)
+        assert words[k][0] == word, (name, words[k])
+        if words[k][1] - words[k - 1][2] >= 0.2:
+            after_pause.append(name)
+            assert abs(onset_after_pause(samples, rate, t) - t) <= ONSET_TOLERANCE, name
+    assert after_pause == ["m1", "m3", "m6"]
 
 
 def test_a_mark_inside_running_speech_is_fed_back_at_the_word_it_precedes(slt):
@@ -336,3 +371,17 @@ def test_eval_speech_sync_runs_on_festival(slt):
     assert report["speech_seconds"] == pytest.approx(utterance.duration, abs=1e-6)
     assert report["words"] == len(utterance.words)
     assert report["error_ms"]["p95"] < 15.0 and report["snaps"] == 0 and report["missed"] == 0
+
+
+@pytest.mark.system  # the longest shipped story with Festival: about two minutes
+def test_the_storyteller_with_festival_strikes_its_syllables_within_2_ms_at_p95(tmp_path):
+    """``run storytelling --tts festival`` with its defaults (the longest shipped story, strategy best, condition
+    A, seed 0): every stroke comes, none snaps, and the sync error's p95 is under 2 ms (0.87 ms measured, as
+    the README says; espeak-ng 0.65 ms)."""
+    out = tmp_path / "story"
+    proc = cli("run", "storytelling", "--tts", "festival", "--no-cache", "--out", str(out), timeout=1200)
+    assert proc.returncode == 0, proc.stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["speech_backend"]["tts"] == "festival" and metrics["strategy"] == "best"
+    assert metrics["missed"] == 0 and metrics["snaps"] == 0 and metrics["gestures"] > 400
+    assert metrics["sync_error_ms"]["p95"] < 2.0, metrics["sync_error_ms"]
