@@ -36,6 +36,7 @@ from typing import Callable, Iterable, Iterator
 from agentsim.errors import UsageError
 
 __all__ = ["written", "check_output", "save_figure", "staged_folder", "staged_page", "check_folder", "clear_staged", "clear_stale",
+           "scratch_folder", "clear_scratch",
            "clear_partials", "RUN_FILES"]
 
 #: The files one of which a run's folder holds (a run's figures): a folder with none of them that is not
@@ -165,6 +166,55 @@ def clear_partials(folder: str | Path) -> list[Path]:
         if leftover.is_file() and not leftover.is_symlink():
             leftover.unlink(missing_ok=True)
             removed.append(leftover)
+    return removed
+
+
+@contextlib.contextmanager
+def scratch_folder(prefix: str) -> Iterator[Path]:
+    """A folder of scratch files in the system's temporary folder (``PREFIXxxxxxxxx``), removed when the body
+    has run. The process holds a lock on it (:func:`fcntl.flock`) while it lives; before it is made, the
+    scratch folders of the same prefix that killed processes left (those whose lock can be got at once) are
+    removed (:func:`clear_scratch`): a killed ``realize --bvh`` leaves its poses' scratch files (gigabytes of a
+    long run) only until the next run that makes such a folder."""
+    import fcntl
+
+    clear_scratch(prefix)
+    while True:
+        folder = Path(tempfile.mkdtemp(prefix=prefix))
+        try:
+            fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+        except OSError:  # another process's clearing took it before its lock was held: make another
+            continue
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            kept = os.path.samestat(os.fstat(fd), os.stat(folder))
+        except OSError:
+            kept = False
+        if kept:
+            break
+        os.close(fd)
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+        os.close(fd)
+
+
+def clear_scratch(prefix: str) -> list[Path]:
+    """Remove the scratch folders (:func:`scratch_folder`) of ``prefix`` in the system's temporary folder that
+    killed processes of this user left: those whose lock can be got at once. Returns what was removed."""
+    removed = []
+    for leftover in Path(tempfile.gettempdir()).glob(f"{glob.escape(prefix)}*"):
+        try:
+            info = os.lstat(leftover)
+        except OSError:
+            continue
+        if not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid():  # a link, a file, another's
+            continue
+        with _held(leftover, wait=False) as stale:
+            if stale:
+                shutil.rmtree(leftover, ignore_errors=True)
+                removed.append(leftover)
     return removed
 
 

@@ -604,6 +604,52 @@ def test_twenty_killed_reports(tmp_path):
     assert any(k["status"] is None for k in outcome["seen"])  # the loop did kill runs midway
 
 
+def test_the_poses_scratch_of_a_killed_realize_is_removed_by_the_next_run_and_a_live_one_is_not(tmp_path,
+                                                                                                monkeypatch):
+    """realize --bvh evaluates the poses into a scratch folder of the temporary folder (here TMPDIR): killed -9
+    while it fills it, the folder stays (hundreds of MB for a long run); the next run that makes one removes
+    it and leaves nothing there itself, and a scratch folder whose process lives (it holds its lock) is left
+    alone."""
+    from agentsim.written import scratch_folder
+
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    words = "the quick brown fox jumps over a lazy dog and then".split()
+    text = " ".join(f'{words[i % 11]}{"." if i % 11 == 10 else ""}' for i in range(3000))
+    (tmp_path / "long.xml").write_text('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="b1"><speech '
+                                       f'id="s"><text>{text}</text></speech></bml>')
+    (tmp_path / "g.xml").write_text(GOOD.format(start=0))
+    run_env = {**env(), "TMPDIR": str(temporary)}
+    proc = subprocess.Popen([sys.executable, "-m", "agentsim", "realize", "--tts", "builtin", "--bvh", "long.bvh",
+                             "long.xml"], cwd=tmp_path, env=run_env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:  # until its poses are being written
+            values = list(temporary.glob("agentsim-scratch-poses-*/values.npy"))
+            if values and values[0].stat().st_size > 1_000_000:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the run ended before it could be killed"
+        os.killpg(proc.pid, signal.SIGKILL)
+    finally:
+        proc.kill()
+        proc.wait()
+    (left,) = temporary.iterdir()
+    assert left.name.startswith("agentsim-scratch-poses-") and (left / "values.npy").stat().st_size > 1_000_000
+    assert not (tmp_path / "long.bvh").exists()
+    import tempfile
+
+    monkeypatch.setenv("TMPDIR", str(temporary))
+    monkeypatch.setattr(tempfile, "tempdir", None)  # read TMPDIR again
+    with scratch_folder("agentsim-scratch-poses-") as live:
+        again = subprocess.run([sys.executable, "-m", "agentsim", "realize", "--tts", "builtin", "--bvh", "g.bvh",
+                                "g.xml"], cwd=tmp_path, env=run_env, capture_output=True, text=True, timeout=120)
+        assert again.returncode == 0, again.stderr
+        assert list(temporary.iterdir()) == [live]  # the killed run's removed, the live one's kept
+    assert list(temporary.iterdir()) == [] and (tmp_path / "g.bvh").is_file()
+
+
 KILLED_WRITER = """
 import os, signal, sys
 from agentsim.written import written

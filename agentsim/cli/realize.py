@@ -111,6 +111,10 @@ def add_outputs(parser: argparse.ArgumentParser) -> None:
                                                              "a folder OUT_files beside it)")
 
 
+#: The prefix of the scratch folder (in the system's temporary folder) the poses are evaluated into.
+POSES_SCRATCH = "agentsim-scratch-poses-"
+
+
 def run_outputs(args: argparse.Namespace) -> list[str]:
     """The files (and the ``--csv`` folder, with a slash) that ``args`` asks :func:`write_run_outputs` for."""
     return [f"{name}/" if name == args.csv else name
@@ -123,10 +127,10 @@ def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sour
     :func:`~agentsim.media.budget.check_budget` has said that the files fit."""
     if not run_outputs(args):
         return  # nothing asked for: nothing to load
-    import tempfile
+    from agentsim.written import scratch_folder
 
-    with tempfile.TemporaryDirectory(prefix="agentsim-poses-") as scratch:
-        _write_run_outputs(args, realizer, title, extra_sources, beat_times, Path(scratch))
+    with scratch_folder(POSES_SCRATCH) as scratch:  # a killed run's is removed by the next run's
+        _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch)
 
 
 def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch: Path) -> None:

@@ -10,11 +10,10 @@ threads; give workers one thread each (``dask worker --nthreads 1``).
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
-import shutil
-import tempfile
 import threading
 import time
 import traceback
@@ -22,6 +21,7 @@ from contextlib import redirect_stderr, redirect_stdout
 
 from agentsim.cli.sweep.spec import project_version, work_parser
 from agentsim.errors import AgentsimError
+from agentsim.written import scratch_folder
 
 _LOCK = threading.Lock()
 
@@ -50,11 +50,11 @@ def run_point(argv: list[str], out_at: int | None = None, keep: str | None = Non
     ``out_at``: where in ``argv`` to give the command ``--out`` (None: it takes none); the folder is
     ``keep`` if given, else a temporary one removed afterwards.
     """
-    with _LOCK:
+    with _LOCK, contextlib.ExitStack() as scratch:
         folder = None
         argv = list(argv)
-        if out_at is not None:
-            folder = keep or tempfile.mkdtemp(prefix="agentsim-point-")
+        if out_at is not None:  # a scratch folder a killed worker leaves is removed by the next point's
+            folder = keep or str(scratch.enter_context(scratch_folder("agentsim-scratch-point-")))
             argv[out_at:out_at] = ["--out", folder]
         stdout, stderr = io.StringIO(), io.StringIO()
         started = time.perf_counter()
@@ -76,9 +76,6 @@ def run_point(argv: list[str], out_at: int | None = None, keep: str | None = Non
         except Exception as exc:  # noqa: BLE001 - a bug in the command: one line and its last frame
             frame = traceback.extract_tb(exc.__traceback__)[-1]
             error = f"internal error: {type(exc).__name__}: {exc} ({frame.filename}:{frame.lineno})"
-        finally:
-            if folder is not None and keep is None:
-                shutil.rmtree(folder, ignore_errors=True)
         return {"status": "failed" if error else "ok", "error": error, "result": result,
                 "seconds": time.perf_counter() - started, "worker": worker_name(), "version": project_version()}
 
