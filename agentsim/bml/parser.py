@@ -443,7 +443,7 @@ class _Reader:
         if not beh.text:
             self.warn("PARSING_FAILURE", f"speech {beh.id} has empty text; behaviour ignored", node, [beh.id])
             return False
-        words = len(beh.text.split())
+        words = beh.text.count(" ") + 1  # (its white space is single spaces: no list of its words is made)
         if words > MAX_WORDS:
             self.warn("PARSING_FAILURE", f"speech {beh.id} has {words} words (at most {MAX_WORDS}, some ten hours of "
                       "speech); behaviour ignored", node, [beh.id])

@@ -88,6 +88,19 @@ class _TreeBuilder:
         self.tags: dict[str, tuple[str, str | None]] = {}
         #: the attribute defaults an internal DTD declares (``gesture lexeme="BEAT"``), which are not applied
         self.defaults: list[str] = []
+        #: the pieces of text expat gave since the last tag, joined into one child at the next (a text of
+        #: megabytes comes in thousands of pieces: added one by one, it was copied as often)
+        self.pending: list[str] = []
+
+    def flush(self) -> None:
+        if self.pending:
+            children = self.stack[-1].children
+            text = "".join(self.pending)
+            self.pending = []
+            if children and isinstance(children[-1], str):
+                children[-1] += text
+            else:
+                children.append(text)
 
     def attlist(self, element: str, attribute: str, kind: str | None, default: str | None, required: int) -> None:
         if default is not None:
@@ -95,6 +108,7 @@ class _TreeBuilder:
             self.defaults.append(f"{element} {attribute}={shown!r}")
 
     def start(self, name: str, attrs: dict[str, str]) -> None:
+        self.flush()
         stack = self.stack
         if len(stack) >= MAX_DEPTH:
             raise BMLError(f"elements nested more than {MAX_DEPTH} deep", self.expat.CurrentLineNumber,
@@ -136,15 +150,12 @@ class _TreeBuilder:
         stack.append(node)
 
     def end(self, name: str) -> None:
+        self.flush()
         self.stack.pop()
 
     def text(self, content: str) -> None:
         if self.stack:
-            children = self.stack[-1].children
-            if children and isinstance(children[-1], str):
-                children[-1] += content
-            else:
-                children.append(content)
+            self.pending.append(content)
 
 
 def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None) -> Node:
@@ -174,6 +185,15 @@ def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None) -> No
     except DefusedXmlException as exc:
         raise BMLError(f"refused XML construct ({type(exc).__name__}): entity and external references "
                        "are not allowed in BML", expat.CurrentLineNumber, expat.CurrentColumnNumber + 1) from None
+    finally:
+        # The reader and its expat parser refer to each other (a cycle, freed only by the collector), and the
+        # parser keeps the document and the tree: the cycle is broken, or every document read would stay in
+        # memory until a collection (dozens of them, megabytes each, in a live service that makes few other
+        # objects)
+        expat.StartElementHandler = expat.EndElementHandler = expat.CharacterDataHandler = None
+        expat.AttlistDeclHandler = None
+        builder.expat = None
+        reader._parser = None
     if builder.root is None:
         raise BMLError("empty document: expected a <bml> element", 1, 1)
     if defaults is not None:
