@@ -125,3 +125,51 @@ def test_serve_with_a_dead_realizer_exits_1_with_one_line():
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_waiting_documents_are_weighed_in_all_and_per_client(monkeypatch):
+    """Documents wait for the reader weighed, not only counted: past a client's share one of its documents is
+    refused, past the whole queue's any client's but a small one that still fits; each refusal one warning to
+    its sender, counted; what was taken runs once the reader goes on."""
+    import threading
+
+    def padded(block_id: str) -> str:  # a nod, with a comment that makes it weigh 256 kB
+        head = f'<bml {NS} id="{block_id}"><head id="h" lexeme="NOD"/><!--'
+        return head + "x" * (2 ** 18 - len(head) - len("--></bml>")) + "--></bml>"
+
+    def refusal(ws) -> str:
+        item = json.loads(ws.recv(timeout=10))
+        assert item["type"] == "warningFeedback", item
+        return item["description"]
+
+    with Background(Service(port=0, audio="none", fps=0, tts=BuiltinBackend())) as running:
+        live = running.service.live
+        live.incoming.max_bytes, live.incoming.sender_bytes = 2 ** 20, 3 * 2 ** 18
+        gate = threading.Event()
+        read_one = live.read_one
+        monkeypatch.setattr(live, "read_one", lambda *entry: (gate.wait(30), read_one(*entry)))
+        with connect(running.url) as a, connect(running.url) as b, connect(running.url) as c:
+            a.send(f'<bml {NS} id="first"><head id="h" lexeme="NOD"/></bml>')  # the reader holds it at the gate
+            time.sleep(0.5)
+            assert len(padded("a1")) == 2 ** 18
+            for name in ("a1", "a2", "a3"):
+                a.send(padded(name))
+            assert refusal(a) == ("document refused: this client's documents of 0.5 MB are already waiting for the "
+                                  "realizer (at most 0.75 MB of one client's may); send fewer at once")
+            for name in ("b1", "b2"):
+                b.send(padded(name))
+            assert refusal(b) == ("document refused: documents of 0.8 MB are already waiting for the realizer (at "
+                                  "most 1 MB may); send fewer at once")
+            c.send(f'<bml {NS} id="c1"><head id="h" lexeme="NOD"/></bml>')  # a small one still fits
+            gate.set()
+            ended = {}
+            for ws, last in ((a, "a2"), (b, "b1"), (c, "c1")):
+                deadline = time.monotonic() + 20
+                while last not in ended and time.monotonic() < deadline:
+                    item = json.loads(ws.recv(timeout=10))
+                    assert item["type"] != "warningFeedback", item
+                    if item["type"] == "blockProgress" and item["id"].endswith(":end"):
+                        ended[item["id"].split(":")[0]] = item["globalTime"]
+            assert set(ended) == {"first", "a1", "a2", "b1", "c1"}  # what was refused never ran
+            now = status(c)
+    assert now["refused_documents"] == 2

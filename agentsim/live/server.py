@@ -2,9 +2,9 @@
 
 The realizer is the one simulated runs use, on SimPy's real-time clock, in a thread of its own
 (:class:`LiveRealizer`); the network is an asyncio loop in the main thread (:class:`Server`, on the
-``websockets`` library). Neither blocks the other: documents go through a bounded queue to a reader thread
-that parses them and has their speech synthesised, then to a SimPy process that submits the blocks every
-:data:`POLL` seconds; feedback reaches the loop through ``call_soon_threadsafe``.
+``websockets`` library). Neither blocks the other: documents go through a bounded queue (counted and
+weighed) to a reader thread that parses them and has their speech synthesised, then to a SimPy process that
+submits the blocks every :data:`POLL` seconds; feedback reaches the loop through ``call_soon_threadsafe``.
 
 Protocol, at ``ws://HOST:PORT/``:
 
@@ -60,6 +60,11 @@ from speech_timing.backend import audio_bytes
 POLL = 0.005
 #: How many documents may wait for the realizer; more are refused with a warning.
 QUEUE = 256
+#: How many bytes the documents waiting for the realizer may weigh together, and one client's of them (a
+#: message may weigh 4 MB: 256 of them had waited as a gigabyte); past either a document is refused with a
+#: warning.
+QUEUE_BYTES = 32 * 2 ** 20
+SENDER_BYTES = 8 * 2 ** 20
 #: What :meth:`LiveRealizer.warm_up` realizes: a speech with a beat on a word, a nod and a gaze shift.
 WARM_UP = ('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="warmup"><speech id="s"><text>Hello '
            '<sync id="w"/>there.</text></speech><gesture id="g" lexeme="BEAT" stroke="s:w"/>'
@@ -142,15 +147,24 @@ class MediaDirectory:
         return path
 
 
+class Full(queue.Full):
+    """A document the queue cannot take; ``str()`` says why."""
+
+
 class TakeTurns:
     """The documents waiting for the reader, taken in turn from each sender (round robin), at most ``maxsize``
-    in all: a client that sends many long speeches delays another client's next document by one of its own
-    at most, not by all of them. ``put_nowait(entry, sender)`` raises :class:`queue.Full`; ``get()`` waits,
-    and gives None once :meth:`close` was called."""
+    in all, weighing at most ``max_bytes`` together and ``sender_bytes`` from one sender (a sender's first
+    waiting document is taken whatever it weighs, if the others leave room for it): a client that sends many
+    long speeches delays another client's next document by one of its own at most, not by all of them.
+    ``put_nowait(entry, sender, weight)`` raises :class:`Full`; ``get()`` waits, and gives None once
+    :meth:`close` was called."""
 
-    def __init__(self, maxsize: int):
-        self.maxsize = maxsize
+    def __init__(self, maxsize: int, max_bytes: int = QUEUE_BYTES, sender_bytes: int = SENDER_BYTES):
+        self.maxsize, self.max_bytes, self.sender_bytes = maxsize, max_bytes, sender_bytes
+        #: each sender's waiting (entry, weight), and what they weigh
         self.lanes: dict[object, collections.deque] = {}
+        self.weights: dict[object, int] = {}
+        self.bytes = 0
         #: when each sender was last served (a count of documents taken); the least recently served goes next
         self.served: collections.OrderedDict[object, int] = collections.OrderedDict()
         self.taken = 0
@@ -158,11 +172,20 @@ class TakeTurns:
         self.closed = False
         self.changed = threading.Condition()
 
-    def put_nowait(self, entry, sender: object = None) -> None:
+    def put_nowait(self, entry, sender: object = None, weight: int = 0) -> None:
         with self.changed:
             if self.count >= self.maxsize:
-                raise queue.Full
-            self.lanes.setdefault(sender, collections.deque()).append(entry)
+                raise Full(f"{self.maxsize} documents are already waiting for the realizer")
+            if self.count and self.bytes + weight > self.max_bytes:
+                raise Full(f"documents of {self.bytes / 2 ** 20:.1f} MB are already waiting for the realizer (at "
+                           f"most {self.max_bytes / 2 ** 20:g} MB may)")
+            mine = self.weights.get(sender, 0)
+            if sender in self.lanes and mine + weight > self.sender_bytes:
+                raise Full(f"this client's documents of {mine / 2 ** 20:.1f} MB are already waiting for the "
+                           f"realizer (at most {self.sender_bytes / 2 ** 20:g} MB of one client's may)")
+            self.lanes.setdefault(sender, collections.deque()).append((entry, weight))
+            self.weights[sender] = mine + weight
+            self.bytes += weight
             self.count += 1
             self.changed.notify()
 
@@ -174,10 +197,12 @@ class TakeTurns:
                 return None
             sender = min(self.lanes, key=lambda s: self.served.get(s, -1))
             lane = self.lanes[sender]
-            entry = lane.popleft()
+            entry, weight = lane.popleft()
             self.count -= 1
+            self.bytes -= weight
+            self.weights[sender] -= weight
             if not lane:
-                del self.lanes[sender]
+                del self.lanes[sender], self.weights[sender]
             self.taken += 1
             self.served[sender] = self.taken  # its next document after every other sender's
             self.served.move_to_end(sender)
@@ -194,7 +219,7 @@ class TakeTurns:
 class LiveRealizer:
     """A :class:`~agentsim.realizer.Realizer` on the real-time clock, in a thread of its own.
 
-    ``offer(text, reply, sender)`` hands it a BML document from any thread (False if the queue is full; the
+    ``offer(text, reply, sender)`` hands it a BML document from any thread (why not, if the queue is full; the
     reader takes each sender's documents in turn, :class:`TakeTurns`);
     what cannot be read is answered through ``reply(feedback)`` (in the reader's or the realizer's thread);
     every feedback goes to each function in :attr:`listeners` as ``listener(feedback, sender)``, ``sender``
@@ -327,13 +352,14 @@ class LiveRealizer:
         self.periodic.append((period, fn))
 
     # ------------------------------------------------------------------------------------------- input
-    def offer(self, text: str | bytes, reply: Callable[[dict], None], sender: object = None) -> bool:
-        """Hand a document to the realizer; False if the queue is full."""
+    def offer(self, text: str | bytes, reply: Callable[[dict], None], sender: object = None) -> str | None:
+        """Hand a document to the realizer; why it was refused (the queue is full, by count or by weight), or
+        None."""
         try:
-            self.incoming.put_nowait((text, reply, sender), sender)
-            return True
-        except queue.Full:
-            return False
+            self.incoming.put_nowait((text, reply, sender), sender, sys.getsizeof(text))
+            return None
+        except Full as full:
+            return str(full)
 
     def read(self) -> None:
         """The reader's thread: parse each document in the order it came and have its speech synthesised,
@@ -833,11 +859,11 @@ class Server:
         if text.lstrip().startswith("{"):
             self.control(client, text)
             return
-        if not self.live.offer(text, self.reply_to(client), self.key_of.get(client)):
+        why = self.live.offer(text, self.reply_to(client), self.key_of.get(client))
+        if why is not None:
             self.counters["refused_documents"] += 1
-            self.send(client, fb.to_json(fb.warning(
-                "", "PARSING_FAILURE", f"document refused: {self.live.incoming.maxsize} documents are already "
-                "waiting for the realizer; send fewer at once", self.live.env.now, "agent")))
+            self.send(client, fb.to_json(fb.warning("", "PARSING_FAILURE", f"document refused: {why}; send fewer "
+                                                    "at once", self.live.env.now, "agent")))
 
     def kinds(self) -> list[str]:
         """What a client may subscribe to here."""
@@ -852,7 +878,7 @@ class Server:
         except ValueError as exc:
             self.warn(client, f"message refused: not JSON ({exc}); {usage}")
             return
-        if message == {"status": True}:
+        if isinstance(message, dict) and list(message) == ["status"] and message["status"] is True:  # (not 1)
             self.send(client, json.dumps(self.status()))
             return
         if not isinstance(message, dict) or set(message) != {"subscribe"}:
