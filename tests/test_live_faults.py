@@ -173,3 +173,52 @@ def test_waiting_documents_are_weighed_in_all_and_per_client(monkeypatch):
             assert set(ended) == {"first", "a1", "a2", "b1", "c1"}  # what was refused never ran
             now = status(c)
     assert now["refused_documents"] == 2
+
+
+def test_a_fault_of_the_reader_in_one_document_refuses_it_and_the_next_runs(monkeypatch, capsys):
+    with Background(Service(port=0, audio="none", fps=0, tts=BuiltinBackend())) as running:
+        live = running.service.live
+        prepare = live.prepare
+
+        def broken(block, reply=None):
+            if block.id == "bad":
+                raise RuntimeError("injected fault")
+            return prepare(block, reply)
+
+        monkeypatch.setattr(live, "prepare", broken)
+        with connect(running.url) as ws:
+            ws.send(f'<bml {NS} id="bad"><head id="h" lexeme="NOD"/></bml>')
+            ws.send(f'<bml {NS} id="good"><head id="h" lexeme="NOD"/></bml>')
+            got = []
+            while not got or got[-1].get("id") != "good:end":
+                got.append(json.loads(ws.recv(timeout=10)))
+            (warning,) = [m for m in got if m["type"] == "warningFeedback"]
+            assert warning["description"] == "document refused: the server failed to read it (RuntimeError)"
+            assert not [m for m in got if m["id"].startswith("bad")]
+            assert status(ws)["realizer_faults"] == {"reader": 1}
+        assert running.thread.is_alive()
+    assert ("agentsim serve: reading a document failed (RuntimeError: injected fault); serving goes on"
+            in capsys.readouterr().err.splitlines())
+
+
+def test_a_dead_reader_thread_stops_the_server(monkeypatch):
+    class Killed(BaseException):
+        pass
+
+    running = Background(Service(port=0, audio="none", fps=0, tts=BuiltinBackend()))
+    try:
+        def dies(*entry):
+            raise Killed("the reader's thread died")
+
+        monkeypatch.setattr(running.service.live, "read_one", dies)
+        with connect(running.url) as ws:
+            ws.send(f'<bml {NS} id="b"><head id="h" lexeme="NOD"/></bml>')
+            with pytest.raises(ConnectionClosed):
+                while True:
+                    ws.recv(timeout=10)
+        running.thread.join(10)
+        assert not running.thread.is_alive()
+        assert str(running.error) == ("the realizer stopped (Killed: the reader's thread died); the service stopped "
+                                      "with it")
+    finally:
+        running.close()

@@ -363,14 +363,31 @@ class LiveRealizer:
 
     def read(self) -> None:
         """The reader's thread: parse each document in the order it came and have its speech synthesised,
-        so that the realizer's thread (whose clock the feedback keeps) only plans and plays."""
+        so that the realizer's thread (whose clock the feedback keeps) only plans and plays. A fault of its own
+        in one document refuses that document (its sender is told, the fault counted and said on stderr);
+        should the thread itself die, the service stops as when the realizer's thread does."""
         realizer = self.realizer
-        while True:
-            entry = self.incoming.get()
-            if entry is None or self.closing:
-                return
-            self.read_one(*entry, realizer)
-            del entry  # (its reply holds the client's connection: not kept while the reader waits)
+        try:
+            while True:
+                entry = self.incoming.get()
+                if entry is None or self.closing:
+                    return
+                try:
+                    self.read_one(*entry, realizer)
+                except Exception as exc:
+                    self.reader_failed(entry[1], exc)
+                del entry  # (its reply holds the client's connection: not kept while the reader waits)
+        except BaseException as exc:  # the server stops, saying why
+            self.error = exc
+            for fn in self.on_failure:
+                fn(exc)
+
+    def reader_failed(self, reply: Callable[[dict], None], exc: Exception) -> None:
+        """The reader failed on a document: its sender hears that it was refused, the operator why."""
+        self.faults["reader"] += 1
+        note(f"reading a document failed ({type(exc).__name__}: {exc}); serving goes on")
+        reply(fb.warning("", "PARSING_FAILURE", f"document refused: the server failed to read it "
+                         f"({type(exc).__name__})", self.env.now, "agent"))
 
     def read_one(self, text, reply: Callable[[dict], None], sender, realizer) -> None:
         """Parse one document and hand its blocks on (in the reader's thread)."""
@@ -378,9 +395,8 @@ class LiveRealizer:
 
         try:
             blocks = parse_document(text, strict=realizer.strict, name_block=realizer.name_block)
-        except Exception as exc:  # the reader's own fault: the client hears of it, nothing else
-            reply(fb.warning("", "PARSING_FAILURE", f"document refused: the reader failed ({exc})",
-                             self.env.now, "agent"))
+        except Exception as exc:  # the reader's own fault: the client hears of it, the operator too
+            self.reader_failed(reply, exc)
             return
         for block in blocks:
             if isinstance(block, Refused):
