@@ -305,3 +305,26 @@ class BvhFk:
     def time(self, t: float) -> int:
         """The frame at time t (s)."""
         return int(round(t / self.frame_time))
+
+
+def open_run_report(bml: str, browser, path, fps: int = 60):
+    """Realize ``bml`` with the built-in timing model, write its run report to ``path`` and open it in
+    ``browser`` (headless Chromium) until it is ready; returns the realizer, its recording and the poses."""
+    from agentsim.animation import evaluate_poses
+    from agentsim.media.report import write_report
+    from agentsim.media.report.browser import open_report
+    from speech_timing.builtin import BuiltinBackend
+
+    realizer = Realizer(tts=BuiltinBackend())
+    realizer.submit(bml)
+    realizer.run()
+    recording = realizer.recording()
+    stream = evaluate_poses(recording, fps=fps)
+    open_report(write_report(path, recording=recording, stream=stream), browser)
+    return realizer, recording, stream
+
+
+def seek_drawn(browser, t: float) -> None:
+    """Seek the open report to ``t`` and wait until the page has drawn that time (two animation frames)."""
+    browser.evaluate(f"report.seek({t!r})")
+    browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", await_promise=True)

@@ -7,12 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agentsim.animation import evaluate_poses
-from agentsim.media.report import write_report
-from agentsim.media.report.browser import open_report
 from agentsim.media.report.data import body_points, point_names
-from agentsim.realizer import Realizer
-from speech_timing.builtin import BuiltinBackend
+from helpers import open_run_report, seek_drawn
 
 pytestmark = pytest.mark.system
 
@@ -24,20 +20,13 @@ POINTS = ("l_eyebrow.end", "r_eyebrow.end", "l_lip_corner.end", "r_lip_corner.en
 
 
 def test_the_report_draws_a_face_lexeme_on_its_side(browser, tmp_path):
-    realizer = Realizer(tts=BuiltinBackend())
-    realizer.submit(BML)
-    realizer.run()
-    recording = realizer.recording()
+    realizer, recording, stream = open_run_report(BML, browser, tmp_path / "face.html")
     assert recording.feedback and not realizer.feedback.warnings()
-    stream = evaluate_poses(recording, fps=60)
-    path = write_report(tmp_path / "face.html", recording=recording, stream=stream)
-    open_report(path, browser)
     assert browser.evaluate("report.errors") == [] and browser.exceptions == []
     names, _ = point_names(stream.body)
     drawn, shots = {}, []
     for t in (0.1, 0.8, 1.5, 2.2):
-        browser.evaluate(f"report.seek({t!r})")
-        browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", await_promise=True)
+        seek_drawn(browser, t)
         drawn[t] = {n: np.array(browser.evaluate(f"report.joint({n!r})")) for n in POINTS + ("skullbase",)}
         k = int(np.argmin(np.abs(stream.times - t)))
         want = body_points(stream.body, stream.values[k:k + 1])[0]

@@ -6,12 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agentsim.animation import evaluate_poses
-from agentsim.media.report import write_report
-from agentsim.media.report.browser import open_report
 from agentsim.media.report.data import body_points, point_names
-from agentsim.realizer import Realizer
-from speech_timing.builtin import BuiltinBackend
+from helpers import open_run_report, seek_drawn
 
 pytestmark = pytest.mark.system
 
@@ -27,17 +23,10 @@ TIPS = ("index3.end", "middle3.end", "ring3.end", "pinky3.end")
 
 
 def test_the_report_draws_the_hands(browser, tmp_path):
-    realizer = Realizer(tts=BuiltinBackend())
-    realizer.submit(BML)
-    realizer.run()
-    recording = realizer.recording()
-    stream = evaluate_poses(recording, fps=60)
-    path = write_report(tmp_path / "hands.html", recording=recording, stream=stream)
-    open_report(path, browser)
+    _, recording, stream = open_run_report(BML, browser, tmp_path / "hands.html")
     assert browser.evaluate("report.errors") == [] and browser.exceptions == []
     stroke = next(f["globalTime"] for f in recording.feedback if f["id"] == "b1:g1:stroke")
-    browser.evaluate(f"report.seek({stroke!r})")
-    browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", await_promise=True)
+    seek_drawn(browser, stroke)
     names, _ = point_names(stream.body)
     k = int(np.argmin(np.abs(stream.times - stroke)))
     want = body_points(stream.body, stream.values[k:k + 1])[0]

@@ -18,6 +18,7 @@ from agentsim.media.report.browser import open_report
 from agentsim.media.tables import gesture_rows
 from agentsim.realizer import Realizer
 from speech_timing.builtin import BuiltinBackend
+from helpers import seek_drawn
 
 pytestmark = pytest.mark.system
 
@@ -101,8 +102,7 @@ def test_the_report_plays_the_run_in_chromium(spoken, browser, tmp_path):
 
     shots = []
     for name, t in (("before", 0.2), ("stroke1", rows[0].happened_s), ("stroke2", rows[1].happened_s)):
-        browser.evaluate(f"report.seek({t})")
-        browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", await_promise=True)
+        seek_drawn(browser, t)
         shots.append(browser.screenshot(tmp_path / f"report-{name}.png"))
     for shot in shots:
         print(f"screenshot {shot}")
