@@ -72,7 +72,9 @@ def test_strokes_pegged_to_the_live_beats_come_on_the_clicks(pulse_null_sink, tm
     track, _ = click_track()
     with Recorder("pulse", samplerate=SR, seconds=SECONDS + 15) as recorder:
         recorder.wait_steady()
-        sounddevice.play(track, SR, device="pulse")  # plays on while the service starts and listens
+        # plays on while the service starts and listens; a half-second output buffer so that a loaded
+        # machine's scheduling stalls do not underrun it (one did: a 42 ms gap in the clicks at load 13)
+        sounddevice.play(track, SR, device="pulse", latency=0.5)
         proc = subprocess.Popen([sys.executable, "-m", "agentsim.cli", "serve", *listen, "--port", "0",
                                  "--audio", "none", "--fps", "0", "--tts", "builtin"], stderr=subprocess.PIPE,
                                 text=True, env=dict(os.environ))
