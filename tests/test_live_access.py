@@ -107,10 +107,12 @@ def test_a_page_whose_name_resolves_here_is_refused(open_server):
     port = open_server.service.server.port
     answer = raw_handshake(port, f"evil.example:{port}", f"http://evil.example:{port}")
     assert answer.startswith(b"HTTP/1.1 403 "), answer[:80]
-    assert b"Upgrade" not in answer.split(b"\r\n\r\n")[0]
+    head = answer.split(b"\r\n\r\n")[0].lower()
+    assert b"upgrade" not in head and b"\r\nserver:" not in head, head  # nor the library's name and version
     assert answer.endswith(b"Forbidden\n")
     answer = raw_handshake(port, f"localhost:{port}", f"http://localhost:{port}")
     assert answer.startswith(b"HTTP/1.1 101 "), answer[:80]
+    assert b"\r\nserver:" not in answer.split(b"\r\n\r\n")[0].lower()
 
 
 def test_the_viewers_own_origin_an_allowed_one_and_programs_are_taken(open_server):

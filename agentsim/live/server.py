@@ -1016,7 +1016,8 @@ class Server:
             failed(self.live.error)
         try:
             server = await serve(self.handler, self.host, self.port, process_request=self.request,
-                                 max_size=2 ** 22, ping_interval=20, write_limit=WRITE_LIMIT)
+                                 max_size=2 ** 22, ping_interval=20, write_limit=WRITE_LIMIT,
+                                 server_header=None)  # no Server: header naming the library and its version
         except OSError as exc:
             raise UsageError(f"cannot listen on {self.host}:{self.port}: {exc.strerror or exc} (is another "
                              f"server running there? choose another with --port)") from None
