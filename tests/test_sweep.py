@@ -14,7 +14,7 @@ import json
 import math
 import re
 import shutil
-from contextlib import redirect_stderr
+from contextlib import contextmanager, redirect_stderr
 from pathlib import Path
 
 import numpy as np
@@ -372,3 +372,113 @@ def test_the_sweeps_help_names_everything_it_writes(swept, capsys):
     assert written == ["points/", "results.csv", "results.parquet", "sweep.json"]
     assert [name for name in written if f"DIR/{name}" not in text] == []
     assert "DIR/outputs/<its grid values>/" in text and "DIR/summary.png" in text
+
+
+def million_point_spec(folder: Path, last: dict | None = None) -> Path:
+    """A spec of 1,000 seeds x 1,000 jitters (10^6 points) of 'eval speech-sync --tts builtin'; ``last``: the
+    last value of an axis instead of its own."""
+    grid = {"seed": list(range(1000)), "jitter": [round(i / 1000, 3) for i in range(1000)]}
+    for key, value in (last or {}).items():
+        grid[key][-1] = value
+    return write_sweep_spec(folder, grid=grid)
+
+
+def counting(monkeypatch, name: str) -> list:
+    """Count the calls of ``spec.<name>`` (the list grows by one a call)."""
+    calls, real = [], getattr(spec, name)
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(spec, name, counted)
+    return calls
+
+
+def test_a_million_point_grid_is_checked_by_its_values_and_its_points_are_made_as_they_are_sent(
+        tmp_path, monkeypatch):
+    """The grid is checked value by value (1 + 999 + 999 command lines, not 10^6), no point is made before the
+    cluster is asked for work, and the points are made one at a time as they are sent, a bounded number ahead
+    of the results: the first is sent having made one point, and when the first result is in, only the
+    points sent so far (MIN_AHEAD for one worker) have been made."""
+    checked, made = counting(monkeypatch, "check_argv"), counting(monkeypatch, "point_key")
+    loaded = spec.load(million_point_spec(tmp_path), max_points=10**6)
+    assert (len(loaded.points), loaded.points.distinct, len(checked), len(made)) == (10**6, 10**6, 1999, 0)
+    last = loaded.points[-1]  # any point is made on its own
+    assert last.values == {"seed": 999, "jitter": 0.999} and last.argv[-5:] == (
+        "--seed", "999", "--jitter", "0.999", "--json") and len(made) == 1
+    made.clear()
+
+    class Interrupted(Exception):
+        pass
+
+    submitted = []  # the points made when each point was sent
+    real_connect = runner.connect
+
+    @contextmanager
+    def watched(workers, scheduler):
+        with real_connect(workers, scheduler) as client:
+            submit = client.submit
+
+            def counted(*args, **kwargs):
+                submitted.append(len(made))
+                if len(submitted) > runner.MIN_AHEAD:  # sent once the first result is in: stop here
+                    raise Interrupted
+                return submit(*args, **kwargs)
+
+            client.submit = counted
+            yield client
+
+    monkeypatch.setattr(runner, "connect", watched)
+    with pytest.raises(Interrupted):
+        runner.run(loaded, tmp_path / "out", workers=1, quiet=True)
+    assert submitted == list(range(1, runner.MIN_AHEAD + 2))  # each point made just before it was sent
+    finished = list((tmp_path / "out" / "points").glob("*.json"))
+    assert finished and len(finished) <= runner.MIN_AHEAD  # real work was done, no point more was made
+    assert json.loads(finished[0].read_text())["status"] == "ok"
+    assert not (tmp_path / "out" / "results.csv").exists()  # an interrupted sweep writes no results
+
+
+@pytest.mark.parametrize("last, message", [
+    ({"jitter": "x"}, "argument --jitter: invalid float value: 'x' (at seed=0, jitter=x)"),
+    ({"seed": -1}, "argument --seed: a seed is a whole number from 0, got -1 (at seed=-1, jitter=0.0)"),
+    ({"seed": -1, "jitter": "x"}, "argument --jitter: invalid float value: 'x' (at seed=0, jitter=x)")],
+    ids=["jitter", "seed", "both"])
+def test_a_bad_value_last_in_a_million_point_grid_is_refused_before_any_work(tmp_path, capsys, monkeypatch, last,
+                                                                             message):
+    """As the first bad point in the grid's order would be, and with no point made."""
+    made = counting(monkeypatch, "point_key")
+    path = million_point_spec(tmp_path, last)
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--max-points", "1000000", "--workers", "1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"agentsim: sweep spec {str(path)!r}: 1000000 points of 'agentsim eval speech-sync', checking "
+                   f"the grid's values", f"agentsim: sweep spec {str(path)!r}: {message}"]
+    assert not out.exists() and made == []
+
+
+def test_results_written_a_batch_of_rows_at_a_time_are_the_tables_of_all_the_rows_at_once(tmp_path, monkeypatch):
+    """Columns whose type shows only in a later batch: an error first in the last rows, whole numbers that a
+    missing value makes decimal, a NaN before a flag and a decimal (text then), flags with a missing value,
+    a whole number too large for 64 bits, a JSON null before numbers."""
+    from agentsim.cli.sweep import results
+
+    rows = []
+    for i in range(7):
+        row = {"seed": i, "status": "ok" if i < 5 else "failed", "error": None if i < 5 else "no text file 'x'"}
+        row |= {"snaps": i} if i != 3 else {}
+        row |= {"mixed": [math.nan, True, 0.25, False, math.nan, 1.5, True][i]}
+        row |= {"flag": bool(i % 2)} if i < 6 else {}
+        row |= {"huge": 2**70 if i == 6 else i}
+        row |= {"beats_to_recover": None if i < 4 else 2.5}
+        row |= {"seconds": 0.1 * i, "worker": "w", "attempts": 1, "point": f"k{i}", "command": "agentsim x"}
+        rows.append(row)
+    whole, batched = tmp_path / "whole", tmp_path / "batched"
+    whole.mkdir(), batched.mkdir()
+    results.write(results.frame(rows, ["seed"]), whole)
+    monkeypatch.setattr(results, "BATCH_ROWS", 2)
+    _, _, plan = results.write_rows(lambda: iter(rows), ["seed"], batched)
+    assert (plan.rows, plan.failed) == (7, 2)
+    assert (batched / "results.csv").read_bytes() == (whole / "results.csv").read_bytes()
+    pd.testing.assert_frame_equal(pd.read_parquet(batched / "results.parquet"), pd.read_parquet(whole / "results.parquet"))
+    assert pd.read_parquet(batched / "results.parquet")["mixed"].tolist()[:3] == ["nan", "True", "0.25"]

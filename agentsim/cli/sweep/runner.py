@@ -16,6 +16,13 @@ The folder (``--out DIR``) holds:
                        sweep.spec.output_folders` says how names that would clash or be too long end)
 =====================  ================================================================================
 
+The points are made as they are sent (:class:`~agentsim.cli.sweep.spec.Points`), and only
+:data:`AHEAD_PER_WORKER` points per worker are sent ahead of the results: a grid of a million points starts
+its first point at once. The sweep holds the points on their way and the failed ones' outcomes; the others'
+are read back from ``points/`` when the results are written, :data:`~agentsim.cli.sweep.results.BATCH_ROWS`
+rows at a time. (Dask's scheduler keeps a little of every task it was sent, about 0.7 kB: with a local
+cluster it runs in this process.)
+
 A point that fails is a row with its error and is not cached: a rerun tries it again. A worker that dies
 takes its points with it, and the scheduler runs them on another worker (up to Dask's
 ``distributed.scheduler.allowed-failures`` deaths per point; beyond that the point fails); the sweep says
@@ -41,13 +48,20 @@ from pathlib import Path
 
 from agentsim.cli.sweep import results
 from agentsim.cli.sweep.point import run_point, worker_info
-from agentsim.cli.sweep.spec import Point, Spec, output_folders, project_version
+from agentsim.cli.sweep.spec import OutputFolders, Point, Spec, project_version
 from agentsim.errors import AgentsimError, Unavailable
 from agentsim.written import clear_partials
 from agentsim.media.files import write_text
 
 #: How long to wait for a scheduler to answer and for its first worker to join (seconds).
 CONNECT_TIMEOUT = 30.0
+#: How many points per worker are sent to the scheduler ahead of the results (at least :data:`MIN_AHEAD`):
+#: enough that no worker waits for its next point, few enough that a long grid holds only these.
+AHEAD_PER_WORKER = 4
+MIN_AHEAD = 16
+#: How many finished points are kept before the scheduler is asked how many times it ran them (and lets
+#: them go).
+ATTEMPTS_BATCH = 64
 
 
 @dataclass
@@ -125,20 +139,16 @@ def check_workers(client, where: str) -> None:
                                 f"the workers the same checkout")
 
 
-def cached_outcomes(folder: Path, points: list[Point]) -> dict[str, dict]:
-    """The finished points of ``points`` that ``folder/points/`` holds, by key."""
-    found = {}
-    for point in points:
-        path = folder / "points" / f"{point.key}.json"
-        if point.key in found or not path.is_file():
-            continue
-        try:
-            outcome = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError):
-            continue  # half written when a sweep was killed: computed again
-        if outcome.get("status") == "ok":
-            found[point.key] = outcome
-    return found
+def cached_outcome(folder: Path, key: str) -> dict | None:
+    """The finished point of key ``key`` that ``folder/points/`` holds, or None."""
+    path = folder / "points" / f"{key}.json"
+    if not path.is_file():
+        return None
+    try:
+        outcome = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None  # half written when a sweep was killed: computed again
+    return outcome if outcome.get("status") == "ok" else None
 
 
 def save(folder: Path, point: Point, outcome: dict) -> None:
@@ -178,7 +188,7 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
     """Run the points of ``spec`` that ``folder`` lacks and write the results there."""
     started = time.perf_counter()
     results.pandas()  # a missing pandas or pyarrow is said before any work, like a missing dask
-    distributed()
+    dd = distributed()
     try:
         (folder / "points").mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -186,34 +196,77 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
     for where in (folder, folder / "points"):  # what a killed sweep was writing: never whole, never read
         clear_partials(where)
     write_text(folder / "sweep.json", json.dumps(spec.to_json(), indent=2, default=str) + "\n")
-    outcomes = cached_outcomes(folder, spec.points)
-    cached = len({p.key for p in spec.points if p.key in outcomes})
-    todo: dict[str, list[Point]] = {}
-    for point in spec.points:
-        if point.key not in outcomes:
-            todo.setdefault(point.key, []).append(point)
-    total = cached + len(todo)
-    failed = 0
+    points = spec.points
+    failed: dict[str, dict] = {}  # by key, the outcomes of the points that failed; the others are in points/
+    sent: dict = {}  # future -> point, of the points sent and not yet finished
+    in_flight: set[str] = set()  # their keys
+    counts = {"cached": 0, "computed": 0, "again": 0}
+    bar = None
+
+    def to_compute():
+        """The first point of each command line that the cache lacks, in the grid's order; the cached ones
+        are counted on the way."""
+        for point in points.firsts():
+            if point.key in in_flight or point.key in failed:  # two axes' values that give one command line
+                continue
+            if cached_outcome(folder, point.key) is None:
+                yield point
+                continue
+            counts["cached"] += 1
+            if bar is not None:
+                bar.update(1)
+
+    todo = to_compute()
+    first = next(todo, None)
     startup = compute = 0.0
-    if todo:
+    if first is not None:
         mine = project_version()
         out_at = len(spec.command) if spec.takes_out else None
-        bar = progress_bar(total, cached, quiet)
+        folders = OutputFolders(points) if spec.keep_outputs else None
+        bar = progress_bar(points.distinct, counts["cached"], quiet)
         connecting = time.perf_counter()
         with bar, connect(workers, scheduler) as client:
             sending = time.perf_counter()
             startup = sending - connecting
-            futures = {}
-            kept = output_folders(spec.points)
-            for key, (point, *_) in todo.items():
-                keep = str((folder / "outputs" / kept[key]).resolve()) if spec.keep_outputs else None
-                futures[client.submit(run_point, list(point.argv), out_at, keep, key=f"agentsim-point-{key}",
-                                      pure=False)] = point
-            pending = set(futures)
+            ahead = max(MIN_AHEAD, AHEAD_PER_WORKER * (workers or len(client.scheduler_info()["workers"]) or 1))
+            finished = dd.as_completed(with_results=True, raise_errors=False)
+
+            def send(point: Point) -> None:
+                keep = str((folder / "outputs" / folders.of(point)).resolve()) if folders is not None else None
+                future = client.submit(run_point, list(point.argv), out_at, keep, key=f"agentsim-point-{point.key}",
+                                       pure=False)
+                sent[future] = point
+                in_flight.add(point.key)
+                finished.add(future)
+                counts["computed"] += 1
+
+            def send_more() -> None:
+                while len(sent) < ahead:
+                    point = next(todo, None)
+                    if point is None:
+                        return
+                    send(point)
+
+            unasked: list = []  # finished points whose runs the scheduler has not been asked to count
+
+            def ask_attempts() -> None:
+                retried = {k: n for k, n in attempts(client, [f for f, _, _ in unasked]).items() if n > 1}
+                for future, point, outcome in unasked:
+                    if future.key in retried:
+                        counts["again"] += 1
+                        outcome = {**outcome, "attempts": retried[future.key]}
+                        if outcome["status"] == "ok":
+                            save(folder, point, outcome)
+                        else:
+                            failed[point.key] = outcome
+                unasked.clear()  # the futures let go: the scheduler forgets their tasks
+
+            send(first)
+            send_more()
             try:
-                for future, outcome in distributed().as_completed(futures, with_results=True, raise_errors=False):
-                    pending.discard(future)
-                    point = futures[future]
+                for future, outcome in finished:
+                    point = sent.pop(future)
+                    in_flight.discard(point.key)
                     if isinstance(outcome, BaseException):
                         outcome = failure(outcome)
                     elif outcome.get("version") not in (None, mine):
@@ -223,28 +276,30 @@ def run(spec: Spec, folder: Path, workers: int | None = None, scheduler: str | N
                     if outcome["status"] == "ok":
                         save(folder, point, outcome)
                     else:
-                        failed += 1
-                    outcomes[point.key] = outcome
-                    bar.set_postfix(failed=failed, refresh=False)
+                        failed[point.key] = outcome
+                    unasked.append((future, point, outcome))
+                    if len(unasked) >= ATTEMPTS_BATCH:
+                        ask_attempts()
+                    bar.set_postfix(failed=len(failed), refresh=False)
                     bar.update(1)
+                    send_more()
                 compute = time.perf_counter() - sending
-                retried = {k: n for k, n in attempts(client, futures).items() if n > 1}
-                for future, point in futures.items():
-                    if future.key in retried:
-                        outcomes[point.key] = {**outcomes[point.key], "attempts": retried[future.key]}
-                        if outcomes[point.key]["status"] == "ok":
-                            save(folder, point, outcomes[point.key])
-                again = len(retried)
+                ask_attempts()
+                again = counts["again"]
                 if again:
                     print(f"agentsim: a worker was lost under {again} point{'s' if again > 1 else ''}, run again "
                           f"on another worker (the 'attempts' column of results.csv counts the runs)",
                           file=sys.stderr)
             finally:
-                if pending:  # interrupted: nothing keeps running for a sweep that stopped
-                    client.cancel(list(pending))
-    rows = [results.make_row(p, outcomes[p.key]) for p in spec.points]
-    parquet, csv = results.write(results.frame(rows, list(spec.grid)), folder)
-    return Outcome(points=len(spec.points), computed=len(todo), cached=cached,
-                   failed=sum(row["status"] != "ok" for row in rows),
+                if sent:  # interrupted: nothing keeps running for a sweep that stopped
+                    client.cancel(list(sent))
+
+    def rows():  # made anew from the cache and the failures, a point at a time
+        for point in points:
+            outcome = failed.get(point.key) or cached_outcome(folder, point.key)
+            yield results.make_row(point, outcome or failure(AgentsimError(f"points/{point.key}.json is gone")))
+
+    parquet, csv, table = results.write_rows(rows, list(spec.grid), folder)
+    return Outcome(points=table.rows, computed=counts["computed"], cached=counts["cached"], failed=table.failed,
                    seconds=time.perf_counter() - started, parquet=parquet, csv=csv, startup_seconds=startup,
                    compute_seconds=compute)

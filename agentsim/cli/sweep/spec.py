@@ -38,7 +38,7 @@ import re
 import shlex
 import tomllib
 from contextlib import redirect_stderr, redirect_stdout
-from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -52,10 +52,10 @@ REPORT_KEYS = ("metrics", "axis", "by", "over")
 SWEEP_OPTIONS = ("json", "out", "help")
 #: Columns every row has beside the grid's and the metrics'.
 ROW_COLUMNS = ("status", "error", "seconds", "worker", "attempts", "point", "command")
-#: The most points a sweep runs unless ``--max-points N`` allows more: each is checked by the command's parser
-#: before any work (about 60 microseconds each), and its row kept in memory.
+#: The most points a sweep runs unless ``--max-points N`` allows more. The points are made as they are sent to
+#: the workers, but each one's row is kept in memory until the results are written.
 MAX_POINTS = 10_000
-#: From how many points a sweep says their count before it checks them (a second's work or more).
+#: From how many points a sweep says their count before it checks the grid's values.
 SAY_COUNT = 1_000
 
 
@@ -67,6 +67,7 @@ class Point:
     values: dict
     argv: tuple[str, ...]
     key: str
+    at: tuple[int, ...] = field(default=(), compare=False, repr=False)  # the index of each value in its axis
 
 
 @dataclass
@@ -80,7 +81,7 @@ class Spec:
     report: dict = field(default_factory=dict)
     keep_outputs: bool = False
     takes_out: bool = False  # the command writes into --out
-    points: list[Point] = field(default_factory=list)
+    points: "Points | list[Point]" = field(default_factory=list)
 
     @property
     def name(self) -> str:
@@ -111,7 +112,7 @@ def subparser_of(command: tuple[str, ...]) -> argparse.ArgumentParser | None:
     return None if subparsers_of(parser) else parser  # a group of commands ("eval") is no command
 
 
-# argparse offers no public way to walk its commands and options: these three read its attributes.
+# argparse offers no public way to walk its commands and options: these four read its attributes.
 def subparsers_of(parser: argparse.ArgumentParser) -> dict:
     """The commands under ``parser`` by name ({} for a command)."""
     for action in parser._actions:
@@ -127,6 +128,11 @@ def flags_of(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
 
 def actions_of(parser: argparse.ArgumentParser) -> list[argparse.Action]:
     return list(parser._actions)
+
+
+def exclusive_groups(parser: argparse.ArgumentParser) -> list[set[str]]:
+    """The destinations of the options of each mutually exclusive group of ``parser``."""
+    return [{action.dest for action in group._group_actions} for group in parser._mutually_exclusive_groups]
 
 
 def json_commands() -> list[str]:
@@ -167,8 +173,8 @@ def count(grid: dict) -> int:
 def load(path: str | Path, max_points: int | None = None, say=None) -> Spec:
     """Read and check a spec; every mistake is a :class:`UsageError` of one line naming it. The grid's
     points are counted first (``say`` is told how many, from :data:`SAY_COUNT` on) and refused past
-    ``max_points`` (default
-    :data:`MAX_POINTS`) before any is made; then they are made one after another, each checked."""
+    ``max_points`` (default :data:`MAX_POINTS`) before any is made; then every value of the grid is checked
+    (:class:`Points`), and the points are made only when they are asked for."""
     path = Path(path)
     where = f"sweep spec {str(path)!r}"
     if not path.exists() and len(path.parts) == 1:
@@ -212,12 +218,12 @@ def load(path: str | Path, max_points: int | None = None, say=None) -> Spec:
     check_report(spec, where)
     total, most = count(grid), MAX_POINTS if max_points is None else max_points
     if say is not None and total >= SAY_COUNT:
-        say(f"agentsim: {where}: {total} points of 'agentsim {spec.name}', checking them")
+        say(f"agentsim: {where}: {total} points of 'agentsim {spec.name}', checking the grid's values")
     if total > most:
         raise UsageError(f"{where}: the grid makes {total} points, more than the {most} a sweep runs"
                          + (" without --max-points N" if max_points is None else " with this --max-points")
                          + f" (give --max-points {total} to run them all)")
-    spec.points = list(expand(spec, parser, where))
+    spec.points = Points(spec, parser, where)
     return spec
 
 
@@ -267,36 +273,155 @@ def check_report(spec: Spec, where: str) -> None:
 
 
 def expand(spec: Spec, parser: argparse.ArgumentParser, where: str):
-    """Every combination of the grid, made one at a time in the order of its keys (the last varies
-    fastest), each command line checked by the command's own parser (a bad value is named before any
-    work)."""
-    keys = list(spec.grid)
-    axes = [list(spec.grid[k]) if isinstance(spec.grid[k], dict) else spec.grid[k] for k in keys]
-    version = project_version()
-    checked = set()
-    for combination in itertools.product(*axes):
-        values, options = {}, dict(spec.fixed)
-        for key, value in zip(keys, combination):
-            values[key] = value
-            if isinstance(spec.grid[key], dict):
-                options.update(spec.grid[key][value])
-            else:
-                options[key] = value
-        argv = tuple(spec.command) + tuple(arguments(parser, options, spec.path.parent, where))
-        if argv not in checked:
-            check_argv(argv, values, where)
-            checked.add(argv)
-        yield Point(values=values, argv=argv, key=point_key(argv, version))
+    """Every combination of the grid, made one at a time in the order of its keys (the last varies fastest)."""
+    return iter(spec.points if isinstance(spec.points, Points) else Points(spec, parser, where))
 
 
-def arguments(parser: argparse.ArgumentParser, options: dict, base: Path, where: str) -> list[str]:
-    """The options as the command's arguments: the flags in the spec's order, ``--json``, the positionals."""
+class Points(Sequence):
+    """The grid's points, in the order of its keys (the last varies fastest), each made only when it is asked
+    for: a grid of a million points costs what its axes cost until its points are sent.
+
+    Made, it checks every value of the grid before any work, without making every point: each value of
+    each axis in a point whose other axes take their first value, read by the command's own parser (the
+    last axis first, so that the value named is the one of the first bad point in the grid's order), and
+    every pair of values of two axes that set options of one mutually exclusive group (the only options
+    argparse weighs against each other). What a command's handler refuses of a combination is a failed row.
+
+    Two values of an axis that give the same options (``seed = [1, 1]``, or two names of a named axis with the
+    same table) give points of one command line: :meth:`firsts` yields only the first point of each command
+    line, which is computed once and whose outcome the others share."""
+
+    def __init__(self, spec: Spec, parser: argparse.ArgumentParser, where: str):
+        self.spec, self.where = spec, where
+        self.names = list(spec.grid)
+        self.axes = [list(spec.grid[k]) for k in self.names]  # a named axis by its names
+        self.sizes = [len(axis) for axis in self.axes]
+        self.version = project_version()
+        self.digests: dict[str, str | None] = {}  # each file a point names, hashed once
+        self.positional_order = [a.dest for a in actions_of(parser) if not a.option_strings]
+        base = spec.path.parent
+        self._fixed = fragment(parser, spec.fixed, base, where)
+        self._fragments: list[dict[int, tuple]] = [{} for _ in self.axes]
+
+        def made(axis: int, index: int) -> tuple:
+            done = self._fragments[axis]
+            if index not in done:
+                key, value = self.names[axis], self.axes[axis][index]
+                done[index] = fragment(parser, spec.grid[key][value] if isinstance(spec.grid[key], dict)
+                                       else {key: value}, base, where)
+            return done[index]
+
+        for axis in range(len(self.axes)):  # the first point's values, as the first point would meet them
+            made(axis, 0)
+        checked: set[tuple[str, ...]] = set()
+
+        def check(indices: tuple[int, ...]) -> None:
+            for axis, index in enumerate(indices):
+                made(axis, index)
+            argv = self.argv(indices)
+            if argv not in checked:
+                check_argv(argv, self.values(indices), where)
+                checked.add(argv)
+
+        zero = (0,) * len(self.axes)
+        check(zero)  # the fixed options, and a grid of no keys
+        for axis in reversed(range(len(self.axes))):
+            for index in range(self.sizes[axis]):
+                check(zero[:axis] + (index,) + zero[axis + 1:])
+        for first, second in self.exclusive_pairs(parser):
+            for i in range(self.sizes[first]):
+                for j in range(self.sizes[second]):
+                    indices = list(zero)
+                    indices[first], indices[second] = i, j
+                    check(tuple(indices))
+        # values of an axis that give the same arguments: the first of them stands for the others
+        self.firsts_of: list[list[int]] = []
+        for done in self._fragments:
+            seen: dict[tuple, int] = {}
+            self.firsts_of.append([seen.setdefault(freeze(done[i]), i) for i in range(len(done))])
+
+    def exclusive_pairs(self, parser: argparse.ArgumentParser) -> list[tuple[int, int]]:
+        """The pairs of axes (in the grid's order) that both set an option of one mutually exclusive group."""
+        pairs = set()
+        for dests in exclusive_groups(parser):
+            touching = []
+            for axis, key in enumerate(self.names):
+                options = self.spec.grid[key]
+                keys = [k for v in options.values() for k in v] if isinstance(options, dict) else [key]
+                parser_dests = {find_action(parser, k).dest for k in keys}
+                if parser_dests & dests:
+                    touching.append(axis)
+            pairs |= set(itertools.combinations(touching, 2))
+        return sorted(pairs)
+
+    def __len__(self) -> int:
+        return count(self.spec.grid)
+
+    @property
+    def distinct(self) -> int:
+        """How many different command lines the points have (the points :meth:`firsts` yields)."""
+        total = 1
+        for firsts in self.firsts_of:
+            total *= len(set(firsts))
+        return total
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        if index < 0:
+            index += len(self)
+        if not 0 <= index < len(self):
+            raise IndexError("point index out of range")
+        indices = []
+        for size in reversed(self.sizes):
+            index, rest = divmod(index, size)
+            indices.append(rest)
+        return self.point(tuple(reversed(indices)))
+
+    def __iter__(self):
+        for indices in itertools.product(*(range(n) for n in self.sizes)):
+            yield self.point(indices)
+
+    def firsts(self):
+        """The first point of each command line, in the grid's order."""
+        for indices in itertools.product(*(sorted(set(firsts)) for firsts in self.firsts_of)):
+            yield self.point(indices)
+
+    def values(self, indices: tuple[int, ...]) -> dict:
+        return {key: axis[i] for key, axis, i in zip(self.names, self.axes, indices)}
+
+    def argv(self, indices: tuple[int, ...]) -> tuple[str, ...]:
+        flags, positionals = list(self._fixed[0]), dict(self._fixed[1])
+        for done, index in zip(self._fragments, indices):
+            flags += done[index][0]
+            positionals.update(done[index][1])
+        ordered = [word for dest in self.positional_order for word in positionals.get(dest, ())]
+        return tuple(self.spec.command) + tuple(flags) + ("--json",) + tuple(ordered)
+
+    def point(self, indices: tuple[int, ...]) -> Point:
+        argv = self.argv(indices)
+        return Point(values=self.values(indices), argv=argv, key=point_key(argv, self.version, self.digests),
+                     at=indices)
+
+
+def freeze(made: tuple) -> tuple:
+    flags, positionals = made
+    return tuple(flags), tuple(sorted(positionals.items()))
+
+
+def fragment(parser: argparse.ArgumentParser, options: dict, base: Path, where: str) -> tuple[list, dict]:
+    """What ``options`` add to a command line: their flags in the spec's order, and the values of each
+    positional argument (by its destination)."""
     flags, positionals = [], {}
     for key, value in options.items():
         action = find_action(parser, key)
         value = resolve(value, base)
         if not action.option_strings:
-            positionals[action.dest] = value if isinstance(value, list) else [value]
+            words = value if isinstance(value, list) else [value]
+            for word in words:
+                if text(word).startswith("-"):
+                    raise UsageError(f"{where}: {action.dest!r} cannot start with '-': {word!r}")
+            positionals[action.dest] = tuple(text(word) for word in words)
             continue
         flag = max(action.option_strings, key=len)
         if isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction)):
@@ -314,13 +439,7 @@ def arguments(parser: argparse.ArgumentParser, options: dict, base: Path, where:
                 raise UsageError(f"{where}: {key!r} takes one value, not a list (the values to sweep go in [grid])")
         else:
             flags += [flag, text(value)]
-    ordered = []
-    for action in actions_of(parser):
-        for value in positionals.get(action.dest, []) if not action.option_strings else []:
-            if text(value).startswith("-"):
-                raise UsageError(f"{where}: {action.dest!r} cannot start with '-': {value!r}")
-            ordered.append(text(value))
-    return flags + ["--json"] + ordered
+    return flags, positionals
 
 
 def text(value) -> str:
@@ -381,17 +500,27 @@ def project_version() -> str:
     return f"{agentsim.__version__}+{digest.hexdigest()[:12]}"
 
 
-def point_key(argv: tuple[str, ...], version: str) -> str:
+def point_key(argv: tuple[str, ...], version: str, digests: dict | None = None) -> str:
     """The cache key of a point: its command line, the project version and the content of every file the
-    command line names."""
+    command line names (``digests`` keeps each file's digest for the next point that names it)."""
     files = {}
+    digests = {} if digests is None else digests
     for word in argv:
-        p = Path(word)
-        if p.is_absolute() and p.is_file():
-            with open(p, "rb") as f:  # a block at a time: a long audio file is never held whole
-                files[word] = hashlib.file_digest(f, "sha256").hexdigest()
+        if word not in digests:
+            digests[word] = file_digest(word)
+        if digests[word] is not None:
+            files[word] = digests[word]
     blob = json.dumps({"argv": list(argv), "version": version, "files": files}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
+
+
+def file_digest(word: str) -> str | None:
+    """The SHA-256 of the file an absolute path names, or None if the word names none."""
+    p = Path(word)
+    if not (p.is_absolute() and p.is_file()):
+        return None
+    with open(p, "rb") as f:  # a block at a time: a long audio file is never held whole
+        return hashlib.file_digest(f, "sha256").hexdigest()
 
 
 #: The longest name of a point's folder in ``outputs/`` (file systems take 255 bytes).
@@ -407,26 +536,42 @@ def folder_name(values: dict) -> str:
                     for key, value in values.items())
 
 
-def output_folders(points: list[Point]) -> dict[str, str]:
-    """The folder name in ``outputs/`` of each point's ``--out``, by its key: :func:`folder_name` of its values.
-    Names that two points would share (once made safe, or differing only in case) and names longer than
-    :data:`MAX_FOLDER_NAME` end in ``~`` and the first 8 characters of the key instead; a grid of no keys is
-    its key. Points of one command line (one key) are computed once, into the folder of the first."""
-    names: dict[str, str] = {}
-    for point in points:
-        names.setdefault(point.key, folder_name(point.values))
-    shared = Counter(name.lower() for name in names.values())
-    folders = {}
-    for key, name in names.items():
+class OutputFolders:
+    """The folder name in ``outputs/`` of each point's ``--out``: :func:`folder_name` of its values. A name that
+    two points of different command lines would share (once made safe, or differing only in case) and a name
+    longer than :data:`MAX_FOLDER_NAME` end in ``~`` and the first 8 characters of the point's key instead; a
+    grid of no keys is its key. Points of one command line are computed once, into the folder of the first.
+
+    Whether a name is shared is read from the axes, not from the other points: the names are the values'
+    parts joined by commas, which no part holds, so two points share a name when each of their axes gives
+    the same part, and a point's name is shared when one of its values gives the part of a value of another
+    command line. A shortened name that an earlier point already took (the first 191 characters and 8 of
+    the key alike) is the point's whole key."""
+
+    def __init__(self, points: Points):
+        self.points = points
+        self.parts = [[f"{UNSAFE_IN_NAME.sub('_', key)}={UNSAFE_IN_NAME.sub('_', text(value))}" for value in axis]
+                      for key, axis in zip(points.names, points.axes)]
+        self.shared = []
+        for parts, firsts in zip(self.parts, points.firsts_of):
+            lines: dict[str, set[int]] = {}
+            for part, first in zip(parts, firsts):
+                lines.setdefault(part.lower(), set()).add(first)
+            self.shared.append([len(lines[part.lower()]) > 1 for part in parts])
+        self.shortened: set[str] = set()
+
+    def of(self, point: Point) -> str:
+        indices = point.at
+        name = ",".join(parts[i] for parts, i in zip(self.parts, indices))
         if not name:
-            folders[key] = key
-        elif len(name) > MAX_FOLDER_NAME or shared[name.lower()] > 1:
-            folders[key] = f"{name[:MAX_FOLDER_NAME - 9]}~{key[:8]}"
-        else:
-            folders[key] = name
-    if len({name.lower() for name in folders.values()}) < len(folders):  # shortened alike, keys alike to 8
-        return {key: key for key in folders}
-    return folders
+            return point.key
+        if len(name) <= MAX_FOLDER_NAME and not any(shared[i] for shared, i in zip(self.shared, indices)):
+            return name
+        short = f"{name[:MAX_FOLDER_NAME - 9]}~{point.key[:8]}"
+        if short.lower() in self.shortened:
+            return point.key
+        self.shortened.add(short.lower())
+        return short
 
 
 def shell_line(argv) -> str:
