@@ -61,6 +61,7 @@ import bisect
 import ctypes
 import difflib
 import functools
+import io
 import itertools
 import mmap
 import os
@@ -227,12 +228,30 @@ class _PcmBuffer:
         self.filled += count
 
     @classmethod
-    def of(cls, pcm: bytes) -> "_PcmBuffer":
-        """A buffer holding the 16-bit samples ``pcm``."""
+    def read_from(cls, stream, count: int) -> "_PcmBuffer":
+        """A buffer of the ``count`` 16-bit samples that come next on ``stream``, read straight into it (no
+        bytes object of them beside it). Raises EOFError if the stream ends first."""
+        import numpy as np
+
         buffer = cls()
-        if pcm:
-            buffer.append(ctypes.c_char_p(pcm), len(pcm) // 2)  # copied once, from the bytes themselves
+        if count:
+            buffer._map = mmap.mmap(-1, 2 * count)
+            view = memoryview(buffer._map)
+            done = 0
+            while done < 2 * count:
+                got = stream.readinto(view[done:done + _RELAY_BLOCK])
+                if not got:
+                    view.release()
+                    raise EOFError("a cut reply")
+                done += got
+            view.release()
+            buffer.array = np.frombuffer(buffer._map, dtype=np.int16)
+            buffer.filled = count
         return buffer
+
+    def raw(self) -> memoryview:
+        """The samples' bytes, as they are in the buffer (no copy)."""
+        return memoryview(self._map)[:2 * self.filled] if self.filled else memoryview(b"")
 
     def samples(self):
         """The samples appended so far (int16, a view of the buffer: valid until :meth:`to_float`)."""
@@ -317,8 +336,7 @@ class _Engine:
         with self.lock:
             if self._pristine is None or self._pristine.pid != os.getpid():  # a forked copy starts its own
                 self._pristine = _Pristine(self.library)
-            pcm, events = self._pristine.synth(ssml, voice, rate)
-        return _PcmBuffer.of(pcm), events
+            return self._pristine.synth(ssml, voice, rate)
 
     def synth_here(self, ssml: str, voice: str, rate: int) -> tuple[_PcmBuffer, list[_RawEvent]]:
         """:meth:`synth` in this process: what it gives depends on what this engine said before."""
@@ -398,7 +416,8 @@ class _Pristine:
     by samples to milliseconds, and its audio differs. The first synthesis of a fresh process is exactly
     reproducible, and so every synthesis is, made this way: the same text gives the same samples and
     times in every process, whatever was spoken before (a fork costs about a millisecond). Messages on
-    the pipes are pickles behind their length.
+    the pipes are pickles behind their length; the samples are raw bytes between two messages, read straight
+    into their buffer (see :func:`_serve_pristine`): no process holds them twice.
     """
 
     def __init__(self, library: str) -> None:
@@ -419,10 +438,11 @@ class _Pristine:
             raise SpeechBackendUnavailable(f"espeak-ng could not be started in a process of its own ({ready}); "
                                            f"install it with: {INSTALL_HINT}")
 
-    def synth(self, ssml: str, voice: str, rate: int) -> tuple[bytes, list[_RawEvent]]:
+    def synth(self, ssml: str, voice: str, rate: int) -> tuple[_PcmBuffer, list[_RawEvent]]:
+        """The samples (read from the pipe straight into their buffer) and the events of one synthesis."""
         try:
             _send(self.process.stdin, (ssml, voice, rate))
-            reply = _receive(self.process.stdout)
+            reply = _read_reply(self.process.stdout)
         except (OSError, EOFError) as exc:
             reply = f"its process ended ({exc})"
         if isinstance(reply, str):
@@ -446,6 +466,23 @@ def _send(stream, value) -> None:
 def _receive(stream):
     import pickle
 
+    return pickle.loads(_receive_raw(stream)[8:])
+
+
+def _read_reply(stream) -> tuple[_PcmBuffer, list[_RawEvent]] | str:
+    """A synthesis's reply as :func:`_serve_pristine` sends it: the samples, read straight into their buffer,
+    and the events; or what went wrong."""
+    reply = _receive(stream)
+    if isinstance(reply, str):
+        return reply
+    count, events = reply
+    buffer = _PcmBuffer.read_from(stream, count)
+    end = _receive(stream)
+    return (buffer, events) if end == "whole" else end
+
+
+def _receive_raw(stream) -> bytes:
+    """One message as it came: its length and its pickle."""
     head = stream.read(8)
     if len(head) < 8:
         raise EOFError("no reply")
@@ -453,12 +490,22 @@ def _receive(stream):
     data = stream.read(size)
     if len(data) < size:
         raise EOFError("a cut reply")
-    return pickle.loads(data)
+    return head + data
+
+
+#: Bytes of samples passed on at a time from the synthesising fork to the process that asked.
+_RELAY_BLOCK = 1 << 20
 
 
 def _serve_pristine() -> None:
     """The loop of :class:`_Pristine`'s process: for each request on stdin, fork; the fork synthesises and
-    hands its samples and events back through a pipe; the reply goes to stdout. Ends when stdin closes."""
+    hands its samples and events back through a pipe; the reply goes to stdout as it comes.
+
+    A reply is a message ``(count, events)`` (or the error as a string), then the ``count`` 16-bit samples
+    as raw bytes, streamed from the fork's buffer through this process a block at a time (no process holds
+    a second copy of them), then the message ``"whole"``, or what went wrong if the fork died on the way
+    (the samples it did not send are sent as zeros, so that the next reply starts where it should). Ends
+    when stdin closes."""
     import sys
 
     requests, replies = sys.stdin.buffer, sys.stdout.buffer
@@ -477,23 +524,50 @@ def _serve_pristine() -> None:
         pid = os.fork()
         if pid == 0:  # the fork: synthesise once, reply, and go
             os.close(read)
-            try:
-                buffer, events = engine.synth_here(ssml, voice, rate)  # which selects the voice and rate
-                reply = (buffer.samples().tobytes(), events)
-            except BaseException as exc:
-                reply = f"{type(exc).__name__}: {exc}"
             with os.fdopen(write, "wb") as out:
-                _send(out, reply)
+                try:
+                    buffer, events = engine.synth_here(ssml, voice, rate)  # which selects the voice and rate
+                except BaseException as exc:
+                    _send(out, f"{type(exc).__name__}: {exc}")
+                else:
+                    _send(out, (buffer.filled, events))
+                    out.write(buffer.raw())
             os._exit(0)
         os.close(write)
         with os.fdopen(read, "rb") as reply_stream:
-            reply = reply_stream.read()  # passed on as it is, length and pickle
+            try:
+                head = _receive_raw(reply_stream)
+            except EOFError:
+                head = None
+            if head is None:
+                _send(replies, "the synthesising process died")
+            else:
+                replies.write(head)
+                reply = _receive(io.BytesIO(head))
+                if not isinstance(reply, str):
+                    _relay(reply_stream, replies, 2 * reply[0])
         os.waitpid(pid, 0)
-        if len(reply) < 8 or len(reply) != 8 + int.from_bytes(reply[:8], "little"):
-            _send(replies, "the synthesising process died")
-        else:
-            replies.write(reply)
-            replies.flush()
+        replies.flush()
+
+
+def _relay(source, target, size: int) -> None:
+    """Pass ``size`` bytes from ``source`` to ``target`` a block at a time, then ``"whole"``; if ``source``
+    ends first, zeros for the rest, then that the synthesising process died."""
+    left = size
+    while left:
+        block = source.read(min(left, _RELAY_BLOCK))
+        if not block:
+            break
+        target.write(block)
+        left -= len(block)
+    if left:
+        zeros = bytes(min(left, _RELAY_BLOCK))
+        while left:
+            target.write(zeros[:min(left, _RELAY_BLOCK)])
+            left -= min(left, _RELAY_BLOCK)
+        _send(target, "the synthesising process died")
+    else:
+        _send(target, "whole")
 
 
 def _engine() -> _Engine:

@@ -430,3 +430,56 @@ def test_what_is_remembered_is_weighed_in_bytes(monkeypatch):
     big = SpeechText("A sentence a good deal longer than any of the ones before, said only once.")
     said = backend.synthesize(big)
     assert backend.synthesize(big) is not said and backend.remembered_bytes == 0
+
+
+LONG_SYNTHESIS_SCRIPT = """
+import re, sys
+from speech_timing.backend import SpeechText
+from speech_timing.espeak import EspeakBackend
+from speech_timing.linear_model import TEXTS_DIR
+
+def status(name):
+    return int(re.search(name + r":\\s+(\\d+)", open("/proc/self/status").read()).group(1)) * 1024
+
+words = " ".join((TEXTS_DIR / name).read_text() for name in ("clocks.txt", "lighthouse.txt", "orchard.txt")).split()
+text = " ".join((words * (int(sys.argv[1]) // len(words) + 1))[:int(sys.argv[1])])
+backend = EspeakBackend()
+backend.synthesize(SpeechText("Warm up."))
+before = status("VmRSS")
+utterance = backend.synthesize(SpeechText(text))
+print(before, status("VmHWM"), status("VmRSS"), utterance.audio.held_bytes, 2 * len(utterance.audio))
+"""
+
+
+def test_a_long_synthesis_holds_its_samples_once():
+    """The samples of a long speech come from the synthesising fork straight into the one buffer the utterance
+    keeps: the peak of the process is what it holds afterwards, not that and a second copy of the audio (as
+    when the reply was read whole and unpickled: 2.2 times the audio, 0.95 of it gone again afterwards)."""
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")])))
+    proc = subprocess.run([sys.executable, "-c", LONG_SYNTHESIS_SCRIPT, "3000"], env=env, cwd=root,
+                          capture_output=True, text=True, timeout=300, check=True)
+    before, peak, after, held, audio = (int(v) for v in proc.stdout.split())
+    assert held == audio > 30e6  # about 40 MB of 16-bit samples, in memory, weighed as such
+    assert peak - after < 0.2 * audio, (before, peak, after, audio)  # no second copy on the way
+    assert peak - before < 1.5 * audio, (before, peak, after, audio)
+
+
+def test_a_synthesis_cut_short_is_said_and_the_next_reply_is_read_whole():
+    """A fork that dies while it sends its samples: the process between passes on zeros for the rest and says
+    so; the reply is an error, and the next reply on the pipe is read from its start."""
+    import io
+
+    from speech_timing.espeak import _read_reply, _relay, _send
+
+    samples = np.arange(-300, 300, dtype="<i2")
+    pipe = io.BytesIO()
+    _send(pipe, (len(samples), []))
+    _relay(io.BytesIO(samples.tobytes()[:500]), pipe, samples.nbytes)  # the fork died after 250 samples
+    _send(pipe, (len(samples), ["events"]))
+    _relay(io.BytesIO(samples.tobytes()), pipe, samples.nbytes)
+    pipe.seek(0)
+    assert _read_reply(pipe) == "the synthesising process died"
+    buffer, events = _read_reply(pipe)
+    assert events == ["events"] and np.array_equal(buffer.samples(), samples)
+    assert pipe.read() == b""
