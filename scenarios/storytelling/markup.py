@@ -260,7 +260,7 @@ def parse_story(source: str, name: str = "<story>", title: str = "") -> Story:
             line_no, col = _locate(raw, where, bracket)
             raise StoryError(f"{name}:{line_no}:{col}: unmatched {bracket!r}; tags look like [beat] or "
                              f"[point:door]")
-    text, positions = normalize_space(plain_raw)
+    text, positions = normalize_space(plain_raw, [offset for offset, _, _, _ in tags])
     words = written_words(text)
     if not words:
         raise StoryError(f"{name}: the story has no words")
