@@ -12,8 +12,8 @@ latency within 100 ms.
 
     python benchmarks/bench_serve.py SECONDS --slow-readers N
 
-The slow-readers case: ``N`` clients (bare sockets, their buffers as the system makes them) subscribe to the
-poses (30 fps) and then read nothing; each one the server closes is replaced by a new one, so that ``N`` are
+The slow-readers case: ``N`` clients (bare sockets, their buffers as the system makes them, in a process of their
+own) subscribe to the poses (30 fps) and then read nothing; each one the server closes is replaced by a new one, so that ``N`` are
 there for all of ``SECONDS``; prints the server's RSS before, during (every second; the
 peak) and after, a fresh client's connection and block latency before, during and after (the time from
 sending a block to its start feedback, and its feedback's lateness spread), and when the server closed the
@@ -329,45 +329,73 @@ def large_speech(n: int) -> dict:
     }
 
 
-def slow_readers(seconds: float, n: int) -> dict:
+def slow_reader_clients(url: str, n: int, commands, out) -> None:
+    """In a process of its own (the server's interpreter and RSS are then the server's alone): ``n`` clients on
+    bare sockets that subscribe to the poses and read nothing; told ``k`` on ``commands``, close the ``k``
+    oldest (those the server closed) and open ``k`` new ones; told None, close them all. Puts "ready" on
+    ``out`` once the first ``n`` have subscribed, and the count of those opened when it stops."""
+    import collections
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
     from rawws import RawClient
+
+    clients: collections.deque = collections.deque()
+    opened = 0
+
+    def add() -> None:
+        nonlocal opened
+        client = RawClient(url)
+        client.send(json.dumps({"subscribe": "poses"}))
+        clients.append(client)
+        opened += 1
+
+    for _ in range(n):
+        add()
+    out.put("ready")
+    while (k := commands.get()) is not None:
+        for _ in range(k):
+            clients.popleft().close()
+            add()
+    for client in clients:
+        client.close()
+    out.put(opened)
+
+
+def slow_readers(seconds: float, n: int) -> dict:
+    import multiprocessing
 
     with Background(Service(port=0, audio="none", fps=30.0, tts=EspeakBackend())) as service:
         live, server = service.service.live, service.service.server
         fresh_client(service.url, live, "warm")
         time.sleep(1.0)
         before = settled(service, "a")
-        clients: list = []  # (RawClient, when it subscribed), oldest first
+        context = multiprocessing.get_context("spawn")
+        commands, out = context.Queue(), context.Queue()
+        readers = context.Process(target=slow_reader_clients, args=(service.url, n, commands, out))
+        readers.start()
+        assert out.get(timeout=60) == "ready"
         started = time.monotonic()
-
-        def add_slow_reader() -> None:
-            client = RawClient(service.url)
-            client.send(json.dumps({"subscribe": "poses"}))
-            clients.append((client, time.monotonic() - started))
-
-        for _ in range(n):
-            add_slow_reader()
+        subscribed = [0.0] * n  # when each slow reader there subscribed, oldest first
         samples, fresh, closes, lived = [], [], [], []
         k = 0
         while time.monotonic() - started < seconds:
             samples.append((round(time.monotonic() - started, 1), round(rss_mb(), 1)))
-            closed = server.counters["closed_not_reading"]
-            while len(closes) < closed:  # the server closes them in the order they stopped: the oldest
+            closed = server.counters["closed_not_reading"] - len(closes)
+            if closed > 0:  # the server closes them in the order they stopped: the oldest
                 now = time.monotonic() - started
-                closes.append(round(now, 1))
-                old, since = clients.pop(0)
-                old.close()
-                lived.append(now - since)
-                add_slow_reader()  # N slow readers there all the time
+                for _ in range(closed):
+                    closes.append(round(now, 1))
+                    lived.append(now - subscribed.pop(0))
+                    subscribed.append(now)
+                commands.put(closed)  # N slow readers there all the time
             if k % 10 == 5:
                 fresh.append({"at_s": samples[-1][0], **fresh_client(service.url, live, f"d{k}")})
             k += 1
             time.sleep(max(0.0, started + k - time.monotonic()))
-        for client, _ in clients:
-            client.close()
+        commands.put(None)
+        opened = out.get(timeout=60)
+        readers.join(30)
         counters = dict(server.counters)
         time.sleep(3.0)
         after = settled(service, "z")
@@ -382,7 +410,7 @@ def slow_readers(seconds: float, n: int) -> dict:
         "rss_samples": samples[::10],
         "fresh_client": {"before": before["fresh"], "during": during, "after": after["fresh"]},
         "latency_ratio_during": ratio, "latency_ratio_after": latency_ratio(after["fresh"], before["fresh"]),
-        "slow_readers_closed": len(closes), "slow_readers_closed_at_s": closes[:2 * n],
+        "slow_readers_opened": opened, "slow_readers_closed": len(closes), "slow_readers_closed_at_s": closes[:2 * n],
         "slow_reader_closed_after_s": {"median": median(lived), "max": round(max(lived), 1) if lived else None},
         "counters": counters,
         "targets": {"rss_above_baseline_mb": 50, "fresh_latency_ratio": 1.5},
