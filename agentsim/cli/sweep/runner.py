@@ -12,8 +12,8 @@ The folder (``--out DIR``) holds:
 ``sweep.json``         the spec as read (command, grid, fixed options, report settings), for
                        ``agentsim sweep report``
 ``outputs/<point>/``   with ``keep_outputs = true``: each point's ``--out`` folder, named by its values in
-                       the grid's order (``strategy=best,seed=1,jitter=0.03``; :func:`~agentsim.cli.
-                       sweep.spec.output_folders` says how names that would clash or be too long end)
+                       the grid's order (``strategy=best,seed=1,jitter=0.03``; :class:`~agentsim.cli.
+                       sweep.spec.OutputFolders` says how names that would clash or be too long end)
 =====================  ================================================================================
 
 The points are made as they are sent (:class:`~agentsim.cli.sweep.spec.Points`), and only

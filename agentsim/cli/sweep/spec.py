@@ -272,11 +272,6 @@ def check_report(spec: Spec, where: str) -> None:
             raise UsageError(f"{where}: [report] {key.split()[0]} = {name!r} is no grid key")
 
 
-def expand(spec: Spec, parser: argparse.ArgumentParser, where: str):
-    """Every combination of the grid, made one at a time in the order of its keys (the last varies fastest)."""
-    return iter(spec.points if isinstance(spec.points, Points) else Points(spec, parser, where))
-
-
 class Points(Sequence):
     """The grid's points, in the order of its keys (the last varies fastest), each made only when it is asked
     for: a grid of a million points costs what its axes cost until its points are sent.
@@ -529,15 +524,15 @@ MAX_FOLDER_NAME = 200
 UNSAFE_IN_NAME = re.compile(r"[^A-Za-z0-9._+-]")
 
 
-def folder_name(values: dict) -> str:
-    """A point's values as a folder name, in the grid's key order: ``strategy=best,seed=1,jitter=0.03``
-    (a named axis by its name; each key and value keeps letters, digits and ``._+-``, the rest is ``_``)."""
-    return ",".join(f"{UNSAFE_IN_NAME.sub('_', key)}={UNSAFE_IN_NAME.sub('_', text(value))}"
-                    for key, value in values.items())
+def name_part(key: str, value) -> str:
+    """One value's part of a point's folder name: ``seed=1`` (a named axis by its name; the key and the value
+    keep letters, digits and ``._+-``, the rest is ``_``). The parts are joined by commas in the grid's key
+    order: ``strategy=best,seed=1,jitter=0.03``."""
+    return f"{UNSAFE_IN_NAME.sub('_', key)}={UNSAFE_IN_NAME.sub('_', text(value))}"
 
 
 class OutputFolders:
-    """The folder name in ``outputs/`` of each point's ``--out``: :func:`folder_name` of its values. A name that
+    """The folder name in ``outputs/`` of each point's ``--out``: each of its values' :func:`name_part`, joined. A name that
     two points of different command lines would share (once made safe, or differing only in case) and a name
     longer than :data:`MAX_FOLDER_NAME` end in ``~`` and the first 8 characters of the point's key instead; a
     grid of no keys is its key. Points of one command line are computed once, into the folder of the first.
@@ -550,8 +545,7 @@ class OutputFolders:
 
     def __init__(self, points: Points):
         self.points = points
-        self.parts = [[f"{UNSAFE_IN_NAME.sub('_', key)}={UNSAFE_IN_NAME.sub('_', text(value))}" for value in axis]
-                      for key, axis in zip(points.names, points.axes)]
+        self.parts = [[name_part(key, value) for value in axis] for key, axis in zip(points.names, points.axes)]
         self.shared = []
         for parts, firsts in zip(self.parts, points.firsts_of):
             lines: dict[str, set[int]] = {}
