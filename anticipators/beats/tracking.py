@@ -264,6 +264,9 @@ class CausalBeatTracker:
         elif int(envelope.sample_rate) != self.sample_rate:
             raise ValueError(f"the envelope's sample rate {envelope.sample_rate} is not {self.sample_rate}")
         self.envelope = envelope
+        #: what the joint filter observes of the envelope, and grids are weighed on (its onset strength if it
+        #: keeps no other observation)
+        self._observed = getattr(envelope, "observation_values", envelope.values)
         fps = envelope.fps
         self._fps = fps
         self.tempo = TempoEstimator(fps, self.min_bpm, self.max_bpm, prior_bpm=self.prior_bpm,
@@ -482,8 +485,7 @@ class CausalBeatTracker:
         envelope.update()
         dbn = self.dbn
         if dbn is not None and dbn.n_frames < envelope.n_frames:
-            observe = getattr(envelope, "observation_values", envelope.values)
-            a = self.activation(observe(dbn.n_frames, envelope.n_frames))
+            a = self.activation(self._observed(dbn.n_frames, envelope.n_frames))
             if self.network is not None:
                 learned = self.network(envelope.bands(dbn.n_frames, envelope.n_frames))
                 a = learned if self.network_mix <= 0.0 else (1.0 - self.network_mix) * learned + self.network_mix * a
@@ -646,7 +648,7 @@ class CausalBeatTracker:
         frame += math.floor((last - frame) / lag) * lag  # the grid's latest beat heard
         teeth = np.rint(frame - lag * np.arange(beats)).astype(np.intp)
         a = max(int(teeth[-1]) - 1, envelope.first_kept)
-        values = getattr(envelope, "observation_values", envelope.values)(a, last + 2)
+        values = self._observed(a, last + 2)
         if values.size < 3:
             return 0.0
         # the strongest frame within one of each tooth (a peak is one frame wide)
