@@ -412,6 +412,53 @@ def speech_segments(phonemes: Sequence[tuple[str, float, float]]) -> list[tuple[
     return out
 
 
+class VisemeTrack:
+    """The mouth of one speech while it is spoken: its visemes' middles, dominances and shapes, built once
+    from its phonemes (:func:`speech_segments`), and evaluated at any times with :meth:`at`."""
+
+    def __init__(self, phonemes: Sequence[tuple[str, float, float]]):
+        segments = speech_segments(phonemes)
+        self.mids = np.array([0.5 * (a + b) for _, a, b in segments])
+        self.alphas = np.array([DOMINANCE.get(name.lower(), DOMINANCE_DEFAULT) for name, _, _ in segments])
+        shapes = {name: (viseme_shape(name) or NEUTRAL).dofs() for name in {name for name, _, _ in segments}}
+        self.shapes = np.array([[shapes[name][d] for d in MOUTH_DOFS] for name, _, _ in segments])
+        self.ordered = np.sort(self.mids)
+
+    def at(self, u) -> dict[str, np.ndarray]:
+        """The mouth DOF values (degrees) at times ``u`` (seconds on the speech's timeline); see
+        :func:`viseme_track`."""
+        u = np.asarray(u, dtype=float)
+        if not len(self.mids) or u.size == 0:
+            return {d: np.zeros(u.shape) for d in MOUTH_DOFS}
+        flat = u.ravel()
+        mids, ordered = self.mids, self.ordered
+        result = np.empty((flat.size, len(MOUTH_DOFS)))
+        for lo in range(0, flat.size, TRACK_CHUNK):
+            part = flat[lo:lo + TRACK_CHUNK]
+            k = np.searchsorted(ordered, part)
+            reach = REACH + np.minimum(np.abs(part - ordered[np.maximum(k - 1, 0)]),
+                                       np.abs(part - ordered[np.minimum(k, len(ordered) - 1)]))
+            chosen = np.flatnonzero((mids >= np.min(part - reach)) & (mids <= np.max(part + reach)))
+            distance = np.abs(part[None, :] - mids[chosen, None])
+            weights = np.where(distance <= reach, self.alphas[chosen, None] * np.exp(-distance / COARTICULATION),
+                               0.0)
+            # summed over the visemes in their order, one after another from zero (a running sum), so that
+            # those left out add exact zeros and a time's sum does not depend on how many times are
+            # computed with it
+            total = _running_sum(weights)
+            share = weights / np.maximum(total, 1e-300)
+            result[lo:lo + TRACK_CHUNK] = _running_sum(share[:, :, None] * self.shapes[chosen][:, None, :])
+        return {d: result[:, i].reshape(u.shape) for i, d in enumerate(MOUTH_DOFS)}
+
+
+def _running_sum(terms: np.ndarray) -> np.ndarray:
+    """``0 + terms[0] + terms[1] + ...`` along the first axis, added one after another in that order."""
+    out = np.zeros(terms.shape[1:])
+    for term in terms:
+        out += term
+    return out
+
+
 def viseme_track(phonemes: Sequence[tuple[str, float, float]], u) -> dict[str, np.ndarray]:
     """The mouth DOF values (degrees) at times ``u`` (seconds on the speech's timeline) while the phonemes
     are spoken, with co-articulation: each viseme's shape is weighted by its dominance
@@ -423,38 +470,9 @@ def viseme_track(phonemes: Sequence[tuple[str, float, float]], u) -> dict[str, n
     weigh less than e^-50 of the nearest one, below a double's precision), and the times are taken
     :data:`TRACK_CHUNK` at a time: the cost and the memory grow with the speech's length, not with its length
     squared (a 70-minute speech is some 250,000 frames and 50,000 phonemes), and a time's value is the same
-    whichever other times it is computed with."""
-    u = np.asarray(u, dtype=float)
-    segments = speech_segments(phonemes)
-    out = {d: np.zeros(u.shape) for d in MOUTH_DOFS}
-    if not segments or u.size == 0:
-        return out
-    flat = u.ravel()
-    mids = np.array([0.5 * (a + b) for _, a, b in segments])
-    alphas = np.array([DOMINANCE.get(name.lower(), DOMINANCE_DEFAULT) for name, _, _ in segments])
-    shapes = np.array([[(viseme_shape(name) or NEUTRAL).dofs()[d] for d in MOUTH_DOFS] for name, _, _ in segments])
-    ordered = np.sort(mids)
-    result = np.zeros((flat.size, len(MOUTH_DOFS)))
-    for lo in range(0, flat.size, TRACK_CHUNK):
-        part = flat[lo:lo + TRACK_CHUNK]
-        k = np.searchsorted(ordered, part)
-        reach = REACH + np.minimum(np.abs(part - ordered[np.maximum(k - 1, 0)]),
-                                   np.abs(part - ordered[np.minimum(k, len(ordered) - 1)]))
-        chosen = np.flatnonzero((mids >= np.min(part - reach)) & (mids <= np.max(part + reach)))
-        distance = np.abs(part[None, :] - mids[chosen, None])
-        weights = np.where(distance <= reach, alphas[chosen, None] * np.exp(-distance / COARTICULATION), 0.0)
-        # summed over the visemes in their order, one after another, so that those left out add exact zeros
-        # and a time's sum does not depend on how many times are computed with it
-        total = np.zeros(len(part))
-        for w in weights:
-            total += w
-        share = weights / np.maximum(total, 1e-300)
-        mouth = result[lo:lo + TRACK_CHUNK]
-        for w, shape in zip(share, shapes[chosen]):
-            mouth += w[:, None] * shape
-    for i, d in enumerate(MOUTH_DOFS):
-        out[d] = result[:, i].reshape(u.shape)
-    return out
+    whichever other times it is computed with. A speech evaluated at many times builds its
+    :class:`VisemeTrack` once."""
+    return VisemeTrack(phonemes).at(u)
 
 
 class SpeechMouthDriver(MotionDriver):
@@ -472,6 +490,7 @@ class SpeechMouthDriver(MotionDriver):
         if len(pref) != len(keys.times):
             pref = np.asarray(keys.times, dtype=float) - keys.times[0]
         self.preferred = np.maximum.accumulate(pref)
+        self.track = VisemeTrack(self.phonemes)
 
     def release_time(self) -> float:
         return self.keys.end
@@ -486,5 +505,5 @@ class SpeechMouthDriver(MotionDriver):
     def on_tick(self, t: np.ndarray) -> None:
         t0, t1 = self.keys.start, self.keys.end
         env = np.clip(np.minimum(t - t0, t1 - t) / SPEECH_BLEND, 0, 1)
-        track = viseme_track(self.phonemes, self.speech_time(t))
+        track = self.track.at(self.speech_time(t))
         self.write_held({d: self.start_value(d) * (1 - env) + track[d] * env for d in MOUTH_DOFS})
