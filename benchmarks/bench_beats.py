@@ -11,7 +11,7 @@ tracker's time is that of ``track_file``, which lets the tracker record its upda
 (:meth:`~anticipators.beats.tracking.CausalBeatTracker.track`: the same updates as predicting after every
 block, without asking while they cannot have changed; a live caller asking after every block adds
 0.0001-0.0002 to the real-time factor). When aubio is
-importable (``pip install aubio``, the ``bench`` extra; a comparison, not a dependency of the package), its
+importable (``pip install 'agentsim[bench]'``, the ``bench`` extra; a comparison, not a dependency of the package), its
 causal beat tracker (:class:`anticipators.beats.baselines.AubioTracker`) runs beside it on the same
 renders, in the same process: its predictions are its last beat plus whole periods.
 

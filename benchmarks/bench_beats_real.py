@@ -278,7 +278,7 @@ def main(argv=None) -> dict:
     skipped = []
     if "aubio" in trackers and not aubio_available():
         trackers.remove("aubio")
-        skipped.append("aubio (not installed: pip install aubio)")
+        skipped.append("aubio (not installed: pip install 'agentsim[bench]')")
         print("aubio is not installed; its tracker is left out", file=sys.stderr)
     from anticipators.beats.baselines import librosa_offline_beats
 

@@ -52,7 +52,7 @@ def track_beats(args: argparse.Namespace) -> int:
         from anticipators.beats.baselines import aubio_available
 
         if not aubio_available():
-            raise AgentsimError("the aubio tracker needs aubio: pip install aubio")
+            raise AgentsimError("the aubio tracker needs aubio: pip install 'agentsim[bench]'")
     if args.input is not None:
         run = listen(args)
     else:

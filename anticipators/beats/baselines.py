@@ -2,8 +2,8 @@
 librosa's offline beat tracker.
 
 :class:`IOIBaselineTracker` extrapolates the last interval between the strongest recent onsets;
-:class:`AubioTracker` wraps aubio's causal ``tempo`` (an optional package: ``pip install aubio``, in the
-``bench`` extra); :func:`librosa_offline_beats` runs librosa's offline dynamic-programming ``beat_track``
+:class:`AubioTracker` wraps aubio's causal ``tempo`` (an optional package, in the ``bench`` extra:
+``pip install 'agentsim[bench]'``); :func:`librosa_offline_beats` runs librosa's offline dynamic-programming ``beat_track``
 on the whole audio (it sees the future, so it is an upper bound on detection rather than a competitor).
 """
 
@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from agentsim.errors import AgentsimError
 from anticipators.beats.envelope import SpectralFluxEnvelope, mono_samples
 
 __all__ = ["IOIBaselineTracker", "AubioTracker", "aubio_available", "librosa_offline_beats"]
@@ -131,7 +132,10 @@ class AubioTracker:
     """
 
     def __init__(self, sample_rate: int, hop: int | None = None) -> None:
-        import aubio
+        try:
+            import aubio
+        except ImportError:
+            raise AgentsimError("the aubio tracker needs aubio: pip install 'agentsim[bench]'") from None
 
         self.sample_rate = int(sample_rate)
         self.hop = int(hop) if hop else (256 if self.sample_rate <= 22050 else 512)
