@@ -205,7 +205,7 @@ def mutated(draw):
     return text
 
 
-@settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(docs=st.lists(mutated(), min_size=1, max_size=3), gap=st.floats(0, 3))
 def test_mutated_examples_never_raise_or_hang(docs, gap):
     from anticipators.metronome import Metronome

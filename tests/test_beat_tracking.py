@@ -203,6 +203,7 @@ def test_other_sample_rates(render_44, rate):
     assert res["f_measure"] >= 0.98 and res["mae_ms"] < 15.0
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_baselines_run_and_are_scored(render_44):
     r = render_44
     base = track_and_evaluate(r.audio, r.beat_times, "baseline", 512, sample_rate=SR, end=music_end(r))

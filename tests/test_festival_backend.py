@@ -334,6 +334,7 @@ def test_a_run_with_festival_plays_its_audio_on_the_feedback_axis():
     assert track.duration == pytest.approx(heard.t0 + heard.utterance.duration, abs=0.01)
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_the_storyteller_speaks_with_festival_and_its_report_plays_that_audio(tmp_path):
     """``run storytelling --tts festival``: metrics.json names the voice, the narration's words after pauses
     sound where the TextGrid has them, the report's audio is the narration, and the strokes meet their
@@ -359,6 +360,7 @@ def test_the_storyteller_speaks_with_festival_and_its_report_plays_that_audio(tm
     assert max(abs(e) for e in errors) <= ONSET_TOLERANCE, errors
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_eval_speech_sync_runs_on_festival(slt):
     """``eval speech-sync --tts festival``: the strategy is scored on Festival's speech of the text (its length,
     its words), with the event delivery of condition A, and best stays on the words."""

@@ -40,6 +40,7 @@ RUNS = {
 }
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 @pytest.mark.parametrize("name", RUNS)
 def test_a_scenario_help_names_everything_it_writes(name, tmp_path):
     command, extra = RUNS[name]

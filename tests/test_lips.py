@@ -347,7 +347,8 @@ def test_the_speaking_mouth_counts_the_visemes_near_each_time_and_gives_the_same
     further add less than e^-50 of the nearest): it is the average over every viseme of the speech to 1e-12
     degrees, and a time's value does not depend on which other times are computed with it (a frame, a live
     tick of a few frames, a window of a long run)."""
-    from agentsim.animation.lips import COARTICULATION, DOMINANCE, DOMINANCE_DEFAULT, speech_segments, viseme_track
+    from agentsim.animation.lips import (COARTICULATION, DOMINANCE, DOMINANCE_DEFAULT, VisemeTrack, speech_segments,
+                                         viseme_track)
     from speech_timing.backend import SpeechText
     from speech_timing.builtin import BuiltinBackend
 
@@ -365,6 +366,7 @@ def test_the_speaking_mouth_counts_the_visemes_near_each_time_and_gives_the_same
     for i, d in enumerate(MOUTH_DOFS):
         every = sum(share[k] * (VISEMES.get(n.lower()) or NEUTRAL).dofs()[d] for k, (n, _, _) in enumerate(segments))
         assert np.abs(whole[d] - every).max() < 1e-12, d
+    track = VisemeTrack(phonemes)  # built once, as the speaking mouth builds it per speech
     for width in (1, 7, 600):
-        cut = [viseme_track(phonemes, u[a:a + width]) for a in range(0, len(u), width)]
+        cut = [track.at(u[a:a + width]) for a in range(0, len(u), width)]
         assert all(np.array_equal(np.concatenate([c[d] for c in cut]), whole[d]) for d in MOUTH_DOFS), width

@@ -68,6 +68,7 @@ def raw_messages_until(raw: RawClient, done, timeout: float) -> list[dict]:
     raise AssertionError(f"timed out after {len(got)} messages")
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_a_client_that_never_reads_is_closed_and_another_runs_on_time(service):
     server = service.service.server
     live = service.service.live
@@ -105,6 +106,7 @@ def test_a_client_that_never_reads_is_closed_and_another_runs_on_time(service):
             assert feedback_until(fresh, "f1:end", 10)[-1][1]["id"] == "f1:end"
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_a_client_with_the_systems_buffers_is_closed_within_seconds_of_its_last_read(service):
     """Buffers of megabytes take the poses of many seconds before sending to a client waits: it is the ping it
     does not answer (behind them, unread) that closes it, not its backlog (it took some 15 s that way)."""
@@ -132,6 +134,7 @@ def fast_poses():
         yield running
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_a_client_slow_for_a_moment_loses_poses_only(fast_poses):
     service = fast_poses
     server = service.service.server

@@ -49,6 +49,7 @@ def welcome(url: str) -> list[dict]:
 
 @pytest.mark.parametrize("options", [("--metronome", f"{BPM:g},{START:g}"),
                                      ("--anticipator", f"metronome,bpm={BPM:g},start={START:g}")])
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_welcome_realizes_its_metronome_beats_live(options):
     proc, url = serve(*options)
     try:
@@ -61,6 +62,7 @@ def test_welcome_realizes_its_metronome_beats_live(options):
         assert strokes[f"welcome:{behaviour}:stroke"] == pytest.approx(START + (beat - 1) * 60 / BPM, abs=1e-6)
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_without_a_metronome_welcome_loses_its_three_beats_with_warnings():
     proc, url = serve()
     try:

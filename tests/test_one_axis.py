@@ -105,6 +105,7 @@ def test_an_output_that_cannot_be_written_is_named_before_any_work(tmp_path):
     assert proc.returncode == 2 and b"--tts espeak" in proc.stderr and not (tmp_path / "x.wav").exists()
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_the_storyteller_writes_its_files_on_the_feedback_axis(tmp_path):
     """narration.wav, story.TextGrid and feedback.jsonl of a short story meet on one axis: the TextGrid's
     strokes are the stroke feedback, its words are where the WAV sounds them, and each word's mark was fed
@@ -149,6 +150,7 @@ def test_the_storyteller_writes_its_files_on_the_feedback_axis(tmp_path):
     assert metrics["time_axis"].startswith("simulated time") and metrics["audio_start_s"] > 1.0
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_the_conductor_writes_the_ensemble_and_its_beats_on_the_motion_axis(tmp_path):
     import csv
     import json

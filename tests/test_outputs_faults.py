@@ -446,6 +446,7 @@ def check_storyteller(outcome: dict) -> None:
     assert outcome["leftovers"] == []  # the next run cleared what the killed ones staged
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_a_killed_storyteller_leaves_the_old_run_or_the_new_whole(tmp_path):
     check_storyteller(storyteller_kills(tmp_path, runs=3))
 
@@ -593,6 +594,7 @@ def check_reports(outcome: dict) -> None:
     assert outcome["final"]["hidden"] == []  # the next run cleared the staging folders and temporaries
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_a_killed_report_leaves_the_old_pair_or_the_new(tmp_path):
     check_reports(report_kills(tmp_path, runs=4))
 

@@ -80,6 +80,7 @@ STORY_STAGES = ("synthesising speech", "simulating", "poses/BVH", "audio", "repo
 CONDUCTOR_STAGES = ("simulating", "measuring", "audio", "poses/BVH", "report", "pictures")
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_run_storytelling_names_its_stages_on_a_terminal_and_nothing_in_a_pipe(tmp_path):
     # each run with a speech cache of its own: both synthesise (and say so on stdout)
     args = ("run", "storytelling", "--story", SHORT_STORY, "--tts", "builtin", "--fps", 30, "--window", 60)
@@ -102,6 +103,7 @@ def test_run_storytelling_names_its_stages_on_a_terminal_and_nothing_in_a_pipe(t
         assert (tmp_path / "tty" / name).read_bytes() == (tmp_path / "pipe" / name).read_bytes(), name
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_run_conductor_names_its_stages_on_a_terminal_and_nothing_in_a_pipe(tmp_path):
     args = ("run", "conductor", "--bars", 4)
     status, out, screen = on_terminal(command(*args, "--out", tmp_path / "tty"), tmp_path)
@@ -119,6 +121,7 @@ def test_run_conductor_names_its_stages_on_a_terminal_and_nothing_in_a_pipe(tmp_
         assert (tmp_path / "tty" / name).read_bytes() == (tmp_path / "pipe" / name).read_bytes(), name
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_storytelling_compare_is_one_bar_of_strategies_and_writes_only_their_folders(tmp_path):
     args = ("run", "storytelling", "--compare", "--story", SHORT_STORY, "--tts", "builtin", "--fps", 30)
     out = tmp_path / "tty"
@@ -146,6 +149,7 @@ def test_storytelling_compare_is_one_bar_of_strategies_and_writes_only_their_fol
     assert without_figures(printed).replace("tty", "pipe") == without_figures(piped.stdout)
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_conductor_compare_is_one_bar_of_strategies_and_writes_only_their_folders(tmp_path):
     args = ("run", "conductor", "--compare", "--bars", 4)
     out = tmp_path / "tty"
@@ -166,6 +170,7 @@ def test_conductor_compare_is_one_bar_of_strategies_and_writes_only_their_folder
     assert without_figures(printed).replace("tty", "pipe") == without_figures(piped.stdout)
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_eval_speech_sync_shows_the_strategy_under_way_on_a_terminal_only(tmp_path):
     args = ("eval", "speech-sync", "--tts", "builtin")
     status, out, screen = on_terminal(command(*args, "--strategy", "all"), tmp_path)

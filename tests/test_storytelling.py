@@ -316,6 +316,7 @@ def _args(tmp_path, cache_dir, **changes) -> argparse.Namespace:
     return args
 
 
+@pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run
 def test_the_command_writes_every_output_and_repeats_itself(tmp_path, cache_dir, capsys):
     first, second = tmp_path / "a", tmp_path / "b"
     assert story_run.main(_args(first, cache_dir)) == 0
