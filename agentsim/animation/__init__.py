@@ -26,6 +26,7 @@ module           what lives there
                  pointing by inverse kinematics, hand shapes and key frame sequences.
 ``head``         nods, shakes and tilts, head turns, gaze with its eyes, saccades and held eyelids.
 ``pose``         face expressions and postures blended to and held, locomotion, the jaw during speech.
+``expressions``  the tables of face lexemes, FACS units and postures (plain data, read without numpy).
 ``lips``         lip sync: the viseme table (jaw, lip spread and rounding, lip closure), the drivers of
                  visemes and of keyframed face channels, and the monotone cubic their keys follow.
 ``functions``    motor functions by name with default parameters (background drivers, motion units).

@@ -19,7 +19,6 @@ wrist on the target, or on the line to it at arm's length).
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,7 +26,7 @@ import numpy as np
 
 from agentsim.animation.drivers import EPSILON, PRIORITY
 from agentsim.animation import lexicon as lexicon_data
-from agentsim.animation.lexicon import builtin as builtin_lexicon
+from agentsim.animation.lexicon import builtin as builtin_lexicon, conducting_meter  # noqa: F401
 from agentsim.errors import UsageError
 from agentsim.animation.motion import EASE, HOLD, MIN_PREP, KeyTimes, MotionDriver, blend_in, frac
 
@@ -86,15 +85,6 @@ CONDUCT_CENTER = builtin_lexicon()["conducting"]["center"]
 CONDUCT_PATTERNS: dict[int, list[tuple[tuple[float, float, float], float, float]]] = dict(
     builtin_lexicon()["conducting"]["patterns"])
 
-_CONDUCT = re.compile(r"^CONDUCT(?:ING)?_(\d+)_(\d+)(?:_(\d+))?$")
-
-
-def conducting_meter(lexeme: str) -> tuple[int, int | None] | None:
-    """(beats per bar, beat in the bar or None) for a lexeme like ``CONDUCT_4_4`` or ``CONDUCT_3_4_2``."""
-    m = _CONDUCT.match((lexeme or "").upper())
-    if not m:
-        return None
-    return int(m.group(1)), (int(m.group(3)) if m.group(3) else None)
 
 
 def conducting_path(beats_per_bar: int, beat: int, amount: float = 1.0) -> StrokePath:

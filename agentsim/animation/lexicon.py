@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import functools
 import json
+import re
+import sys
 import tomllib
 from importlib import resources
 
@@ -118,6 +120,26 @@ def builtin() -> dict:
     for name, form in lexicon["forms"].items():
         MURML_LEXEMES.setdefault(name, form)
     return lexicon
+
+
+_CONDUCT = re.compile(r"^CONDUCT(?:ING)?_(\d+)_(\d+)(?:_(\d+))?$")
+
+
+def conducting_meter(lexeme: str) -> tuple[int, int | None] | None:
+    """(beats per bar, beat in the bar or None) for a lexeme like ``CONDUCT_4_4`` or ``CONDUCT_3_4_2``."""
+    m = _CONDUCT.match((lexeme or "").upper())
+    if not m:
+        return None
+    return int(m.group(1)), (int(m.group(3)) if m.group(3) else None)
+
+
+def stroke_names():
+    """The gesture lexemes that are strokes now: :data:`agentsim.animation.arms.GESTURE_FORMS` once that module
+    is loaded (with the lexicons added since), before then the lexicon's own strokes, which are what it starts
+    with (read without numpy)."""
+    arms = sys.modules.get("agentsim.animation.arms")
+    forms = getattr(arms, "GESTURE_FORMS", None) if arms is not None else None
+    return forms if forms is not None else builtin()["strokes"]
 
 
 def murml_form(lexeme: str) -> str | None:

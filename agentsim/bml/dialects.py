@@ -80,6 +80,11 @@ SYNC_ALIASES = {
     "lips": {"stroke": "ready"},
     "speech": {"ready": "start", "stroke": "start", "strokeStart": "start", "relax": "end", "strokeEnd": "end"},
 }
+#: The sync point names that have an alias on some type, without those that hold another (``strokeStart`` holds
+#: ``stroke``): a reference with none of them in its text is never retargeted.
+_ALIASED = tuple(sorted(name for name in {n for aliases in SYNC_ALIASES.values() for n in aliases}
+                        if not any(other != name and other in name for aliases in SYNC_ALIASES.values()
+                                   for other in aliases)))
 #: Elements of BMLA and BMLT, which only count in their own namespaces.
 EXTENSION_LOCALS = set().union(*EXTENSION_BEHAVIOURS.values())
 _NUMBER = re.compile(r"^\s*[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\s*$")
@@ -154,12 +159,21 @@ def without_doctype(data: bytes) -> tuple[bytes, bool]:
 def fold_case(node: Node) -> bool:
     """Element names written in another case (``<BML>``, ``<SPEECH>``) get BML's spelling; True if any did."""
     changed = False
-    known = KNOWN_ELEMENTS.get(node.local.lower())
-    if known is not None and known != node.local:
-        node.tag = f"{node.prefix}:{known}" if node.prefix else known
-        changed = True
-    for child in node.elements():
-        changed = fold_case(child) or changed
+    spelling: dict[str, str | None] = {}  # a name as written -> BML's spelling if that differs, else None
+    stack = [node]
+    while stack:  # (every element, each on its own: the order they are met in does not matter)
+        n = stack.pop()
+        local = n.local
+        if local in spelling:
+            known = spelling[local]
+        else:
+            known = KNOWN_ELEMENTS.get(local.lower())
+            known = spelling[local] = known if known is not None and known != local else None
+        if known is not None:
+            n.tag = f"{n.prefix}:{known}" if n.prefix else known
+            changed = True
+        if n.children:
+            stack += [c for c in n.children if isinstance(c, Node)]
     return changed
 
 
@@ -277,6 +291,7 @@ class Adapter:
         self.prosody: list[Node] = []
         self.constraints: list[Node] = []
         self.written: dict[int, str] = {}  # id() of an element -> its name as written, before mapping
+        self._respelled: dict[str, tuple[str, str | None]] = {}  # see ref()
 
     # ------------------------------------------------------------------------------------------- the block
     def adapt(self) -> None:
@@ -342,19 +357,20 @@ class Adapter:
         """The draft namespace is read as BML 1.0 (in every element's declarations)."""
         changed: dict[int, dict[str, str]] = {}
         drafts: set[str] = set()
-
-        def visit(n: Node) -> None:
-            if id(n.namespaces) not in changed:
+        stack = [node]
+        while stack:  # (every element, each on its own; most share their parent's declarations, one dict)
+            n = stack.pop()
+            key = id(n.namespaces)
+            mapping = changed.get(key)
+            if mapping is None:
                 mapping = n.namespaces
                 if any(uri in DRAFT_NAMESPACES for uri in mapping.values()):
                     drafts.update(uri for uri in mapping.values() if uri in DRAFT_NAMESPACES)
                     mapping = {p: (BML_NAMESPACE if uri in DRAFT_NAMESPACES else uri) for p, uri in mapping.items()}
-                changed[id(n.namespaces)] = mapping
-            n.namespaces = changed[id(n.namespaces)]
-            for child in n.elements():
-                visit(child)
-
-        visit(node)
+                changed[key] = mapping
+            n.namespaces = mapping
+            if n.children:
+                stack += [c for c in n.children if isinstance(c, Node)]
         for uri in sorted(drafts):
             self.notes.add(f"namespace {uri} (a BML draft) read as BML 1.0")
 
@@ -404,17 +420,17 @@ class Adapter:
     def map_element(self, node: Node) -> bool:
         """Rewrite one behaviour element into a type we have; False if it has no mapping."""
         local = node.local
-        mapped = getattr(self, f"map_{local.replace('-', '_')}", None)
         if local in BEHAVIOUR_TYPES and local not in DIALECT_BEHAVIOURS and local not in EXTENSION_LOCALS:
             if not is_bml_uri(node.namespace):
                 self.notes.add(f"<{node.tag}> (namespace {node.namespace or 'undeclared'}) read as BML <{local}>")
             new = self.core(node)
-        elif mapped is not None:
+        else:
+            mapped = getattr(self, f"map_{local.replace('-', '_')}", None)
+            if mapped is None:
+                return False
             new = mapped(node)
             if new is None:
                 return False
-        else:
-            return False
         self.make_bml(node, new)
         self.attributes(node)
         return True
@@ -680,23 +696,35 @@ class Adapter:
             node.attrs[canonical] = self.ref(node.attrs[canonical])
 
     def constraint_refs(self, node: Node) -> None:
-        for child in node.elements():
+        for child in node.children:
+            if not isinstance(child, Node):
+                continue
             if "ref" in child.attrs:
                 child.attrs["ref"] = self.ref(child.attrs["ref"])
-            for sync in child.elements():
-                if "ref" in sync.attrs:
+            for sync in child.children:
+                if isinstance(sync, Node) and "ref" in sync.attrs:
                     sync.attrs["ref"] = self.ref(sync.attrs["ref"])
 
     def ref(self, value: str) -> str:
+        """A reference with its sync point spelled as BML does, noting the respelling (a block repeats its
+        references: each one is read once)."""
+        found = self._respelled.get(value)
+        if found is None:
+            found = self._respelled[value] = self._respell(value)
+        if found[1] is not None:
+            self.notes.add(found[1])
+        return found[0]
+
+    @staticmethod
+    def _respell(value: str) -> tuple[str, str | None]:
         match = _REF_SYNC.match(value.strip())
         if not match:
-            return value
+            return value, None
         sync = match.group("sync")
         canonical = SYNC_SPELLINGS.get(sync.lower().replace("_", "").replace("-", ""))
         if canonical and canonical != sync:
-            self.notes.add(f"sync point {sync} read as {canonical}")
-            return f"{match.group('path')}{canonical}{match.group('rest')}"
-        return value
+            return f"{match.group('path')}{canonical}{match.group('rest')}", f"sync point {sync} read as {canonical}"
+        return value, None
 
     def retarget_refs(self, behaviours: list[Node], constraints: list[Node]) -> None:
         """References to a sync point that the behaviour referred to has under another name (SmartBody's
@@ -705,31 +733,45 @@ class Adapter:
         kinds = {b.attrs.get("id", ""): b.local for b in behaviours}
         marks = {b.attrs.get("id", ""): speech_marks(b) for b in behaviours if b.local == "speech"}
 
-        def fix(value: str) -> str:
+        def retarget(value: str) -> tuple[str, str | None]:
+            if not any(name in value for name in _ALIASED):  # (most references: no sync point with an alias)
+                return value, None
             match = _REF_SYNC.match(value.strip())
             if not match:
-                return value
+                return value, None
             path = match.group("path")[:-1].split(":")
             if len(path) == 2 and path[0] == block_id:
                 path = path[1:]
             if len(path) != 1 or path[0] not in kinds:
-                return value
+                return value, None
             kind, sync = kinds[path[0]], match.group("sync")
             if sync in BEHAVIOUR_TYPES[kind].syncs or sync in marks.get(path[0], ()):
-                return value
+                return value, None
             alias = SYNC_ALIASES.get(kind, {}).get(sync)
             if alias is None:
-                return value
-            self.notes.add(f"{path[0]}:{sync} read as {path[0]}:{alias} (a <{kind}> has no {sync})")
-            return f"{match.group('path')}{alias}{match.group('rest')}"
+                return value, None
+            return (f"{match.group('path')}{alias}{match.group('rest')}",
+                    f"{path[0]}:{sync} read as {path[0]}:{alias} (a <{kind}> has no {sync})")
+
+        done: dict[str, tuple[str, str | None]] = {}  # (a block repeats its references: each is read once)
+
+        def fix(value: str) -> str:
+            found = done.get(value)
+            if found is None:
+                found = done[value] = retarget(value)
+            if found[1] is not None:
+                self.notes.add(found[1])
+            return found[0]
 
         for b in behaviours:
             for key in self.sync_keys(b):
                 b.attrs[key] = fix(b.attrs[key])
         for c in constraints:
-            for child in c.elements():
-                for n in (child, *child.elements()):
-                    if "ref" in n.attrs:
+            for child in c.children:
+                if not isinstance(child, Node):
+                    continue
+                for n in (child, *child.children):
+                    if isinstance(n, Node) and "ref" in n.attrs:
                         n.attrs["ref"] = fix(n.attrs["ref"])
 
     # ------------------------------------------------------------------------------------------- ids, times
@@ -814,7 +856,8 @@ class Adapter:
         the earliest start's distance before 0 (a behaviour's start as its numbers and its preferred timing
         put it), and behaviours that had no time of their own start at that time."""
         numbers = [(b, key) for b in behaviours for key in self.sync_keys(b) if _NUMBER.match(b.attrs[key])]
-        earliest = min((implied_start(b) for b in behaviours if any(x is b for x, _ in numbers)), default=0.0)
+        timed = {id(b) for b, _ in numbers}  # (the behaviours with a number: looked up, not searched for)
+        earliest = min((implied_start(b) for b in behaviours if id(b) in timed), default=0.0)
         if not earliest < -1e-9 or not math.isfinite(earliest):
             return
         shift = -earliest

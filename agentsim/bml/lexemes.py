@@ -26,9 +26,9 @@ def fallback(tag: str, attrs: Mapping[str, str]) -> tuple[str, str] | None:
         return None
     if not lexeme and tag != "faceFacs":
         return None
-    # the body's lexicons come with numpy: imported only when a behaviour has a lexeme to look up there
-    from agentsim.animation.arms import GESTURE_FORMS, conducting_meter
-    from agentsim.animation.pose import FACE_LEXEMES, FACS_UNITS, POSTURES
+    # the body's tables, read without numpy (the modules that move the body to them import it)
+    from agentsim.animation.expressions import FACE_LEXEMES, FACS_UNITS, POSTURES
+    from agentsim.animation.lexicon import conducting_meter, murml_form, stroke_names
 
     if tag == "faceFacs":
         au = str(attrs.get("au", "")).strip()
@@ -37,9 +37,7 @@ def fallback(tag: str, attrs: Mapping[str, str]) -> tuple[str, str] | None:
     if tag in ("face", "faceLexeme", "faceShift"):
         return None if lexeme.upper() in FACE_LEXEMES else (lexeme, "no motion")
     if tag == "gesture":
-        from agentsim.animation.lexicon import murml_form
-
-        known = (lexeme.upper() in GESTURE_FORMS or lexeme.upper() in SIGNALS or murml_form(lexeme) is not None
+        known = (lexeme.upper() in stroke_names() or lexeme.upper() in SIGNALS or murml_form(lexeme) is not None
                  or conducting_meter(lexeme.upper()) is not None)
         return None if known else (lexeme, "a generic gesture")
     if tag in ("posture", "postureShift"):
