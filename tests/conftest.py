@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import EXAMPLES
+from helpers import EXAMPLES, cached_render
 
 
 @pytest.fixture
@@ -23,8 +23,8 @@ def ensemble(tmp_path_factory):
 
     from agentsim.music.ensemble import render_ensemble, write_beats
 
-    audio, sr, beats = render_ensemble(bpm=120, meter="4/4", bars=20, ramp=(4, 8, 0.10), rubato=0.02, seed=11,
-                                       sample_rate=22050)
+    audio, sr, beats = cached_render(render_ensemble, bpm=120, meter="4/4", bars=20, ramp=(4, 8, 0.10), rubato=0.02,
+                                     seed=11, sample_rate=22050)
     folder = tmp_path_factory.mktemp("ensemble")
     soundfile.write(folder / "ensemble.wav", audio, sr)
     write_beats(folder / "beats.txt", beats)

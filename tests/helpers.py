@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 
@@ -328,3 +329,38 @@ def seek_drawn(browser, t: float) -> None:
     """Seek the open report to ``t`` and wait until the page has drawn that time (two animation frames)."""
     browser.evaluate(f"report.seek({t!r})")
     browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", await_promise=True)
+
+
+# ------------------------------------------------------------------------------------------------ renders
+#: Where renders the tests share are kept between runs (outside the checkout).
+RENDERS = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "agentsim" / "test-renders"
+
+
+def cached_render(make, *args, **kwargs):
+    """``make(*args, **kwargs)`` (an ensemble's render: audio and its true beats), rendered once per test run
+    and machine and read back from :data:`RENDERS` after that. The key holds the function's name, its
+    arguments and the source of ``agentsim.music`` (a change of the renderer renders anew); test processes
+    running side by side wait for each other's render rather than make it twice."""
+    import fcntl
+    import hashlib
+    import pickle
+
+    import agentsim.music
+
+    music = Path(agentsim.music.__file__).parent
+    key = hashlib.sha256(repr((make.__module__, make.__qualname__, args, sorted(kwargs.items()))).encode())
+    for source in sorted(music.rglob("*.py")):
+        key.update(source.read_bytes())
+    RENDERS.mkdir(parents=True, exist_ok=True)
+    path = RENDERS / f"{make.__name__}-{key.hexdigest()[:20]}.pickle"
+    with open(RENDERS / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if path.exists():
+            with open(path, "rb") as f:
+                return pickle.load(f)
+        made = make(*args, **kwargs)
+        scratch = path.with_suffix(f".{os.getpid()}.tmp")
+        with open(scratch, "wb") as f:
+            pickle.dump(made, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(scratch, path)
+        return made

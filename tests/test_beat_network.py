@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from agentsim.music.ensemble import render_ensemble_full
+from helpers import cached_render
 from anticipators.beats.envelope import SpectralFluxEnvelope
 from anticipators.beats.evaluation import committed_beats, score_beats, track_file
 from anticipators.beats.network import WEIGHTS_PATH, BandFluxEnvelope, band_flux, load_network
@@ -22,7 +23,7 @@ def frame_times(n: int) -> np.ndarray:
 @pytest.fixture(scope="module")
 def drums():
     """Drums alone at 100 BPM, hi-hat on every eighth: the off-beat eighths are onsets but no beats."""
-    return render_ensemble_full(100.0, "4/4", 12, parts=("drums",), hihat="eighths", seed=3, sample_rate=SR)
+    return cached_render(render_ensemble_full, 100.0, "4/4", 12, parts=("drums",), hihat="eighths", seed=3, sample_rate=SR)
 
 
 def test_the_shipped_weights_load_and_are_small():
@@ -94,7 +95,7 @@ def test_the_activation_peaks_on_the_beats_not_the_off_beat_eighths(drums):
 
 
 def test_the_tracker_with_the_learned_observation_holds_on_a_render():
-    r = render_ensemble_full(118.0, "3/4", 24, ramp=(4, 12, 0.08), rubato=0.02, seed=11, sample_rate=SR)
+    r = cached_render(render_ensemble_full, 118.0, "3/4", 24, ramp=(4, 12, 0.08), rubato=0.02, seed=11, sample_rate=SR)
     run = track_file(r.audio, "causal-net", 512, sample_rate=SR)
     committed = committed_beats(run["updates"], 0.2, float(r.beat_times[-1]) + 0.07)
     res = score_beats(r.beat_times, committed, skip=8.0)

@@ -20,6 +20,7 @@ from anticipators.beats.baselines import IOIBaselineTracker
 from anticipators.beats.envelope import SpectralFluxEnvelope
 from anticipators.beats.tracking import CausalBeatTracker, make_tracker
 from agentsim.music.ensemble import render_ensemble_full
+from helpers import cached_render
 from agentsim.music.events import SynthEvent
 from agentsim.music.rendering import render_events
 
@@ -105,12 +106,12 @@ def test_score_committed_scores_the_committed_sequence_not_the_nearest_predictio
 @pytest.fixture(scope="module")
 def render_44():
     # 4/4, 118 BPM, +10 % ramp over 16 bars, +-2 % rubato, about 30 s
-    return render_ensemble_full(118, "4/4", 15, ramp=(2, 16, 0.10), rubato=0.02, seed=21, sample_rate=SR)
+    return cached_render(render_ensemble_full, 118, "4/4", 15, ramp=(2, 16, 0.10), rubato=0.02, seed=21, sample_rate=SR)
 
 
 @pytest.fixture(scope="module")
 def render_34():
-    return render_ensemble_full(132, "3/4", 22, ramp=(2, 16, 0.10), rubato=0.02, seed=22, sample_rate=SR)
+    return cached_render(render_ensemble_full, 132, "3/4", 22, ramp=(2, 16, 0.10), rubato=0.02, seed=22, sample_rate=SR)
 
 
 @pytest.mark.parametrize("which", ["render_44", "render_34"])
