@@ -313,12 +313,14 @@ class LiveRealizer:
     def run(self) -> None:
         """The realizer's thread: the SimPy real-time loop, until :meth:`close`."""
         self.env.sync()
-        self.env.process(self.pump())
+        pump = self.env.process(self.pump())
         for period, fn in self.periodic:
             self.env.process(self.tick(period, fn))
         self.started.set()
         try:
-            self.env.run()
+            # until the pump stops, at :meth:`close`: what still plays then (a long speech, an anticipator's
+            # beats) is not waited for in real time
+            self.env.run(until=pump)
         except BaseException as exc:  # the server stops, saying why
             self.error = exc
             for fn in self.on_failure:
