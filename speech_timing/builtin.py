@@ -116,6 +116,7 @@ class BuiltinBackend:
         sentence_starts = True
         k = 0  # the next pause
         vowel_time, consonant_time, stress_factor = self.vowel, self.consonant, self.stress_factor
+        new, set_fields = object.__new__, object.__setattr__
         for match in matches:
             while k < len(pauses) and pauses[k][0] <= match.start():
                 t += pauses[k][1]
@@ -135,7 +136,11 @@ class BuiltinBackend:
                 if emphasised != 1.0 and vowel and not emphasised_done and (stressed or not content):
                     duration *= emphasised
                     emphasised_done = True
-                phonemes.append(Phoneme(symbol, t, t + duration * word_scale, index, stressed))
+                # (Phoneme(symbol, t, end, index, stressed), made without the frozen dataclass's __init__)
+                phoneme = new(Phoneme)
+                set_fields(phoneme, "__dict__", {"symbol": symbol, "start": t, "end": t + duration * word_scale,
+                                                 "word_index": index, "stressed": stressed})
+                phonemes.append(phoneme)
                 t += duration * word_scale
             words.append(Word(index, token, start, t, match.start(), match.end()))
             following = text[match.end():match.end() + 2].strip()[:1]

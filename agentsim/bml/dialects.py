@@ -20,6 +20,8 @@ from typing import Iterable
 # The body's lexicons (agentsim.animation.arms and .pose, with numpy) are imported where foreign vocabulary
 # is mapped or noted: reading BML 1.0 does without them.
 from agentsim.bml import lexemes
+from agentsim.bml.spelling import (KNOWN_ELEMENTS, REF_SYNC, SYNC_SPELLINGS, canonical_sync,  # noqa: F401
+                                   fold_case, ref_sync, without_doctype)
 from agentsim.core.xmltree import FOREST, Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
@@ -31,9 +33,6 @@ from agentsim.errors import ScheduleError
 #: The namespace of the BML drafts before 1.0 (Greta, SEMAINE, the Vienna draft), read as BML 1.0.
 DRAFT_NAMESPACES = ("http://www.mindmakers.org/projects/BML", "http://www.mindmakers.org/projects/bml",
                     "http://www.mindmakers.org/projects/BML/", "http://www.mindmakers.org/projects/bml/")
-#: Sync point names as every type of behaviour spells them, by a spelling folded to lower case without
-#: underscores or hyphens (``stroke_start``, ``strokeENd`` and ``STROKE`` are strokeStart, strokeEnd, stroke).
-SYNC_SPELLINGS = {s.lower(): s for t in BEHAVIOUR_TYPES.values() for s in t.syncs}
 #: Behaviour types whose ``type=`` attribute the drafts used for the lexeme.
 TYPE_IS_LEXEME = {"gesture", "head", "face", "faceLexeme", "posture", "postureShift", "faceShift"}
 #: Elements of other realizers that have no counterpart here (taken out, reported once per block).
@@ -82,15 +81,12 @@ SYNC_ALIASES = {
 }
 #: The sync point names that have an alias on some type, without those that hold another (``strokeStart`` holds
 #: ``stroke``): a reference with none of them in its text is never retargeted.
-_ALIASED = tuple(sorted(name for name in {n for aliases in SYNC_ALIASES.values() for n in aliases}
-                        if not any(other != name and other in name for aliases in SYNC_ALIASES.values()
-                                   for other in aliases)))
+_ALIASED = re.compile("|".join(sorted(
+    name for name in {n for aliases in SYNC_ALIASES.values() for n in aliases}
+    if not any(other != name and other in name for aliases in SYNC_ALIASES.values() for other in aliases))))
 #: Elements of BMLA and BMLT, which only count in their own namespaces.
 EXTENSION_LOCALS = set().union(*EXTENSION_BEHAVIOURS.values())
 _NUMBER = re.compile(r"^\s*[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\s*$")
-_REF_SYNC = re.compile(r"^(?P<path>.*:)(?P<sync>[^:+\-\s]+)(?P<rest>\s*(?:[+-].*)?)$")
-
-
 @dataclass
 class Notes:
     """What was adapted, in order, each said once (with how many times it happened), and the behaviour
@@ -135,46 +131,6 @@ class Envelope:
     notes: Notes = field(default_factory=Notes)
     character: str | None = None
     losses: list[tuple[str, Node]] = field(default_factory=list)
-
-
-#: Element names the lenient reader knows, by their lower-case spelling (EMBR writes ``<BML>``, ``<SPEECH>``).
-KNOWN_ELEMENTS = {name.lower(): name for name in (*BEHAVIOUR_TYPES, "bml", "text", "sync", "required", "constraint",
-                                                  "synchronize", "before", "after", "act", "participant",
-                                                  "fml-apml", "tm", "mark", "description", "animation", "lips",
-                                                  "curves", "curve", "event", "saccade", "body", "torso")}
-_DOCTYPE = re.compile(rb"<!DOCTYPE\s+[\w:.-]+(?:\s+(?:SYSTEM|PUBLIC)(?:\s+(?:\"[^\"]*\"|'[^']*')){1,2})?\s*"
-                      rb"(?:\[\s*\])?\s*>")
-
-
-def without_doctype(data: bytes) -> tuple[bytes, bool]:
-    """A document type declaration that only names an external DTD (and declares nothing) is blanked out:
-    the DTD is never fetched, and the hardened reader refuses what could fetch it. One that declares
-    entities stays, and is refused."""
-    match = _DOCTYPE.search(data)
-    if not match:
-        return data, False
-    return data[:match.start()] + b" " * (match.end() - match.start()) + data[match.end():], True
-
-
-def fold_case(node: Node) -> bool:
-    """Element names written in another case (``<BML>``, ``<SPEECH>``) get BML's spelling; True if any did."""
-    changed = False
-    spelling: dict[str, str | None] = {}  # a name as written -> BML's spelling if that differs, else None
-    stack = [node]
-    while stack:  # (every element, each on its own: the order they are met in does not matter)
-        n = stack.pop()
-        local = n.local
-        if local in spelling:
-            known = spelling[local]
-        else:
-            known = KNOWN_ELEMENTS.get(local.lower())
-            known = spelling[local] = known if known is not None and known != local else None
-        if known is not None:
-            n.tag = f"{n.prefix}:{known}" if n.prefix else known
-            changed = True
-        if n.children:
-            stack += [c for c in n.children if isinstance(c, Node)]
-    return changed
 
 
 def seconds(value: float) -> str:
@@ -279,8 +235,9 @@ class Adapter:
     ``name_block`` gives an id to a block without one.
     """
 
-    def __init__(self, envelope: Envelope, name_block):
+    def __init__(self, envelope: Envelope, name_block, drafts: bool = True):
         self.envelope = envelope
+        self.drafts = drafts  # False: no namespace declared in the document is a draft's
         self.node = envelope.node
         self.notes = envelope.notes
         self.losses = envelope.losses
@@ -297,7 +254,8 @@ class Adapter:
     def adapt(self) -> None:
         node = self.node
         self.declared_namespace = node.namespace
-        self.read_namespaces(node)
+        if self.drafts:
+            self.read_namespaces(node)
         if not node.attrs.get("id", "").strip():
             node.attrs["id"] = self.name_block()
             self.notes.add(f"block without id: named {node.attrs['id']}")
@@ -696,14 +654,19 @@ class Adapter:
             node.attrs[canonical] = self.ref(node.attrs[canonical])
 
     def constraint_refs(self, node: Node) -> None:
+        respelled, notes = self._respelled, self.notes  # (Adapter.ref, without a call per reference)
         for child in node.children:
-            if not isinstance(child, Node):
+            if isinstance(child, str):
                 continue
-            if "ref" in child.attrs:
-                child.attrs["ref"] = self.ref(child.attrs["ref"])
-            for sync in child.children:
-                if isinstance(sync, Node) and "ref" in sync.attrs:
-                    sync.attrs["ref"] = self.ref(sync.attrs["ref"])
+            for n in (child, *child.children):
+                value = None if isinstance(n, str) else n.attrs.get("ref")
+                if value is not None:
+                    found = respelled.get(value)
+                    if found is None:
+                        found = respelled[value] = self._respell(value)
+                    if found[1] is not None:
+                        notes.add(found[1])
+                    n.attrs["ref"] = found[0]
 
     def ref(self, value: str) -> str:
         """A reference with its sync point spelled as BML does, noting the respelling (a block repeats its
@@ -717,13 +680,13 @@ class Adapter:
 
     @staticmethod
     def _respell(value: str) -> tuple[str, str | None]:
-        match = _REF_SYNC.match(value.strip())
+        match = ref_sync(value)
         if not match:
             return value, None
-        sync = match.group("sync")
-        canonical = SYNC_SPELLINGS.get(sync.lower().replace("_", "").replace("-", ""))
+        path, sync, rest = match
+        canonical = canonical_sync(sync)
         if canonical and canonical != sync:
-            return f"{match.group('path')}{canonical}{match.group('rest')}", f"sync point {sync} read as {canonical}"
+            return f"{path}{canonical}{rest}", f"sync point {sync} read as {canonical}"
         return value, None
 
     def retarget_refs(self, behaviours: list[Node], constraints: list[Node]) -> None:
@@ -734,9 +697,9 @@ class Adapter:
         marks = {b.attrs.get("id", ""): speech_marks(b) for b in behaviours if b.local == "speech"}
 
         def retarget(value: str) -> tuple[str, str | None]:
-            if not any(name in value for name in _ALIASED):  # (most references: no sync point with an alias)
+            if not _ALIASED.search(value):  # (most references: no sync point with an alias)
                 return value, None
-            match = _REF_SYNC.match(value.strip())
+            match = REF_SYNC.match(value.strip())
             if not match:
                 return value, None
             path = match.group("path")[:-1].split(":")

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from agentsim.bml import lexemes
-from agentsim.bml.dialects import Adapter, Notes, find_blocks, fold_case, without_doctype
+from agentsim.bml.dialects import DRAFT_NAMESPACES, Adapter, Notes, find_blocks, fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
 from agentsim.core.xmltree import Node, encode, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
@@ -213,11 +213,13 @@ def _parse_document(text: str | bytes, strict: bool, name_block: Callable[[], st
         return [Refused(guess_block_id(text), exc)]
     data, doctype = without_doctype(data)
     defaults: list[str] = []
+    made: dict = {}
     try:
-        root, forest = read_forest(data, defaults)
+        root, forest = read_forest(data, defaults, made)
     except BMLError as exc:
         return [Refused(guess_block_id(text), exc)]
-    folded = fold_case(root)
+    folded = fold_case(root, made["names"])
+    drafts = any(uri in DRAFT_NAMESPACES for scope in made["scopes"] for uri in scope.values())
     envelopes = find_blocks(root, forest)
     for envelope in envelopes:
         if doctype:
@@ -235,7 +237,7 @@ def _parse_document(text: str | bytes, strict: bool, name_block: Callable[[], st
     results: list[Block | Refused] = []
     for envelope in envelopes:
         try:
-            Adapter(envelope, name_free).adapt()
+            Adapter(envelope, name_free, drafts).adapt()
             block = read_block(envelope.node, envelope.notes)
         except BMLError as exc:
             results.append(Refused(envelope.node.attrs.get("id", ""), exc))
@@ -452,9 +454,12 @@ class _Reader:
 
     def constraint(self, node: Node, required: bool) -> None:
         owner = node.attrs.get("id", "")
-        constraints = self.block.constraints
+        add = self.block.constraints.append
         known = self.refs  # (looked up here at once: a block's constraints repeat their references)
-        for child in node.elements():
+        new = _new_constraint
+        for child in node.children:
+            if isinstance(child, str):
+                continue
             kind = child.local
             if kind not in ("synchronize", "before", "after"):
                 self.warn("PARSING_FAILURE", f"unknown constraint <{child.tag}> ignored", child)
@@ -476,16 +481,28 @@ class _Reader:
                         continue
                 refs.append(ref)
             anchor = None
-            if "ref" in child.attrs:
-                try:
-                    anchor = self.ref(child.attrs["ref"], child)
-                except BMLError as exc:
-                    self.warn("PARSING_FAILURE", f"{exc.reason}; constraint ignored", child)
-                    continue
-            if kind in ("before", "after") and anchor is None:
+            text = child.attrs.get("ref")
+            if text is not None:
+                anchor = known.get(text)
+                if anchor is None:
+                    try:
+                        anchor = self.ref(text, child)
+                    except BMLError as exc:
+                        self.warn("PARSING_FAILURE", f"{exc.reason}; constraint ignored", child)
+                        continue
+            if kind == "synchronize":
+                if anchor is not None:
+                    refs.insert(0, anchor)
+                    anchor = None
+            elif anchor is None:
                 self.warn("PARSING_FAILURE", f"<{kind}> needs a ref attribute; constraint ignored", child)
                 continue
-            if kind == "synchronize" and anchor is not None:
-                refs.insert(0, anchor)
-                anchor = None
-            constraints.append(Constraint(kind, refs, anchor, owner, required, line=child.line, column=child.column))
+            # (made as Constraint(kind, refs, anchor, owner, required, line=, column=) makes it, without its
+            # __init__: a block has thousands)
+            constraint = new(Constraint)
+            constraint.__dict__.update(kind=kind, refs=refs, anchor=anchor, id=owner, required=required, owner="",
+                                       line=child.line, column=child.column)
+            add(constraint)
+
+
+_new_constraint = object.__new__

@@ -87,7 +87,11 @@ class Planner:
 
     def check_times(self, behaviour: Behaviour, preferred: Sequence[float], times: Sequence[float]) -> None:
         """Raise :class:`ScheduleError` unless ``times`` is a valid timing for ``behaviour``."""
-        if any(t != t for t in times):
+        try:
+            total = sum(times)  # (not a number only if one of them is not, or they hold both infinities)
+        except TypeError:
+            total = math.nan
+        if total != total and any(t != t for t in times):
             raise ScheduleError("a sync point's time is not a number (NaN)")
         for a, b in zip(times, times[1:]):
             if b < a - EPSILON:

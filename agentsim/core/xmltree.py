@@ -74,47 +74,52 @@ class Node:
 _new_node = object.__new__
 
 
-class _TreeBuilder:
-    """Builds :class:`Node` trees from expat callbacks, recording where each element starts.
+def _builder(expat, shift: int, data: bytes) -> dict:
+    """The expat callbacks that build :class:`Node` trees, recording where each element starts, and what
+    they build: ``root``, and ``defaults``, the attribute defaults an internal DTD declares (``gesture
+    lexeme="BEAT"``), which are not applied. ``shift`` is subtracted from columns on line 1 (text put
+    before the document there).
 
-    ``first_line_shift`` is subtracted from columns on line 1 (text put before the document there).
+    (Closures over local state: one element costs a call of ``start`` and one of ``end``, nothing more.)
+    ``data``, the document: where it spells ``xmlns`` fewer times than a namespace could be declared in it,
+    no element after that has its attributes searched for declarations.
     """
+    state: dict = {"root": None, "defaults": [], "scopes": [{}]}
+    stack: list[Node] = []
+    push, pop = stack.append, stack.pop
+    # the pieces of text expat gave since the last tag, joined into one child at the next (a text of
+    # megabytes comes in thousands of pieces: added one by one, it was copied as often)
+    pending: list[str] = []
+    # tag name -> (local, prefix): the tag's parts are split once per tag name, not per element
+    tags: dict[str, tuple[str, str | None]] = {}
+    new = _new_node
+    # How many namespace declarations the document can still hold: the times it spells "xmlns" (an attribute
+    # name is written as it is; in UTF-16, bytes of its own, every element is searched)
+    utf16 = data[:2] in (b"\xff\xfe", b"\xfe\xff") or b"\x00" in data[:2]
+    declarations = [data.count(b"xmlns") if not utf16 else len(data)]
 
-    def __init__(self, expat, first_line_shift: int = 0) -> None:
-        self.expat = expat
-        self.shift = first_line_shift
-        self.root: Node | None = None
-        self.stack: list[Node] = []
-        self.tags: dict[str, tuple[str, str | None]] = {}
-        #: the attribute defaults an internal DTD declares (``gesture lexeme="BEAT"``), which are not applied
-        self.defaults: list[str] = []
-        #: the pieces of text expat gave since the last tag, joined into one child at the next (a text of
-        #: megabytes comes in thousands of pieces: added one by one, it was copied as often)
-        self.pending: list[str] = []
+    def flush() -> None:
+        children = stack[-1].children
+        text = "".join(pending)
+        pending.clear()
+        if children and isinstance(children[-1], str):
+            children[-1] += text
+        else:
+            children.append(text)
 
-    def flush(self) -> None:
-        if self.pending:
-            children = self.stack[-1].children
-            text = "".join(self.pending)
-            self.pending = []
-            if children and isinstance(children[-1], str):
-                children[-1] += text
-            else:
-                children.append(text)
-
-    def attlist(self, element: str, attribute: str, kind: str | None, default: str | None, required: int) -> None:
-        if default is not None:
-            shown = default if len(default) <= 40 else default[:37] + "..."
-            self.defaults.append(f"{element} {attribute}={shown!r}")
-
-    def start(self, name: str, attrs: dict[str, str]) -> None:
-        self.flush()
-        stack = self.stack
-        if len(stack) >= MAX_DEPTH:
-            raise BMLError(f"elements nested more than {MAX_DEPTH} deep", self.expat.CurrentLineNumber,
-                           self.expat.CurrentColumnNumber + 1)
-        namespaces = stack[-1].namespaces if stack else {}
-        if attrs and "xmlns" in "".join(attrs) and any(key.startswith("xmlns") for key in attrs):
+    def start(name: str, attrs: dict[str, str]) -> None:
+        if pending:
+            flush()
+        if stack:
+            if len(stack) >= MAX_DEPTH:
+                raise BMLError(f"elements nested more than {MAX_DEPTH} deep", expat.CurrentLineNumber,
+                               expat.CurrentColumnNumber + 1)
+            parent = stack[-1]
+            namespaces = parent.namespaces
+        else:
+            parent = None
+            namespaces = state["scopes"][0]
+        if declarations[0] and attrs and "xmlns" in "".join(attrs) and any(key.startswith("xmlns") for key in attrs):
             namespaces = dict(namespaces)
             plain = {}
             for key, value in attrs.items():
@@ -124,56 +129,63 @@ class _TreeBuilder:
                     namespaces[key[6:]] = value
                 else:
                     plain[key] = value
+            declarations[0] = max(declarations[0] - (len(attrs) - len(plain)), 0)
             attrs = plain
-        expat = self.expat
+            state["scopes"].append(namespaces)
         line = expat.CurrentLineNumber
-        column = expat.CurrentColumnNumber + 1
-        if line == 1:
-            column -= self.shift
-        # (a Node made without its __init__: the tag's parts are split once per tag name, not per element)
-        node = _new_node(Node)
+        # (a Node made without its __init__)
+        node = new(Node)
         node._tag = name
-        parts = self.tags.get(name)
+        parts = tags.get(name)
         if parts is None:
             prefix, colon, local = name.partition(":")
-            parts = self.tags[name] = (local, prefix) if colon else (name, None)
+            parts = tags[name] = (local, prefix) if colon else (name, None)
         node.local, node.prefix = parts
         node.attrs = attrs
         node.line = line
-        node.column = column
+        node.column = expat.CurrentColumnNumber + 1 - (shift if line == 1 else 0)
         node.children = []
         node.namespaces = namespaces
-        if stack:
-            stack[-1].children.append(node)
+        if parent is not None:
+            parent.children.append(node)
         else:
-            self.root = node
-        stack.append(node)
+            state["root"] = node
+        push(node)
 
-    def end(self, name: str) -> None:
-        self.flush()
-        self.stack.pop()
+    def end(name: str) -> None:
+        if pending:
+            flush()
+        pop()
 
-    def text(self, content: str) -> None:
-        if self.stack:
-            self.pending.append(content)
+    def text(content: str) -> None:
+        if stack:
+            pending.append(content)
+
+    def attlist(element: str, attribute: str, kind: str | None, default: str | None, required: int) -> None:
+        if default is not None:
+            shown = default if len(default) <= 40 else default[:37] + "..."
+            state["defaults"].append(f"{element} {attribute}={shown!r}")
+
+    state.update(start=start, end=end, text=text, attlist=attlist, names=tags.keys())
+    return state
 
 
-def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None) -> Node:
+def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None, made: dict | None = None) -> Node:
     # defusedxml's reader installs the handlers that refuse entity declarations and external
     # references on its expat parser; the tree is built straight from that parser's callbacks.
     reader = create_parser(forbid_dtd=False, forbid_entities=True, forbid_external=True)
     reader.setFeature(xml.sax.handler.feature_namespaces, False)
     reader.reset()
     expat = reader._parser
-    builder = _TreeBuilder(expat, shift)
-    expat.StartElementHandler = builder.start
-    expat.EndElementHandler = builder.end
-    expat.CharacterDataHandler = builder.text
+    builder = _builder(expat, shift, data)
+    expat.StartElementHandler = builder["start"]
+    expat.EndElementHandler = builder["end"]
+    expat.CharacterDataHandler = builder["text"]
     expat.buffer_text = True
     # Only the attributes the document writes: defaults an internal DTD's ATTLIST declares are not applied
     # (they could give a block its id or put a time into every element of a kind).
     expat.specified_attributes = True
-    expat.AttlistDeclHandler = builder.attlist
+    expat.AttlistDeclHandler = builder["attlist"]
     try:
         expat.Parse(data, True)
     except xml.parsers.expat.ExpatError as exc:
@@ -187,18 +199,22 @@ def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None) -> No
                        "are not allowed in BML", expat.CurrentLineNumber, expat.CurrentColumnNumber + 1) from None
     finally:
         # The reader and its expat parser refer to each other (a cycle, freed only by the collector), and the
-        # parser keeps the document and the tree: the cycle is broken, or every document read would stay in
-        # memory until a collection (dozens of them, megabytes each, in a live service that makes few other
-        # objects)
+        # parser keeps the document and the tree (through the callbacks' closures): the cycle is broken, or
+        # every document read would stay in memory until a collection (dozens of them, megabytes each, in a
+        # live service that makes few other objects)
         expat.StartElementHandler = expat.EndElementHandler = expat.CharacterDataHandler = None
         expat.AttlistDeclHandler = None
-        builder.expat = None
+        root, declared = builder["root"], builder["defaults"]
+        seen = {"names": set(builder["names"]), "scopes": builder["scopes"]}
+        builder.clear()  # (the callbacks and the state they fill refer to each other: another cycle)
         reader._parser = None
-    if builder.root is None:
+    if root is None:
         raise BMLError("empty document: expected a <bml> element", 1, 1)
     if defaults is not None:
-        defaults.extend(builder.defaults)
-    return builder.root
+        defaults.extend(declared)
+    if made is not None:
+        made.update(seen)
+    return root
 
 
 def encode(text: str | bytes) -> bytes:
@@ -230,16 +246,19 @@ _ENCODING = re.compile(rb"""encoding\s*=\s*["']([A-Za-z0-9._\-]+)["']""")
 _JUNK = xml.parsers.expat.errors.messages[xml.parsers.expat.errors.codes[xml.parsers.expat.errors.XML_ERROR_JUNK_AFTER_DOC_ELEMENT]]
 
 
-def read_forest(text: str | bytes, defaults: list[str] | None = None) -> tuple[Node, bool]:
+def read_forest(text: str | bytes, defaults: list[str] | None = None,
+                made: dict | None = None) -> tuple[Node, bool]:
     """The element tree of a document that may hold several top-level elements.
 
     Returns the root, and whether it is a :data:`FOREST` element made here around several elements one
     after another (XML declarations among them are dropped; positions stay those of the text given).
-    ``defaults``: as for :func:`read_tree`.
+    ``defaults``: as for :func:`read_tree`. ``made``: gets what the tree is made of, without a walk through
+    it: ``names``, the set of element names written, and ``scopes``, the namespace mappings the elements
+    share (each element's ``namespaces`` is one of them).
     """
     data = encode(text)
     try:
-        return _parse(data, defaults=defaults), False
+        return _parse(data, defaults=defaults, made=made), False
     except BMLError as exc:
         if not exc.reason.endswith(_JUNK):
             raise
@@ -255,6 +274,6 @@ def read_forest(text: str | bytes, defaults: list[str] | None = None) -> tuple[N
     blanked = _DECLARATION.sub(lambda m: b" " * len(m.group(0)), data)
     opening = f"<{FOREST}>".encode()
     try:
-        return _parse(opening + blanked + f"</{FOREST}>".encode(), shift=len(opening)), True
+        return _parse(opening + blanked + f"</{FOREST}>".encode(), shift=len(opening), made=made), True
     except BMLError:
         raise first from None

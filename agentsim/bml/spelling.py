@@ -1,0 +1,91 @@
+"""How the names of a BML document are spelled, and spelled as BML 1.0 does: element names in another case
+(``<BML>``, ``<SPEECH>``), sync points spelled as the drafts and EMBR do (``stroke_start``, ``strokeENd``) in
+attributes and references, and the document type declaration that only names an external DTD."""
+
+from __future__ import annotations
+
+import functools
+import re
+
+from agentsim.core.block import BEHAVIOUR_TYPES
+from agentsim.core.xmltree import Node
+
+#: Sync point names as every type of behaviour spells them, by a spelling folded to lower case without
+#: underscores or hyphens (``stroke_start``, ``strokeENd`` and ``STROKE`` are strokeStart, strokeEnd, stroke).
+SYNC_SPELLINGS = {s.lower(): s for t in BEHAVIOUR_TYPES.values() for s in t.syncs}
+#: Element names the lenient reader knows, by their lower-case spelling (EMBR writes ``<BML>``, ``<SPEECH>``).
+KNOWN_ELEMENTS = {name.lower(): name for name in (*BEHAVIOUR_TYPES, "bml", "text", "sync", "required", "constraint",
+                                                  "synchronize", "before", "after", "act", "participant",
+                                                  "fml-apml", "tm", "mark", "description", "animation", "lips",
+                                                  "curves", "curve", "event", "saccade", "body", "torso")}
+_DOCTYPE = re.compile(rb"<!DOCTYPE\s+[\w:.-]+(?:\s+(?:SYSTEM|PUBLIC)(?:\s+(?:\"[^\"]*\"|'[^']*')){1,2})?\s*"
+                      rb"(?:\[\s*\])?\s*>")
+
+
+def without_doctype(data: bytes) -> tuple[bytes, bool]:
+    """A document type declaration that only names an external DTD (and declares nothing) is blanked out:
+    the DTD is never fetched, and the hardened reader refuses what could fetch it. One that declares
+    entities stays, and is refused."""
+    match = _DOCTYPE.search(data)
+    if not match:
+        return data, False
+    return data[:match.start()] + b" " * (match.end() - match.start()) + data[match.end():], True
+
+
+def fold_case(node: Node, names=None) -> bool:
+    """Element names written in another case (``<BML>``, ``<SPEECH>``) get BML's spelling; True if any did.
+    ``names``: the element names the tree holds, if known (when none is spelled otherwise, nothing is walked)."""
+    if names is not None and not any(_respelled_name(name) for name in names):
+        return False
+    changed = False
+    spelling: dict[str, str | None] = {}  # a name as written -> BML's spelling if that differs, else None
+    stack = [node]
+    while stack:  # (every element, each on its own: the order they are met in does not matter)
+        n = stack.pop()
+        local = n.local
+        if local in spelling:
+            known = spelling[local]
+        else:
+            known = KNOWN_ELEMENTS.get(local.lower())
+            known = spelling[local] = known if known is not None and known != local else None
+        if known is not None:
+            n.tag = f"{n.prefix}:{known}" if n.prefix else known
+            changed = True
+        if n.children:
+            stack += [c for c in n.children if isinstance(c, Node)]
+    return changed
+
+
+def _respelled_name(name: str) -> bool:
+    local = name.partition(":")[2] or name
+    known = KNOWN_ELEMENTS.get(local.lower())
+    return known is not None and known != local
+
+
+REF_SYNC = re.compile(r"^(?P<path>.*:)(?P<sync>[^:+\-\s]+)(?P<rest>\s*(?:[+-].*)?)$")
+_SYNC_TAIL = re.compile(r"([^:+\-\s]+)(\s*(?:[+-].*)?)$")
+
+
+def ref_sync(value: str) -> tuple[str, str, str] | None:
+    """``path``, ``sync`` and ``rest`` of a reference as :data:`REF_SYNC` splits it (None if it does not):
+    read from what follows its last colon, the part references share (``b1:end`` and ``b2:end``)."""
+    text = value.strip()
+    path, colon, tail = text.rpartition(":")
+    if colon and "\n" not in path:  # then the pattern's first try, the path to the last colon, is its match
+        parts = _tail(tail)
+        if parts is not None:
+            return path + colon, parts[0], parts[1]
+    match = REF_SYNC.match(text)
+    return (match.group("path"), match.group("sync"), match.group("rest")) if match else None
+
+
+@functools.lru_cache(maxsize=1024)
+def _tail(tail: str) -> tuple[str, str] | None:
+    match = _SYNC_TAIL.match(tail)
+    return match.groups() if match else None
+
+
+@functools.lru_cache(maxsize=1024)
+def canonical_sync(sync: str) -> str | None:
+    """The sync point a spelling of it names (``stroke_start``: strokeStart), None if none."""
+    return SYNC_SPELLINGS.get(sync.lower().replace("_", "").replace("-", ""))
