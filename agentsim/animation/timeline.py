@@ -682,7 +682,8 @@ def warm_workers():
     ``forkserver``: a process of its own, so that no thread of this one is copied half-way), if it is not
     running; it imports what they need while this process goes on. A run calls this early, so that its
     pictures begin (:func:`start_timelines`) without waiting for it. Returns the multiprocessing context,
-    or None where there is no ``forkserver`` (the pictures are then drawn in this process).
+    or None where there is no ``forkserver`` or this process may start none (a daemonic one): the
+    pictures are then drawn in this process.
 
     As with any start method but ``fork``, a worker imports the main module again: a script that draws a
     long run's pictures keeps its work under ``if __name__ == "__main__":``.
@@ -690,7 +691,7 @@ def warm_workers():
     import multiprocessing
     import multiprocessing.forkserver
 
-    if "forkserver" not in multiprocessing.get_all_start_methods():
+    if "forkserver" not in multiprocessing.get_all_start_methods() or not _may_start_processes():
         return None
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload([__name__, "matplotlib.backends.backend_agg"])
@@ -820,11 +821,28 @@ def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | No
     """Begin drawing the pictures of :func:`plot_timelines`; the caller writes its other files meanwhile
     and asks :meth:`TimelineDrawing.result` for these when it needs them.
 
-    A long run's overview and windows are drawn by ``workers`` processes (default :data:`WORKERS`, at most
-    one per core and one per picture), started here; a short run's one picture, or every picture with
-    one worker, is drawn by :meth:`TimelineDrawing.result` in this process. Either way the files are the
-    same. The pose panel (:class:`PosePanel`) is taken from ``stream`` here, once: the stream may be gone
-    by the time the pictures are drawn.
+    A long run's overview and windows (two windows or more) are drawn by worker processes started here
+    (:func:`warm_workers`); a short run's one picture, or every picture with one worker, on one core, in a
+    daemonic process or where there is no ``forkserver``, is drawn by :meth:`TimelineDrawing.result` in
+    this process. Either way the files are the same.
+
+    Parameters
+    ----------
+    source : Recording
+        The run (or a realizer after ``run()``).
+    out, window, threshold, title, width
+        As :func:`plot_timelines` takes them.
+    stream : PoseStream or PosePanel, optional
+        The run's poses; their :class:`PosePanel` is taken here, once (the stream may be gone by the time
+        the pictures are drawn).
+    workers : int, optional
+        How many processes draw side by side (default :data:`WORKERS`; at most one per core this process
+        may run on, and one per picture).
+
+    Returns
+    -------
+    TimelineDrawing
+        The pictures under way; use it as a context manager.
     """
     if not window > 0:
         raise ValueError(f"a window must last a positive number of seconds, not {window}")
@@ -843,7 +861,7 @@ def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | No
             part = f"{a:g}-{b:g} s of {duration:.0f} s"
             jobs.append(("window", window_path(png, a, b), f"{title}: {part}" if title else part, width, a, b))
     n = min(WORKERS if workers is None else workers, _cores(), len(jobs))
-    if len(jobs) < 3 or not _may_start_processes():  # one window at most: nothing to draw side by side
+    if len(jobs) < 3:  # one window at most: nothing to draw side by side
         n = 1
     return TimelineDrawing(jobs, png, recording, panel, n)
 
