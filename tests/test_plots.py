@@ -12,10 +12,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from matplotlib.collections import PolyCollection
 from matplotlib.text import Text
+from matplotlib.transforms import Bbox
 
 from agentsim.animation.timeline import (heard_words, layout_words, overview_figure, plot_timelines, run_duration,
-                                         time_windows, timeline_figure, window_path)
+                                         start_timelines, time_windows, timeline_figure, window_path)
 from agentsim.realizer import Realizer
 from scenarios.conductor.metrics import (asynchrony, asynchrony_series, beats_to_recover, local_tempo,
                                                   recovery_phrase, tempo_figure)
@@ -55,6 +57,18 @@ def row_labels(fig) -> list[str]:
     return [t.get_text() for t in fig.axes[0].get_yticklabels()]
 
 
+def bars(fig, gid: str) -> list[tuple[float, float, float, float]]:
+    """The bars (left, bottom, right, top in data units) of the collections of the first axes with ``gid``:
+    one path each."""
+    out = []
+    for c in fig.axes[0].collections:
+        if c.get_gid() == gid:
+            for path in c.get_paths():
+                (x0, y0), (x1, y1) = path.vertices.min(axis=0), path.vertices.max(axis=0)
+                out.append((x0, y0, x1, y1))
+    return out
+
+
 @pytest.fixture(scope="module")
 def talk():
     """A speech heard 0.25 s late on a clock that drifts by 5000 ppm (exaggerated so that it shows), and
@@ -81,7 +95,7 @@ def test_the_words_under_the_speech_are_the_utterances_at_their_onsets(talk):
     assert _same(drawn_words(fig), want)
     assert note(fig) == f"words: all {len(want)} labelled at their onsets"
     # the labels hang under the speech row (its row's bars are above every word)
-    (speech_bar,) = {p.get_y() for p in fig.axes[0].patches if p.get_gid() == "behaviour:b:s"}
+    (speech_bar,) = {bottom for _, bottom, _, _ in bars(fig, "behaviour:b:s")}
     assert all(t.get_position()[1] < speech_bar for t in fig.findobj(Text) if t.get_gid() == "word")
 
 
@@ -144,7 +158,7 @@ def test_a_window_leaves_out_the_behaviours_outside_it(talk):
     rows = row_labels(fig)
     assert "b:g3 (gesture BEAT)" in rows and "b:s (speech)" in rows
     assert not [r for r in rows if r.startswith(("b:g1", "b:g2"))]
-    drawn = {p.get_gid() for p in fig.axes[0].patches if p.get_gid()}
+    drawn = {c.get_gid() for c in fig.axes[0].collections if c.get_gid()}
     assert drawn == {"behaviour:b:g3", "behaviour:b:s"}
     assert fig.axes[0].get_xlim() == (start, 16.0)
     assert {w for w, _ in drawn_words(fig)} == {w for w, _ in expected_words(talk, start, 16.0)}
@@ -193,8 +207,47 @@ def test_the_overview_has_a_row_per_type_and_a_tick_per_stroke():
     (strokes,) = [c for c in fig.axes[0].collections if c.get_gid() == "overview-stroke"]
     stroke_times = sorted(b.time("stroke") for b in recording.behaviours)
     assert sorted(seg[0][0] for seg in strokes.get_segments()) == pytest.approx(stroke_times)
-    assert len([p for p in fig.axes[0].patches if p.get_gid() == "overview:gesture"]) == 38
+    spans = np.array(sorted((b.start, b.end) for b in recording.behaviours))
+    drawn = np.array(sorted((x0, x1) for x0, _, x1, _ in bars(fig, "overview:gesture")))
+    assert drawn.shape == (38, 2) and np.allclose(drawn, spans, rtol=0, atol=1e-9)  # a bar per gesture
     assert says_none_or_nan(fig) == []
+
+
+def test_the_bars_are_a_collection_per_row_not_an_artist_per_bar():
+    recording = long_run()
+    fig = timeline_figure(recording, start=0.0, end=40.0)
+    ax = fig.axes[0]
+    rows = [r for r in row_labels(fig) if r != "feedback"]
+    phases = {r.name: len(r.times) - 1 for r in recording.behaviours if r.start < 40.0}
+    assert len(rows) == len(phases) > 10
+    assert len(ax.patches) == 0  # no Rectangle per bar
+    collections = [c for c in ax.collections if isinstance(c, PolyCollection)]
+    assert sorted(c.get_gid() for c in collections) == sorted(f"behaviour:{name}" for name in phases)
+    assert {c.get_gid(): len(c.get_paths()) for c in collections} == {f"behaviour:{n}": k for n, k in phases.items()}
+    # the texts of the axes: a label per stroke, the block's name and the word note, no more
+    strokes = [t for t in ax.texts if t.get_text() == "stroke"]
+    names = [t for t in ax.texts if t.get_gid() == "block-name"]
+    assert len(strokes) == len(phases) and len(names) == 1  # the block's start
+    assert len(ax.texts) == len(strokes) + len(names) + 1  # and the (empty) word note
+    overview = overview_figure(recording, window=30.0)
+    assert len(overview.axes[0].patches) == 0 and len(bars(overview, "overview:gesture")) == 38
+    assert [c.get_gid() for c in overview.axes[0].collections if isinstance(c, PolyCollection)] == ["overview:gesture"]
+
+
+def test_windows_drawn_by_worker_processes_are_the_files_drawn_here(tmp_path, monkeypatch):
+    from agentsim.animation import timeline
+
+    monkeypatch.setattr(timeline, "_cores", lambda: 2)  # side by side even where this process has one core
+    recording = long_run(40.0)  # an overview and three windows
+    here = plot_timelines(recording, tmp_path / "here", window=15.0, threshold=15.0, width=8.0, workers=1)
+    with start_timelines(recording, tmp_path / "workers", window=15.0, threshold=15.0, width=8.0, workers=2) as drawing:
+        assert drawing.workers == 2
+        there = drawing.result()
+    assert drawing.workers == 2  # none of them fell back to this process
+    assert [p.name for p in here] == [p.name for p in there] == [
+        "timeline.png", "timeline_0000-0015s.png", "timeline_0015-0030s.png", "timeline_0030-0045s.png"]
+    for a, b in zip(here, there):  # byte for byte: the same size, the same labels
+        assert a.read_bytes() == b.read_bytes(), a.name
 
 
 # ------------------------------------------------------------------------------------------- tempo
@@ -332,6 +385,7 @@ def test_no_label_of_the_conductors_timelines_overlaps_another_or_leaves_the_pic
     from agentsim.cli import main
 
     figures = []
+    monkeypatch.setattr(timeline, "WORKERS", 1)  # every picture drawn in this process, where it is kept
     for name in ("timeline_figure", "overview_figure"):
         def keep(*args, _make=getattr(timeline, name), **kwargs):
             figures.append(_make(*args, **kwargs))
@@ -363,5 +417,8 @@ def test_no_label_of_the_conductors_timelines_overlaps_another_or_leaves_the_pic
         assert overlapping(name_boxes, [t.get_text() for t in names]) == []
         axis = ax.get_window_extent(fig.canvas.get_renderer())
         assert all(axis.x0 <= b.x0 and b.x1 <= axis.x1 + 0.5 and b.y1 <= axis.y1 for b in name_boxes)
-        others = boxes_of(fig, strokes + list(ax.patches))
+        bar_boxes = [Bbox(ax.transData.transform([(x0, y0), (x1, y1)])) for c in ax.collections
+                     if (c.get_gid() or "").startswith("behaviour:") for x0, y0, x1, y1 in bars(fig, c.get_gid())]
+        assert bar_boxes and not ax.patches
+        others = boxes_of(fig, strokes) + bar_boxes
         assert not [t.get_text() for t, b in zip(names, name_boxes) if any(b.overlaps(o) for o in others)]

@@ -8,7 +8,10 @@ function                 what it does
 ``timeline_figure``      the detailed figure of a run or of a window of it (a matplotlib ``Figure``)
 ``plot_timeline``        that figure, saved as a PNG
 ``overview_figure``      a whole run at a glance: one row per behaviour type, thin bars, strokes as ticks
-``plot_timelines``       a short run as one picture; a long one as an overview plus one picture per window
+``plot_timelines``       a short run as one picture; a long one as an overview plus one picture per window,
+                         drawn by worker processes side by side
+``start_timelines``      the same pictures begun, to be waited for later (a ``TimelineDrawing``)
+``PosePanel``            what the panel under a timeline draws of the poses, taken from a stream once
 ``heard_words``          the words each speech made heard, at their onsets on the run's axis
 ``layout_words``         which word labels fit (staggered on a few lines) at a given scale, and which do not
 ``run_duration``         where the run's axis ends
@@ -21,17 +24,24 @@ Times are seconds on the run's axis (the simulated time of the run, the feedback
 
 from __future__ import annotations
 
+import functools
 import glob
 import math
+import os
+import pickle
 import re
-from dataclasses import dataclass
+import threading
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from agentsim.animation.output import PoseStream
 from agentsim.animation.units import PHASE_NAMES
 from agentsim.written import save_figure
+
+if TYPE_CHECKING:  # the poses' module (the body, the drivers) is not loaded to draw a run that has them
+    from agentsim.animation.output import PoseStream
 
 _PHASE_COLOURS = {
     "preparation": "#9ecae1", "pre-stroke hold": "#deebf7", "stroke": "#e6550d", "post-stroke hold": "#fdd0a2",
@@ -75,6 +85,31 @@ class HeardWord:
     end: float
 
 
+@dataclass(frozen=True, eq=False)
+class PosePanel:
+    """What the panel under a timeline draws of a run's poses, for every frame: its time (s), the heights
+    (m) of the left and right wrists and the head's pitch down (degrees).
+
+    :meth:`of` takes them from a :class:`~agentsim.animation.output.PoseStream` once, so that the windows of
+    a long run do not each work out the head's orientation over the whole run again; they are plain arrays,
+    which pass cheaply to the processes that draw windows side by side.
+    """
+
+    times: np.ndarray
+    l_wrist: np.ndarray
+    r_wrist: np.ndarray
+    head_pitch: np.ndarray
+
+    @classmethod
+    def of(cls, stream: PoseStream | PosePanel) -> PosePanel:
+        """The panel of ``stream`` (a panel is its own)."""
+        if isinstance(stream, PosePanel):
+            return stream
+        fwd = stream.forward("skullbase")
+        return cls(np.array(stream.times), np.array(stream.position("l_wrist")[:, 1]),
+                   np.array(stream.position("r_wrist")[:, 1]), -np.degrees(np.arcsin(np.clip(fwd[:, 1], -1, 1))))
+
+
 def _recording(source):
     return source.recording() if hasattr(source, "recording") else source
 
@@ -108,8 +143,10 @@ def heard_words(source, start: float | None = None, end: float | None = None) ->
     return words
 
 
+@functools.lru_cache(maxsize=4096)
 def _text_width(text: str, size: float) -> float:
-    """Width (points) of ``text`` in the default font at ``size`` points."""
+    """Width (points) of ``text`` in the default font at ``size`` points (measured once per text and size:
+    the words of a story come back again and again)."""
     from matplotlib.font_manager import FontProperties
     from matplotlib.textpath import text_to_path
 
@@ -196,17 +233,42 @@ def _label(record) -> str:
     return label
 
 
-def _extent(recording, stream: PoseStream | None) -> tuple[float, float]:
+def _extent(recording, panel: PosePanel | None) -> tuple[float, float]:
     """The x range that shows all of a run: every known sync point, feedback and pose, a little padded."""
     times = [t for b in recording.behaviours for t in b.times if t is not None and math.isfinite(t)]
     times += [f["globalTime"] for f in recording.feedback if math.isfinite(f.get("globalTime", math.nan))]
-    if stream is not None and len(stream.times):
-        times += [float(stream.times[0]), float(stream.times[-1])]
+    if panel is not None and len(panel.times):
+        times += [float(panel.times[0]), float(panel.times[-1])]
     if not times:
         return 0.0, 1.0
     a, b = min(times), max(times)
     pad = 0.03 * max(b - a, 1.0)
     return a - pad, b + pad
+
+
+def _title_y() -> float:
+    """Where a title sits (axes coordinates): the ``axes.titley`` setting, or the top of the axes."""
+    import matplotlib
+
+    y = matplotlib.rcParams["axes.titley"]
+    return 1.0 if y is None else float(y)
+
+
+def _box(left: float, width: float, y: float, height: float) -> list[tuple[float, float]]:
+    """The corners of a bar from ``left`` that is ``width`` long, centred on ``y`` (as ``barh`` draws it)."""
+    bottom, top = y - 0.5 * height, y + 0.5 * height
+    return [(left, bottom), (left + width, bottom), (left + width, top), (left, top)]
+
+
+def _tight_layout(fig, **options) -> None:
+    """Lay ``fig`` out once (``Figure.tight_layout``) and leave it with no layout engine: the place holder
+    that ``tight_layout`` leaves behind would have ``savefig`` lay out every artist in a pass of its own
+    before drawing, to no effect."""
+    import matplotlib
+
+    fig.tight_layout(**options)
+    with matplotlib.rc_context({"figure.autolayout": False, "figure.constrained_layout.use": False}):
+        fig.set_layout_engine(None)
 
 
 def _new_figure(width: float, height: float, rows: int = 1, ratios=None, sharex: bool = True):
@@ -219,8 +281,8 @@ def _new_figure(width: float, height: float, rows: int = 1, ratios=None, sharex:
     return fig, [a[0] for a in axes]
 
 
-def timeline_figure(source, stream: PoseStream | None = None, title: str | None = None, width: float = 12.0,
-                    start: float | None = None, end: float | None = None):
+def timeline_figure(source, stream: PoseStream | PosePanel | None = None, title: str | None = None,
+                    width: float = 12.0, start: float | None = None, end: float | None = None):
     """The detailed figure of what a run did (a matplotlib ``Figure``; :func:`plot_timeline` saves it).
 
     ``source``: its :class:`~agentsim.core.recording.Recording`, or a realizer after ``run()``. With
@@ -234,17 +296,19 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
     with every sync point progress (dots), prediction (diamonds) and warning (red triangles). Under each
     speech row, the words heard (:func:`heard_words`), each label starting at its word's onset (a tick
     marks every onset), staggered on up to ``WORD_LINES`` lines; labels that would overlap at this width
-    are left out, and a note above the axis says how many. With ``stream``, a panel below shows the
-    wrist heights and head pitch of the evaluated poses with the stroke feedback.
+    are left out, and a note above the axis says how many. With ``stream`` (the evaluated poses, or their
+    :class:`PosePanel`), a panel below shows the wrist heights and head pitch with the stroke feedback.
 
-    Artists a reader (or a test) can find by ``get_gid()``: ``"word"`` (a word's label, at its onset),
-    ``"word-note"``, ``"behaviour:<block:behaviour>"`` (a row's bars), ``"block-name"`` (a block start's or
-    end's name).
+    The bars of a row are one ``PolyCollection`` (the hatched bars of a dropped behaviour another), the
+    ticks and pegs one ``LineCollection`` each. Artists a reader (or a test) can find by ``get_gid()``:
+    ``"word"`` (a word's label, a ``Text`` at its onset), ``"word-note"``, ``"behaviour:<block:behaviour>"``
+    (a row's bars), ``"block-name"`` (a block start's or end's name).
     """
-    from matplotlib.collections import LineCollection
+    from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.patches import Patch
 
     recording = _recording(source)
+    panel = None if stream is None else PosePanel.of(stream)
     window = start is not None or end is not None
     if window:
         lo = 0.0 if start is None else float(start)
@@ -258,10 +322,10 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
     if window:
         x0, x1 = lo, hi
     else:
-        x0, x1 = _extent(recording, stream)
+        x0, x1 = _extent(recording, panel)
     # lines of words each speech row needs, at the axis width the labels on the left are likely to leave
     labels_width = max([_text_width(_label(r), 6.5) for r in rows] + [0.0]) / 72.0
-    guess = width - labels_width - 0.6 - WORD_MARGIN - (0.6 if stream is not None else 0.1)
+    guess = width - labels_width - 0.6 - WORD_MARGIN - (0.6 if panel is not None else 0.1)
     lines_of = {name: max([line + 1 for _, line in layout_words(words, x0, x1, guess)[0]] + [1])
                 for name, words in words_by_row.items()}
     line_step = 8.5 / (72.0 * ROW_INCHES)  # data units between two lines of words
@@ -282,8 +346,8 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
                   if blocks else 0.0)
     top = y + 1.0 + block_band
     units = top + 1.3
-    panels = 2 if stream is not None else 1
-    height = max(2.5, ROW_INCHES * units + 1.6) + (2.2 if stream is not None else 0.0)
+    panels = 2 if panel is not None else 1
+    height = max(2.5, ROW_INCHES * units + 1.6) + (2.2 if panel is not None else 0.0)
     fig, axes = _new_figure(width, height, panels, [max(3.0, units), 3.0][:panels])
     ax = axes[0]
     peg_points: dict[int, list[tuple[float, float]]] = {}
@@ -325,15 +389,16 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
             if group is not None:  # a speech's pegs are joined from under its words, not across them
                 peg_points.setdefault(group, []).append((t, y - band_of[record.name] if has_words else y))
         labels.append((y, _label(record)))
-    for dropped in (False, True):
-        part = [b for b in bars if b[4] == dropped]
-        if not part:
-            continue
-        patches = ax.barh([b[0] for b in part], [b[2] for b in part], left=[b[1] for b in part], height=0.6,
-                          color=[b[3] for b in part], edgecolor="#555555", linewidth=0.4,
-                          hatch="///" if dropped else None, alpha=0.35 if dropped else 1.0)
-        for patch, b in zip(patches, part):
-            patch.set_gid(f"behaviour:{b[5]}")
+    for dropped in (False, True):  # the hatched bars over the others
+        of_row: dict[str, list] = {}
+        for b in bars:
+            if b[4] == dropped:
+                of_row.setdefault(b[5], []).append(b)
+        for name, part in of_row.items():
+            ax.add_collection(PolyCollection([_box(b[1], b[2], b[0], 0.6) for b in part],
+                                             facecolors=[b[3] for b in part], edgecolors="#555555", linewidths=0.4,
+                                             hatch="///" if dropped else None, alpha=0.35 if dropped else 1.0,
+                                             gid=f"behaviour:{name}"))
     pegs = []
     for pts in peg_points.values():
         if len(pts) > 1:
@@ -364,25 +429,27 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
     if marks.get("blockProgress"):
         ax.vlines(marks["blockProgress"], -1.3, top, colors="#bdbdbd", linewidths=0.6, linestyles=":")
     ax.set_yticks([y for y, _ in labels], [lab for _, lab in labels], fontsize=6.5)
+    # the rows' axis has no label to place beside its many tick labels: placing it (measuring every tick label
+    # at every layout and every draw) is skipped
+    ax.yaxis.set_label_coords(0.0, 0.5)
     ax.set_ylim(-1.3, top)
     fig.legend(handles=[Patch(color=c, label=n) for n, c in _PHASE_COLOURS.items() if n != "hold"],
                loc="lower center", fontsize=6.5, ncol=10, frameon=False, handlelength=1.2, columnspacing=1.2)
+    # at the top of the axes, above which no tick label lies: matplotlib need not look for any (measuring
+    # every row's label) to place it
     ax.set_title(title or "behaviours, phases, pegs and feedback", loc="left", fontsize=10,
-                 pad=15 if words_by_row else 6)
+                 pad=15 if words_by_row else 6, y=_title_y())
     note = ax.text(0.0, 1.005, "", transform=ax.transAxes, ha="left", va="bottom", fontsize=6.5,
                    color="#555555", gid="word-note")
-    if stream is not None:
+    if panel is not None:
         bx = axes[1]
-        times = np.asarray(stream.times)
+        times = panel.times
         sel = slice(None) if not window else (times >= lo - 0.5) & (times <= hi + 0.5)
-        for joint, colour in (("l_wrist", "#31a354"), ("r_wrist", "#e6550d")):
-            bx.plot(times[sel], stream.position(joint)[sel, 1], color=colour, linewidth=0.9,
-                    label=f"{joint} height (m)")
+        for joint, heights, colour in (("l_wrist", panel.l_wrist, "#31a354"), ("r_wrist", panel.r_wrist, "#e6550d")):
+            bx.plot(times[sel], heights[sel], color=colour, linewidth=0.9, label=f"{joint} height (m)")
         bx.set_ylabel("height (m)", fontsize=7)
         cx = bx.twinx()
-        fwd = stream.forward("skullbase")[sel]
-        cx.plot(times[sel], -np.degrees(np.arcsin(np.clip(fwd[:, 1], -1, 1))), color="#756bb1", linewidth=0.8,
-                label="head pitch down (deg)")
+        cx.plot(times[sel], panel.head_pitch[sel], color="#756bb1", linewidth=0.8, label="head pitch down (deg)")
         cx.set_ylabel("head pitch (deg)", fontsize=7)
         strokes = [f["globalTime"] for f in recording.feedback if f["type"] == "syncPointProgress"
                    and f["id"].endswith(":stroke") and (not window or lo <= f["globalTime"] <= hi)]
@@ -393,7 +460,7 @@ def timeline_figure(source, stream: PoseStream | None = None, title: str | None 
         cx.legend(loc="upper right", fontsize=6)
     axes[-1].set_xlim(x0, x1)
     axes[-1].set_xlabel("time of the run (s)")
-    fig.tight_layout(rect=(0.0, 0.3 / height, 1.0, 1.0))
+    _tight_layout(fig, rect=(0.0, 0.3 / height, 1.0, 1.0))
     if words_by_row:
         _draw_words(fig, ax, dict(zip((r.name for r in rows), ys)), words_by_row, lines_of, x0, x1, line_step, note)
     _draw_block_names(fig, ax, blocks, top, x0, x1)  # after the words: they can narrow the axis
@@ -462,7 +529,7 @@ def _draw_words(fig, ax, row_y: dict[str, float], words_by_row: dict[str, list[H
     note.set_text(text)
 
 
-def plot_timeline(source, out_png: str | Path, stream: PoseStream | None = None, title: str | None = None,
+def plot_timeline(source, out_png: str | Path, stream: PoseStream | PosePanel | None = None, title: str | None = None,
                   width: float = 12.0, start: float | None = None, end: float | None = None) -> Path:
     """Draw what a run did on one time axis (:func:`timeline_figure`) and save it as a PNG.
 
@@ -499,9 +566,13 @@ def overview_figure(source, title: str | None = None, width: float = 16.0, windo
     hatched), strokes as black ticks, warnings as red triangles; no phases. With ``window``, the
     boundaries of the windows :func:`plot_timelines` draws in detail are marked and named.
 
-    Artists by ``get_gid()``: ``"overview:<type>"`` (a row's bars), ``"overview-stroke"`` (stroke ticks).
+    A row's bars are one ``PolyCollection`` (its dropped behaviours' another), its strokes one
+    ``LineCollection``. Artists by ``get_gid()``: ``"overview:<type>"`` (a row's bars, a bar a path),
+    ``"overview-stroke"`` (stroke ticks).
     """
-    from matplotlib.collections import LineCollection
+    import matplotlib
+    from matplotlib.collections import LineCollection, PolyCollection
+    from matplotlib.colors import to_rgba
 
     recording = _recording(source)
     duration = run_duration(recording)
@@ -524,15 +595,19 @@ def overview_figure(source, title: str | None = None, width: float = 16.0, windo
         lane_h = 0.8 / n_lanes
         colour = _TYPE_COLOURS.get(kind, "#737373")
         strokes = []
+        boxes: dict[bool, list] = {False: [], True: []}  # played, dropped
         for record, (a, b), lane in zip(records, spans, lanes):
             yc = y + 0.4 - (lane + 0.5) * lane_h
-            dropped = record.state == "dropped"
-            ax.barh(yc, max(b - a, 1e-3), left=a, height=0.75 * lane_h, color=colour,
-                    alpha=0.35 if dropped else 0.8, hatch="///" if dropped else None, linewidth=0,
-                    gid=f"overview:{kind}")
+            boxes[record.state == "dropped"].append(_box(a, max(b - a, 1e-3), yc, 0.75 * lane_h))
             for s, t in zip(record.sync_ids, record.times):
                 if s == "stroke" and t is not None and math.isfinite(t):
                     strokes.append([(t, yc - 0.45 * lane_h), (t, yc + 0.45 * lane_h)])
+        for dropped, part in boxes.items():
+            if part:  # no edge: the hatching in the colour of edges that are not drawn, as a bar's would be
+                ax.add_collection(PolyCollection(part, facecolors=to_rgba(colour, 0.35 if dropped else 0.8),
+                                                 edgecolors="none", linewidths=0, hatch="///" if dropped else None,
+                                                 hatchcolors=matplotlib.rcParams["patch.edgecolor"],
+                                                 gid=f"overview:{kind}"))
         if strokes:
             ax.add_collection(LineCollection(strokes, colors="black", linewidths=0.6, gid="overview-stroke"))
         n_strokes = len(strokes)
@@ -557,24 +632,217 @@ def overview_figure(source, title: str | None = None, width: float = 16.0, windo
     ax.set_title(f"{head}overview of {n} behaviours over {duration:.1f} s (strokes as ticks{detail})",
                  loc="left", fontsize=10)
     ax.grid(axis="x", alpha=0.25)
-    fig.tight_layout()
+    _tight_layout(fig)
     return fig
 
 
 _WINDOW_FILE = re.compile(r"_\d{4,}(?:\.\d)?-\d{4,}(?:\.\d)?s")
 
 
-def plot_timelines(source, out: str | Path, stream: PoseStream | None = None, window: float = WINDOW,
-                   threshold: float | None = None, title: str | None = None, width: float = 16.0) -> list[Path]:
-    """The timeline of a run as pictures that read: one if it is short, an overview plus windows if long.
+#: How many worker processes draw the pictures of a long run side by side (at most one per core this
+#: process may run on); 1: all of them in the calling process.
+WORKERS = 2
 
-    ``out``: the overview's file (``.png``, or another format matplotlib writes) or a folder (a path
-    without a suffix: ``timeline.png`` inside). A run no longer than
-    ``threshold`` seconds (default ``LONG_RUN``) is drawn whole in that file by :func:`plot_timeline`. A
-    longer one gets :func:`overview_figure` there, and each of its :func:`time_windows` of ``window``
-    seconds in detail in its own file next to it (:func:`window_path`: ``timeline_0000-0030s.png``, ...);
-    window files of an earlier, longer run left in the folder are removed. Returns the files written,
-    the overview (or the one picture) first.
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity on this system
+        return os.cpu_count() or 1
+
+
+def _may_start_processes() -> bool:
+    """Whether this process may start worker processes (a daemonic one, a worker of a pool, may not)."""
+    import multiprocessing
+
+    return not multiprocessing.current_process().daemon
+
+
+def _portable(recording):
+    """``recording`` as the pictures need it, without what cannot pass to another process: the samples of
+    its speech (the pictures draw its words) and the sound files it played."""
+    speech = tuple(replace(s, utterance=replace(s.utterance, audio=None))
+                   if getattr(s.utterance, "audio", None) is not None else s for s in recording.speech)
+    return replace(recording, speech=speech, audio=())
+
+
+def _changed_rc() -> dict:
+    """The matplotlib settings this process changed (that a worker process changes in turn)."""
+    import matplotlib
+
+    return {k: v for k, v in matplotlib.rcParams.items()
+            if k != "backend" and matplotlib.rcParamsOrig.get(k, v) != v}
+
+
+_RUN: tuple = ()  # in a worker process: the recording and the pose panel it draws
+
+
+def warm_workers():
+    """Start the server that the processes drawing pictures are forked from (multiprocessing's
+    ``forkserver``: a process of its own, so that no thread of this one is copied half-way), if it is not
+    running; it imports what they need while this process goes on. A run calls this early, so that its
+    pictures begin (:func:`start_timelines`) without waiting for it. Returns the multiprocessing context,
+    or None where there is no ``forkserver`` or this process may start none (a daemonic one): the
+    pictures are then drawn in this process.
+
+    As with any start method but ``fork``, a worker imports the main module again: a script that draws a
+    long run's pictures keeps its work under ``if __name__ == "__main__":``.
+    """
+    import multiprocessing
+    import multiprocessing.forkserver
+
+    if "forkserver" not in multiprocessing.get_all_start_methods() or not _may_start_processes():
+        return None
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload([__name__, "matplotlib.backends.backend_agg"])
+    multiprocessing.forkserver.ensure_running()
+    return context
+
+
+def _take_run(payload: bytes) -> None:
+    """Start a worker process: keep the run it draws (pickled once for all of its pictures)."""
+    global _RUN
+    import matplotlib
+
+    recording, panel, rc = pickle.loads(payload)
+    matplotlib.rcParams.update(rc)
+    _RUN = (recording, panel)
+
+
+def _draw(job: tuple, recording=None, panel=None) -> Path:
+    """Draw one picture of :func:`plot_timelines` of the run given or, in a worker process, of its run;
+    ``job``: ``("whole", file, title, width)``, ``("overview", file, title, width, window)`` or
+    ``("window", file, title, width, start, end)``. Returns the file."""
+    if recording is None:
+        recording, panel = _RUN
+    kind, path, title, width, *span = job
+    if kind == "overview":
+        save_figure(overview_figure(recording, title=title, width=width, window=span[0]), path, dpi=_DPI)
+        return path
+    if kind == "whole":
+        return plot_timeline(recording, path, stream=panel, title=title, width=width)
+    return plot_timeline(recording, path, stream=panel, title=title, width=width, start=span[0], end=span[1])
+
+
+class TimelineDrawing:
+    """The pictures of :func:`start_timelines` as they are drawn: by worker processes from the start, or
+    (one process) here when :meth:`result` asks for them.
+
+    The workers are started on a thread of their own, so that beginning the pictures does not wait for
+    them. Use it as a context manager, or call :meth:`close`, so that the workers are let go if the files
+    are never asked for.
+
+    Attributes
+    ----------
+    workers : int
+        How many worker processes draw the pictures; 0 if :meth:`result` draws them (one worker asked
+        for, or a run that cannot pass to another process), or drew any of them (workers that could not
+        start, or died).
+    """
+
+    def __init__(self, jobs: list[tuple], png: Path, recording, panel: PosePanel | None, workers: int) -> None:
+        self._jobs, self._png, self._recording, self._panel = jobs, png, recording, panel
+        self._written: list[Path] | None = None
+        self._pool = None
+        self._futures: list = []
+        self._starting: threading.Thread | None = None
+        self.workers = 0
+        context = warm_workers() if workers > 1 else None
+        if context is not None:
+            try:
+                payload = pickle.dumps((_portable(recording), panel, _changed_rc()), protocol=pickle.HIGHEST_PROTOCOL)
+            except (pickle.PicklingError, TypeError, AttributeError):  # a run that cannot pass is drawn here
+                return
+            self.workers = workers
+            self._starting = threading.Thread(target=self._start, args=(context, workers, payload),
+                                              name="timeline workers", daemon=True)
+            self._starting.start()
+
+    def _start(self, context, workers: int, payload: bytes) -> None:
+        """Start the workers and hand them the pictures (what cannot start leaves them to :meth:`result`)."""
+        import concurrent.futures
+
+        try:
+            self._pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_take_run,
+                                                                initargs=(payload,))
+            self._futures = [self._pool.submit(_draw, job) for job in self._jobs]
+        except (OSError, RuntimeError, concurrent.futures.BrokenExecutor):
+            self._futures = []
+
+    def _started(self) -> None:
+        if self._starting is not None:
+            self._starting.join()
+            self._starting = None
+
+    def result(self) -> list[Path]:
+        """Wait for the pictures (or draw them) and return their files, the overview (or the one picture)
+        first; window files of an earlier, longer run left in the folder are removed. Raises what drawing
+        one of them raised. A picture whose worker died (killed, or unable to start) is drawn here."""
+        from concurrent.futures import BrokenExecutor
+
+        if self._written is None:
+            self._started()
+            try:
+                written = []
+                for k, job in enumerate(self._jobs):
+                    try:
+                        written.append(self._futures[k].result() if self._futures else None)
+                    except BrokenExecutor:
+                        written.append(None)
+                    if written[-1] is None:
+                        written[-1] = _draw(job, self._recording, self._panel)
+                        self.workers = 0
+            finally:
+                self.close()
+            png = self._png
+            for old in png.parent.glob(f"{glob.escape(png.stem)}_*s{glob.escape(png.suffix)}"):
+                if _WINDOW_FILE.fullmatch(old.name[len(png.stem):-len(png.suffix)]) and old not in written:
+                    old.unlink()
+            self._written = written
+        return list(self._written)
+
+    def close(self) -> None:
+        """Let the workers go: pictures not begun are not drawn, those under way are finished."""
+        self._started()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+    def __enter__(self) -> TimelineDrawing:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | None = None, window: float = WINDOW,
+                    threshold: float | None = None, title: str | None = None, width: float = 16.0,
+                    workers: int | None = None) -> TimelineDrawing:
+    """Begin drawing the pictures of :func:`plot_timelines`; the caller writes its other files meanwhile
+    and asks :meth:`TimelineDrawing.result` for these when it needs them.
+
+    A long run's overview and windows (two windows or more) are drawn by worker processes started here
+    (:func:`warm_workers`); a short run's one picture, or every picture with one worker, on one core, in a
+    daemonic process or where there is no ``forkserver``, is drawn by :meth:`TimelineDrawing.result` in
+    this process. Either way the files are the same.
+
+    Parameters
+    ----------
+    source : Recording
+        The run (or a realizer after ``run()``).
+    out, window, threshold, title, width
+        As :func:`plot_timelines` takes them.
+    stream : PoseStream or PosePanel, optional
+        The run's poses; their :class:`PosePanel` is taken here, once (the stream may be gone by the time
+        the pictures are drawn).
+    workers : int, optional
+        How many processes draw side by side (default :data:`WORKERS`; at most one per core this process
+        may run on, and one per picture).
+
+    Returns
+    -------
+    TimelineDrawing
+        The pictures under way; use it as a context manager.
     """
     if not window > 0:
         raise ValueError(f"a window must last a positive number of seconds, not {window}")
@@ -582,19 +850,36 @@ def plot_timelines(source, out: str | Path, stream: PoseStream | None = None, wi
     out = Path(out)
     png = out if out.suffix else out / "timeline.png"
     png.parent.mkdir(parents=True, exist_ok=True)
+    panel = None if stream is None else PosePanel.of(stream)
     duration = run_duration(recording)
     limit = LONG_RUN if threshold is None else threshold
-    written: list[Path] = []
     if duration <= limit:
-        written.append(plot_timeline(recording, png, stream=stream, title=title, width=width))
+        jobs = [("whole", png, title, width)]
     else:
-        save_figure(overview_figure(recording, title=title, width=width, window=window), png, dpi=_DPI)
-        written.append(png)
+        jobs = [("overview", png, title, width, window)]
         for a, b in time_windows(duration, window):
             part = f"{a:g}-{b:g} s of {duration:.0f} s"
-            written.append(plot_timeline(recording, window_path(png, a, b), stream=stream, width=width,
-                                         title=f"{title}: {part}" if title else part, start=a, end=b))
-    for old in png.parent.glob(f"{glob.escape(png.stem)}_*s{glob.escape(png.suffix)}"):
-        if _WINDOW_FILE.fullmatch(old.name[len(png.stem):-len(png.suffix)]) and old not in written:
-            old.unlink()
-    return written
+            jobs.append(("window", window_path(png, a, b), f"{title}: {part}" if title else part, width, a, b))
+    n = min(WORKERS if workers is None else workers, _cores(), len(jobs))
+    if len(jobs) < 3:  # one window at most: nothing to draw side by side
+        n = 1
+    return TimelineDrawing(jobs, png, recording, panel, n)
+
+
+def plot_timelines(source, out: str | Path, stream: PoseStream | PosePanel | None = None, window: float = WINDOW,
+                   threshold: float | None = None, title: str | None = None, width: float = 16.0,
+                   workers: int | None = None) -> list[Path]:
+    """The timeline of a run as pictures that read: one if it is short, an overview plus windows if long.
+
+    ``out``: the overview's file (``.png``, or another format matplotlib writes) or a folder (a path
+    without a suffix: ``timeline.png`` inside). A run no longer than
+    ``threshold`` seconds (default ``LONG_RUN``) is drawn whole in that file by :func:`plot_timeline`. A
+    longer one gets :func:`overview_figure` there, and each of its :func:`time_windows` of ``window``
+    seconds in detail in its own file next to it (:func:`window_path`: ``timeline_0000-0030s.png``, ...),
+    drawn by ``workers`` processes side by side (:func:`start_timelines`); window files of an earlier,
+    longer run left in the folder are removed. Returns the files written, the overview (or the one
+    picture) first.
+    """
+    with start_timelines(source, out, stream=stream, window=window, threshold=threshold, title=title, width=width,
+                         workers=workers) as drawing:
+        return drawing.result()

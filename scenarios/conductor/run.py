@@ -105,6 +105,10 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
     strategies = STRATEGIES if args.compare else (args.strategy or config.conductor.strategy,)
     rows = []
     stages = Stages()
+    if not args.compare:
+        from agentsim.animation.timeline import warm_workers
+
+        warm_workers()  # the processes that draw the timeline pictures get ready while the run is simulated
     for name in stages.over(list(strategies), "strategies", unit="strategy") if args.compare else strategies:
         started = time.perf_counter()
         run = simulate(config, name, args.seed, stages=stages)

@@ -404,8 +404,10 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     pictures too, ``plots``: any picture at all (``tempo.png`` and the timeline). ``stages``: where to say
     on a terminal which stage is under way."""
     import concurrent.futures
+    import contextlib
 
-    from agentsim.animation import evaluate_poses, plot_timelines, write_bvh
+    from agentsim.animation import evaluate_poses, write_bvh
+    from agentsim.animation.timeline import start_timelines, warm_workers
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_feedback, write_text, write_wav
     from agentsim.media.report import write_report
@@ -414,6 +416,8 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     from agentsim.media.tables import gesture_rows, write_csv
 
     say = stages or Stages.off()
+    if plots and pictures:  # the processes that draw the timeline pictures get ready meanwhile
+        warm_workers()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     from agentsim.media import AXIS, GLOSSARY
@@ -422,8 +426,9 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     recording = run.realizer.recording()
     write_feedback(out / "feedback.jsonl", recording.feedback)
     # the report's sound is encoded on a thread of its own (libsndfile does not hold the interpreter) while
-    # the poses and the rest are made
-    with concurrent.futures.ThreadPoolExecutor(1) as sound:
+    # the poses and the rest are made; the timeline pictures are drawn by worker processes from when the poses
+    # are known, and waited for at the end
+    with contextlib.ExitStack() as drawing, concurrent.futures.ThreadPoolExecutor(1) as sound:
         with say("audio"):
             # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the
             # feedback's)
@@ -432,6 +437,9 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
             write_wav(out / "ensemble.wav", track)
         with say("poses/BVH"):
             stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
+            timelines = (drawing.enter_context(start_timelines(
+                recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
+                title=f"conductor ({run.strategy_name})")) if plots and pictures else None)
             write_bvh(out / "conductor.bvh", stream)
         with say("report"):
             write_csv(out / "beats.csv", beat_rows(run))
@@ -441,11 +449,10 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
                          title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})",
                          audio=ogg)
             sound.shutdown(wait=True)  # the report's sound is encoded
-    if not plots:
-        return out
-    with say("pictures"):
-        save_figure(run_tempo_figure(run, metrics), out / "tempo.png")
-        if pictures:
-            plot_timelines(recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW,
-                           threshold=TIMELINE_WINDOW, title=f"conductor ({run.strategy_name})")
+        if not plots:
+            return out
+        with say("pictures"):
+            save_figure(run_tempo_figure(run, metrics), out / "tempo.png")
+            if timelines is not None:
+                timelines.result()
     return out

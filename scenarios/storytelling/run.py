@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures
+import contextlib
 import json
 import math
 import sys
@@ -155,6 +156,9 @@ def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: P
     printed = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
     stages = Stages()
     if not args.compare:
+        from agentsim.animation.timeline import warm_workers
+
+        warm_workers()  # the processes that draw the timeline pictures get ready while the story is told
         telling = tell(story, strategy=strategy, delivery=delivery, seed=args.seed, voice=voice, anchor=args.anchor,
                        timing=args.timing, stages=stages)
         stages_seconds = write_outputs(telling, staging, fps=args.fps, window=args.window, seed=args.seed,
@@ -296,13 +300,19 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
         stages[name] = time.perf_counter() - started
         return time.perf_counter()
 
+    if plots and pictures:  # the processes that draw the timeline pictures get ready meanwhile
+        from agentsim.animation.timeline import warm_workers
+
+        warm_workers()
     t = time.perf_counter()
     utterance = telling.utterance
     # the track is made a stretch at a time, for the WAV and again for the report: never held whole; both
     # sound files are written on a thread of their own (mixing and encoding mostly run outside the
     # interpreter) while the poses and the rest are made, and waited for where they were written before
     track = run_track_stream(telling.recording) if utterance.audio is not None else None
-    with concurrent.futures.ThreadPoolExecutor(1) as sound:
+    # the timeline pictures are drawn by worker processes from when the poses are known while the rest is
+    # written, and waited for at the end
+    with contextlib.ExitStack() as drawing, concurrent.futures.ThreadPoolExecutor(1) as sound:
         # where the listener heard it: late by the playback latency, drifting
         wav = sound.submit(write_wav, out / "narration.wav", track) if track is not None else None
         ogg = start_audio(out / "report.html", track, sound)
@@ -312,6 +322,8 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
             t = stage("feedback", t)
             stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene,
                                     folder=scratch)
+            timelines = (drawing.enter_context(start_window(telling, out / "timeline.png", stream, window))
+                         if plots and pictures else None)
             t = stage("poses", t)
             write_bvh(out / "story.bvh", stream)
             t = stage("bvh", t)
@@ -332,13 +344,13 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
             write_report(out / "report.html", recording=telling.recording, stream=stream, track=track,
                          gestures=gestures, title=f"{telling.story.title} (strategy {telling.strategy})", audio=ogg)
             sound.shutdown(wait=True)  # the report's sound is encoded
-    t = stage("report", t)
-    if plots:
-        with say("pictures"):
-            if pictures:
-                plot_window(telling, out / "timeline.png", stream, window)
-            plot_errors(telling, out / "sync_errors.png")
-        stage("plots", t)
+        t = stage("report", t)
+        if plots:
+            with say("pictures"):
+                plot_errors(telling, out / "sync_errors.png")
+                if timelines is not None:
+                    timelines.result()
+            stage("plots", t)
     return stages
 
 
@@ -365,10 +377,18 @@ def plot_window(telling: Telling, png: Path, stream, window: float = 30.0) -> li
     an overview of the whole story, and next to it each ``window`` seconds in detail, with the words
     heard under the speech and the poses of that window (a whole story in one picture would need one row
     per gesture, hundreds of rows). Returns the files written, the overview first."""
-    from agentsim.animation import plot_timelines
+    with start_window(telling, png, stream, window) as drawing:
+        return drawing.result()
 
-    return plot_timelines(telling.recording, png, stream=stream, window=window, threshold=window, width=16.0,
-                          title=f"{telling.story.title} (strategy {telling.strategy})")
+
+def start_window(telling: Telling, png: Path, stream, window: float = 30.0):
+    """Begin drawing the pictures of :func:`plot_window` in worker processes
+    (:func:`~agentsim.animation.timeline.start_timelines`); its ``result()`` waits for them and returns the
+    files, the overview first. ``stream`` is read here: it may be gone before the pictures are drawn."""
+    from agentsim.animation.timeline import start_timelines
+
+    return start_timelines(telling.recording, png, stream=stream, window=window, threshold=window, width=16.0,
+                           title=f"{telling.story.title} (strategy {telling.strategy})")
 
 
 def plot_errors(telling: Telling, png: Path) -> Path:
