@@ -23,6 +23,7 @@ class Cell:
 def collector(monkeypatch):
     """A clean collector (enabled, nothing frozen) and a fresh budget; restored afterwards."""
     was_enabled = gc.isenabled()
+    gc.unfreeze()  # a live service run earlier in this process froze what it had made (gc.freeze())
     gc.enable()
     gc.collect()
     monkeypatch.setattr(gcpause, "_moved", 0)
@@ -34,8 +35,6 @@ def collector(monkeypatch):
 
 
 def test_many_objects_made_in_a_pause_go_to_the_oldest_generation(collector):
-    if gc.get_freeze_count():
-        pytest.skip("objects are frozen in this process")
     with paused_collection():
         kept = [Cell() for _ in range(3 * gcpause.FEW)]
         assert not gc.isenabled()
@@ -60,8 +59,6 @@ def test_nested_pauses_end_with_the_outermost(collector):
 
 
 def test_cycles_among_moved_objects_are_collected_once_the_budget_is_spent(collector, monkeypatch):
-    if gc.get_freeze_count():
-        pytest.skip("objects are frozen in this process")
     with paused_collection():
         cells = [Cell() for _ in range(2 * gcpause.FEW)]
         a, b = Cell(), Cell()
