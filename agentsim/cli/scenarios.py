@@ -70,9 +70,16 @@ def add_conductor(scenarios) -> argparse.ArgumentParser:
                         help="--input: how long to listen (default: the piece's length at its tempo)")
     parser.add_argument("--sample-rate", type=int, metavar="HZ",
                         help="--input: the sample rate to record at (default: the configuration's)")
+    add_no_pictures(parser)
     add_json(parser)
     parser.set_defaults(handler=run_conductor)
     return parser
+
+
+def add_no_pictures(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--no-pictures", action="store_true",
+                        help="write every file but the pictures (the PNGs): for runs whose folder nobody looks at, "
+                             "as a sweep's points whose outputs are not kept")
 
 
 def add_json(parser: argparse.ArgumentParser) -> None:
@@ -132,6 +139,7 @@ def add_storytelling(scenarios) -> argparse.ArgumentParser:
                         help="seconds of each detailed timeline picture, timeline_0000-0030s.png, ... "
                              "(30); timeline.png is the overview of the whole story")
     options.add_delivery(parser)
+    add_no_pictures(parser)
     add_json(parser)
     parser.set_defaults(handler=run_storytelling)
     return parser

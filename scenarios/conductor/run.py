@@ -105,7 +105,8 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
     strategies = STRATEGIES if args.compare else (args.strategy or config.conductor.strategy,)
     rows = []
     stages = Stages()
-    if not args.compare:
+    pictures = not getattr(args, "no_pictures", False)
+    if not args.compare and pictures:
         from agentsim.animation.timeline import warm_workers
 
         warm_workers()  # the processes that draw the timeline pictures get ready while the run is simulated
@@ -115,7 +116,7 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
         with stages("measuring"):
             metrics = collect_metrics(run)
         folder = out / name if args.compare else out
-        write_outputs(run, metrics, folder, pictures=not args.compare, stages=stages)
+        write_outputs(run, metrics, folder, pictures=not args.compare, plots=pictures, stages=stages)
         rows.append(metrics)
         if not args.compare:
             _report(metrics, shown, time.perf_counter() - started, table)

@@ -155,14 +155,16 @@ def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: P
     as_json = getattr(args, "json", False)
     printed = sys.stderr if as_json else sys.stdout  # with --json, stdout carries the JSON alone
     stages = Stages()
+    plots = not getattr(args, "no_pictures", False)
     if not args.compare:
-        from agentsim.animation.timeline import warm_workers
+        if plots:
+            from agentsim.animation.timeline import warm_workers
 
-        warm_workers()  # the processes that draw the timeline pictures get ready while the story is told
+            warm_workers()  # the processes that draw the timeline pictures get ready while the story is told
         telling = tell(story, strategy=strategy, delivery=delivery, seed=args.seed, voice=voice, anchor=args.anchor,
                        timing=args.timing, stages=stages)
         stages_seconds = write_outputs(telling, staging, fps=args.fps, window=args.window, seed=args.seed,
-                                       stages=stages)
+                                       plots=plots, stages=stages)
         wall = time.perf_counter() - started - voice.backend.synthesis_seconds
         metrics = _metrics(telling, args, voice, stages_seconds, wall)
         write_text(staging / "metrics.json", json.dumps(_clean(metrics), indent=2) + "\n")
@@ -180,7 +182,7 @@ def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: P
         tellings[name] = t = tell(story, strategy=name, delivery=delivery, seed=args.seed, voice=voice,
                                   anchor=args.anchor, timing=args.timing, stages=stages)
         stages_seconds = write_outputs(t, staging / name, fps=args.fps, window=args.window, seed=args.seed,
-                                       pictures=False, stages=stages)
+                                       plots=plots, pictures=False, stages=stages)
         every[name] = _metrics(t, args, voice, stages_seconds,
                                time.perf_counter() - begun - (voice.backend.synthesis_seconds - synthesis))
     wall = time.perf_counter() - started - voice.backend.synthesis_seconds

@@ -48,7 +48,8 @@ def run_point(argv: list[str], out_at: int | None = None, keep: str | None = Non
     "version"}``.
 
     ``out_at``: where in ``argv`` to give the command ``--out`` (None: it takes none); the folder is
-    ``keep`` if given, else a temporary one removed afterwards.
+    ``keep`` if given, else a temporary one removed afterwards (and then a command that draws pictures is
+    run with ``--no-pictures``).
     """
     with _LOCK, contextlib.ExitStack() as scratch:
         folder = None
@@ -62,6 +63,8 @@ def run_point(argv: list[str], out_at: int | None = None, keep: str | None = Non
         try:
             with redirect_stdout(stdout), redirect_stderr(stderr):
                 args = work_parser().parse_args(argv)
+                if keep is None and getattr(args, "no_pictures", None) is False:
+                    args.no_pictures = True  # its folder is removed unseen: no picture is drawn for nobody
                 status = args.handler(args) or 0
             if status:
                 error = f"exit status {status}: {last_line(stderr.getvalue())}"
