@@ -452,6 +452,14 @@ class _Reader:
             return False
         return True
 
+    def _ref_or_warn(self, text: str, node: Node, what: str):
+        """The reference ``text`` read; None, with a warning that ``what`` is ignored, if it cannot be."""
+        try:
+            return self.ref(text, node)
+        except BMLError as exc:
+            self.warn("PARSING_FAILURE", f"{exc.reason}; {what} ignored", node)
+            return None
+
     def constraint(self, node: Node, required: bool) -> None:
         owner = node.attrs.get("id", "")
         add = self.block.constraints.append
@@ -472,24 +480,16 @@ class _Reader:
                 if text is None:
                     self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
                     continue
-                ref = known.get(text)
+                ref = known.get(text) or self._ref_or_warn(text, sync, "reference")
                 if ref is None:
-                    try:
-                        ref = self.ref(text, sync)
-                    except BMLError as exc:
-                        self.warn("PARSING_FAILURE", f"{exc.reason}; reference ignored", sync)
-                        continue
+                    continue
                 refs.append(ref)
             anchor = None
             text = child.attrs.get("ref")
             if text is not None:
-                anchor = known.get(text)
+                anchor = known.get(text) or self._ref_or_warn(text, child, "constraint")
                 if anchor is None:
-                    try:
-                        anchor = self.ref(text, child)
-                    except BMLError as exc:
-                        self.warn("PARSING_FAILURE", f"{exc.reason}; constraint ignored", child)
-                        continue
+                    continue
             if kind == "synchronize":
                 if anchor is not None:
                     refs.insert(0, anchor)
