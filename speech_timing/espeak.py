@@ -301,9 +301,19 @@ class _Engine:
         self.sample_rate = sample_rate
         self._chunks = _PcmBuffer()
         self._events: list[_RawEvent] = []
+        #: what was said, by voice and rate (see :meth:`spoken`)
+        self._spoken: dict[tuple[str, int], Spoken] = {}
         self._callback_error: BaseException | None = None
         self._callback = _SynthCallback(self._on_synth)  # kept referenced for the library's use
         self._lib.espeak_SetSynthCallback(self._callback)
+
+    def spoken(self, voice: str, rate: int) -> Spoken:
+        """What this process's engine said with ``voice`` at ``rate``, kept (the last :data:`REMEMBERED`
+        utterances, at most :data:`REMEMBERED_BYTES` of audio): each synthesis is a fresh engine's, so a text
+        is said the same every time, and every backend of that voice and rate answers a text said before at
+        once (a sweep's points, each with a backend of its own, synthesise a text once per worker)."""
+        with self.lock:
+            return self._spoken.setdefault((voice, rate), Spoken(REMEMBERED, REMEMBERED_BYTES))
 
     def _on_synth(self, wav, num_samples: int, events) -> int:
         """Collect one audio chunk and its events; returns 1 (abort) on an error."""
@@ -1025,8 +1035,9 @@ class EspeakBackend:
         self.voice = voice
         self.rate = int(rate)
         # what was said, kept: the same text is said the same every time (each synthesis is a fresh
-        # engine's, see _Pristine), and asked for again it is not synthesised again
-        self._spoken = Spoken(REMEMBERED, REMEMBERED_BYTES)
+        # engine's, see _Pristine), and asked for again, of this backend or another of its voice and rate,
+        # it is not synthesised again
+        self._spoken = self._engine.spoken(voice, self.rate)
 
     @property
     def sample_rate(self) -> int:

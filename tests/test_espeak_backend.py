@@ -399,7 +399,9 @@ def test_a_text_is_said_the_same_whatever_was_said_before_and_in_every_process(t
     other = " ".join((TEXTS_DIR / "orchard.txt").read_text().split())
     first = EspeakBackend().synthesize(SpeechText(text))
     EspeakBackend().synthesize(SpeechText(other))
-    again = EspeakBackend().synthesize(SpeechText(text))  # a new backend: synthesised anew, after another text
+    assert EspeakBackend().synthesize(SpeechText(text)) is first  # a new backend answers from what was said
+    EspeakBackend().forget(SpeechText(text))
+    again = EspeakBackend().synthesize(SpeechText(text))  # forgotten: synthesised anew, after another text
     assert again is not first and np.array_equal(again.audio, first.audio)
     assert again.words == first.words and again.phonemes == first.phonemes
     # ... and as a fresh process says it first, in that process itself (the engine's own synthesis)
