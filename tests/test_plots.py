@@ -16,8 +16,9 @@ from matplotlib.collections import PolyCollection
 from matplotlib.text import Text
 from matplotlib.transforms import Bbox
 
-from agentsim.animation.timeline import (heard_words, layout_words, overview_figure, plot_timelines, run_duration,
-                                         start_timelines, time_windows, timeline_figure, window_path)
+from agentsim.animation.pictures import plot_timelines, start_timelines
+from agentsim.animation.timeline import (heard_words, layout_words, overview_figure, run_duration, time_windows,
+                                         timeline_figure, window_path)
 from agentsim.realizer import Realizer
 from scenarios.conductor.metrics import (asynchrony, asynchrony_series, beats_to_recover, local_tempo,
                                                   recovery_phrase, tempo_figure)
@@ -235,9 +236,9 @@ def test_the_bars_are_a_collection_per_row_not_an_artist_per_bar():
 
 
 def test_windows_drawn_by_worker_processes_are_the_files_drawn_here(tmp_path, monkeypatch):
-    from agentsim.animation import timeline
+    from agentsim.animation import pictures
 
-    monkeypatch.setattr(timeline, "_cores", lambda: 2)  # side by side even where this process has one core
+    monkeypatch.setattr(pictures, "_cores", lambda: 2)  # side by side even where this process has one core
     recording = long_run(40.0)  # an overview and three windows
     here = plot_timelines(recording, tmp_path / "here", window=15.0, threshold=15.0, width=8.0, workers=1)
     with start_timelines(recording, tmp_path / "workers", window=15.0, threshold=15.0, width=8.0, workers=2) as drawing:
@@ -381,16 +382,18 @@ def test_no_label_of_the_conductors_timelines_overlaps_another_or_leaves_the_pic
     """A conductor run through the command line: the lane labels on the left of every timeline picture, the
     block names at the top of its lines (bar4:end and bar6:start 0.1 s apart) and the stroke labels, as the
     renderer lays them out in the files written."""
-    from agentsim.animation import timeline
+    from agentsim.animation import pictures, timeline
     from agentsim.cli import main
 
     figures = []
-    monkeypatch.setattr(timeline, "WORKERS", 1)  # every picture drawn in this process, where it is kept
+    monkeypatch.setattr(pictures, "WORKERS", 1)  # every picture drawn in this process, where it is kept
     for name in ("timeline_figure", "overview_figure"):
         def keep(*args, _make=getattr(timeline, name), **kwargs):
             figures.append(_make(*args, **kwargs))
             return figures[-1]
-        monkeypatch.setattr(timeline, name, keep)
+        monkeypatch.setattr(timeline, name, keep)  # plot_timeline draws with it
+        if hasattr(pictures, name):
+            monkeypatch.setattr(pictures, name, keep)  # and the overview is drawn here
     assert main(["run", "conductor", "--bars", "8", "--out", str(tmp_path)]) == 0
     assert len(figures) == 3 and (tmp_path / "timeline_0000-0015s.png").is_file()
     import json

@@ -36,8 +36,9 @@ module           what lives there
 ``output``       ``evaluate_poses`` (a PoseStream of joint angles and joint positions per frame),
                  ``write_bvh`` and ``write_npz``.
 ``timeline``     ``plot_timeline``: behaviours, phases, pegs, feedback and the words heard on one time
-                 axis, for a run or a window of it; ``plot_timelines``: a long run as an overview plus
-                 one picture per window.
+                 axis, for a run or a window of it, and a long run's overview.
+``pictures``     ``plot_timelines``: a long run as an overview plus one picture per window, drawn side by
+                 side by worker processes.
 ``analysis``     measuring where the motion really has its stroke (ictus, nod bottom, pointing arrival)
                  against the stroke feedback.
 ===============  ========================================================================================
@@ -52,7 +53,7 @@ import importlib
 _EXPORTS = {
     "Arbitrator": "arbitrator", "Body": "body", "Driver": "drivers", "DriverManager": "manager",
     "PoseStream": "output", "evaluate_poses": "output", "write_bvh": "output", "write_npz": "output",
-    "TimeSource": "time_source", "plot_timeline": "timeline", "plot_timelines": "timeline",
+    "TimeSource": "time_source", "plot_timeline": "timeline", "plot_timelines": "pictures",
 }
 
 __all__ = sorted(_EXPORTS)

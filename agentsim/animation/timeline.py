@@ -1,6 +1,6 @@
 """The timeline pictures: behaviours, phases, sync points, shared pegs, feedback and the words heard on one
-time axis (PNG), for the whole run or a window of it, and for a long run an overview plus one picture per
-window.
+time axis (PNG), for the whole run or a window of it, and for a long run an overview; a long run's pictures
+as files, drawn side by side, are :mod:`agentsim.animation.pictures`'.
 
 =======================  ==========================================================================================
 function                 what it does
@@ -8,9 +8,6 @@ function                 what it does
 ``timeline_figure``      the detailed figure of a run or of a window of it (a matplotlib ``Figure``)
 ``plot_timeline``        that figure, saved as a PNG
 ``overview_figure``      a whole run at a glance: one row per behaviour type, thin bars, strokes as ticks
-``plot_timelines``       a short run as one picture; a long one as an overview plus one picture per window,
-                         drawn by worker processes side by side
-``start_timelines``      the same pictures begun, to be waited for later (a ``TimelineDrawing``)
 ``PosePanel``            what the panel under a timeline draws of the poses, taken from a stream once
 ``heard_words``          the words each speech made heard, at their onsets on the run's axis
 ``layout_words``         which word labels fit (staggered on a few lines) at a given scale, and which do not
@@ -25,13 +22,8 @@ Times are seconds on the run's axis (the simulated time of the run, the feedback
 from __future__ import annotations
 
 import functools
-import glob
 import math
-import os
-import pickle
-import re
-import threading
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -71,7 +63,8 @@ ROW_INCHES = 0.34
 #: room kept across the axis for each of them (points; they are written upwards, so this is their height).
 BLOCK_FONT = 6.0
 BLOCK_PITCH = 1.45 * BLOCK_FONT
-_DPI = 120
+#: Resolution (dots per inch) of the timeline pictures.
+DPI = 120
 
 
 @dataclass(frozen=True)
@@ -110,7 +103,8 @@ class PosePanel:
                    np.array(stream.position("r_wrist")[:, 1]), -np.degrees(np.arcsin(np.clip(fwd[:, 1], -1, 1))))
 
 
-def _recording(source):
+def recording_of(source):
+    """The :class:`~agentsim.core.recording.Recording` of ``source``: itself, or a realizer's after ``run()``."""
     return source.recording() if hasattr(source, "recording") else source
 
 
@@ -122,7 +116,7 @@ def heard_words(source, start: float | None = None, end: float | None = None) ->
     With ``start``/``end``, only the words whose onset lies in ``[start, end)``. ``source``: a
     :class:`~agentsim.core.recording.Recording` or a realizer after ``run()``.
     """
-    recording = _recording(source)
+    recording = recording_of(source)
     cut = {b.name: b.stopped for b in recording.behaviours if b.stopped is not None}
     words = []
     for speech in recording.speech:
@@ -181,7 +175,7 @@ def layout_words(words: list[HeardWord], x0: float, x1: float, inches: float, li
 def run_duration(source) -> float:
     """Where a run's axis ends (s): the latest of the recording's time, every known sync point, feedback
     and the end of every speech heard."""
-    recording = _recording(source)
+    recording = recording_of(source)
     ends = [float(recording.now), 0.0]
     for b in recording.behaviours:
         ends += [t for t in b.times if t is not None and math.isfinite(t)]
@@ -275,7 +269,7 @@ def _new_figure(width: float, height: float, rows: int = 1, ratios=None, sharex:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(width, height), dpi=_DPI)
+    fig = Figure(figsize=(width, height), dpi=DPI)
     FigureCanvasAgg(fig)
     axes = fig.subplots(rows, 1, sharex=sharex, squeeze=False, gridspec_kw={"height_ratios": ratios})
     return fig, [a[0] for a in axes]
@@ -307,7 +301,7 @@ def timeline_figure(source, stream: PoseStream | PosePanel | None = None, title:
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.patches import Patch
 
-    recording = _recording(source)
+    recording = recording_of(source)
     panel = None if stream is None else PosePanel.of(stream)
     window = start is not None or end is not None
     if window:
@@ -537,7 +531,7 @@ def plot_timeline(source, out_png: str | Path, stream: PoseStream | PosePanel | 
     """
     out_png = Path(out_png)
     fig = timeline_figure(source, stream=stream, title=title, width=width, start=start, end=end)
-    save_figure(fig, out_png, dpi=_DPI)
+    save_figure(fig, out_png, dpi=DPI)
     return out_png
 
 
@@ -574,7 +568,7 @@ def overview_figure(source, title: str | None = None, width: float = 16.0, windo
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.colors import to_rgba
 
-    recording = _recording(source)
+    recording = recording_of(source)
     duration = run_duration(recording)
     by_type: dict[str, list] = {}
     for record in recording.behaviours:
@@ -634,252 +628,3 @@ def overview_figure(source, title: str | None = None, width: float = 16.0, windo
     ax.grid(axis="x", alpha=0.25)
     _tight_layout(fig)
     return fig
-
-
-_WINDOW_FILE = re.compile(r"_\d{4,}(?:\.\d)?-\d{4,}(?:\.\d)?s")
-
-
-#: How many worker processes draw the pictures of a long run side by side (at most one per core this
-#: process may run on); 1: all of them in the calling process.
-WORKERS = 2
-
-
-def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # no affinity on this system
-        return os.cpu_count() or 1
-
-
-def _may_start_processes() -> bool:
-    """Whether this process may start worker processes (a daemonic one, a worker of a pool, may not)."""
-    import multiprocessing
-
-    return not multiprocessing.current_process().daemon
-
-
-def _portable(recording):
-    """``recording`` as the pictures need it, without what cannot pass to another process: the samples of
-    its speech (the pictures draw its words) and the sound files it played."""
-    speech = tuple(replace(s, utterance=replace(s.utterance, audio=None))
-                   if getattr(s.utterance, "audio", None) is not None else s for s in recording.speech)
-    return replace(recording, speech=speech, audio=())
-
-
-def _changed_rc() -> dict:
-    """The matplotlib settings this process changed (that a worker process changes in turn)."""
-    import matplotlib
-
-    return {k: v for k, v in matplotlib.rcParams.items()
-            if k != "backend" and matplotlib.rcParamsOrig.get(k, v) != v}
-
-
-_RUN: tuple = ()  # in a worker process: the recording and the pose panel it draws
-
-
-def warm_workers():
-    """Start the server that the processes drawing pictures are forked from (multiprocessing's
-    ``forkserver``: a process of its own, so that no thread of this one is copied half-way), if it is not
-    running; it imports what they need while this process goes on. A run calls this early, so that its
-    pictures begin (:func:`start_timelines`) without waiting for it. Returns the multiprocessing context,
-    or None where there is no ``forkserver`` or this process may start none (a daemonic one): the
-    pictures are then drawn in this process.
-
-    As with any start method but ``fork``, a worker imports the main module again: a script that draws a
-    long run's pictures keeps its work under ``if __name__ == "__main__":``.
-    """
-    import multiprocessing
-    import multiprocessing.forkserver
-
-    if "forkserver" not in multiprocessing.get_all_start_methods() or not _may_start_processes():
-        return None
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload([__name__, "matplotlib.backends.backend_agg"])
-    multiprocessing.forkserver.ensure_running()
-    return context
-
-
-def _take_run(payload: bytes) -> None:
-    """Start a worker process: keep the run it draws (pickled once for all of its pictures)."""
-    global _RUN
-    import matplotlib
-
-    recording, panel, rc = pickle.loads(payload)
-    matplotlib.rcParams.update(rc)
-    _RUN = (recording, panel)
-
-
-def _draw(job: tuple, recording=None, panel=None) -> Path:
-    """Draw one picture of :func:`plot_timelines` of the run given or, in a worker process, of its run;
-    ``job``: ``("whole", file, title, width)``, ``("overview", file, title, width, window)`` or
-    ``("window", file, title, width, start, end)``. Returns the file."""
-    if recording is None:
-        recording, panel = _RUN
-    kind, path, title, width, *span = job
-    if kind == "overview":
-        save_figure(overview_figure(recording, title=title, width=width, window=span[0]), path, dpi=_DPI)
-        return path
-    if kind == "whole":
-        return plot_timeline(recording, path, stream=panel, title=title, width=width)
-    return plot_timeline(recording, path, stream=panel, title=title, width=width, start=span[0], end=span[1])
-
-
-class TimelineDrawing:
-    """The pictures of :func:`start_timelines` as they are drawn: by worker processes from the start, or
-    (one process) here when :meth:`result` asks for them.
-
-    The workers are started on a thread of their own, so that beginning the pictures does not wait for
-    them. Use it as a context manager, or call :meth:`close`, so that the workers are let go if the files
-    are never asked for.
-
-    Attributes
-    ----------
-    workers : int
-        How many worker processes draw the pictures; 0 if :meth:`result` draws them (one worker asked
-        for, or a run that cannot pass to another process), or drew any of them (workers that could not
-        start, or died).
-    """
-
-    def __init__(self, jobs: list[tuple], png: Path, recording, panel: PosePanel | None, workers: int) -> None:
-        self._jobs, self._png, self._recording, self._panel = jobs, png, recording, panel
-        self._written: list[Path] | None = None
-        self._pool = None
-        self._futures: list = []
-        self._starting: threading.Thread | None = None
-        self.workers = 0
-        context = warm_workers() if workers > 1 else None
-        if context is not None:
-            try:
-                payload = pickle.dumps((_portable(recording), panel, _changed_rc()), protocol=pickle.HIGHEST_PROTOCOL)
-            except (pickle.PicklingError, TypeError, AttributeError):  # a run that cannot pass is drawn here
-                return
-            self.workers = workers
-            self._starting = threading.Thread(target=self._start, args=(context, workers, payload),
-                                              name="timeline workers", daemon=True)
-            self._starting.start()
-
-    def _start(self, context, workers: int, payload: bytes) -> None:
-        """Start the workers and hand them the pictures (what cannot start leaves them to :meth:`result`)."""
-        import concurrent.futures
-
-        try:
-            self._pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_take_run,
-                                                                initargs=(payload,))
-            self._futures = [self._pool.submit(_draw, job) for job in self._jobs]
-        except (OSError, RuntimeError, concurrent.futures.BrokenExecutor):
-            self._futures = []
-
-    def _started(self) -> None:
-        if self._starting is not None:
-            self._starting.join()
-            self._starting = None
-
-    def result(self) -> list[Path]:
-        """Wait for the pictures (or draw them) and return their files, the overview (or the one picture)
-        first; window files of an earlier, longer run left in the folder are removed. Raises what drawing
-        one of them raised. A picture whose worker died (killed, or unable to start) is drawn here."""
-        from concurrent.futures import BrokenExecutor
-
-        if self._written is None:
-            self._started()
-            try:
-                written = []
-                for k, job in enumerate(self._jobs):
-                    try:
-                        written.append(self._futures[k].result() if self._futures else None)
-                    except BrokenExecutor:
-                        written.append(None)
-                    if written[-1] is None:
-                        written[-1] = _draw(job, self._recording, self._panel)
-                        self.workers = 0
-            finally:
-                self.close()
-            png = self._png
-            for old in png.parent.glob(f"{glob.escape(png.stem)}_*s{glob.escape(png.suffix)}"):
-                if _WINDOW_FILE.fullmatch(old.name[len(png.stem):-len(png.suffix)]) and old not in written:
-                    old.unlink()
-            self._written = written
-        return list(self._written)
-
-    def close(self) -> None:
-        """Let the workers go: pictures not begun are not drawn, those under way are finished."""
-        self._started()
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
-
-    def __enter__(self) -> TimelineDrawing:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-
-def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | None = None, window: float = WINDOW,
-                    threshold: float | None = None, title: str | None = None, width: float = 16.0,
-                    workers: int | None = None) -> TimelineDrawing:
-    """Begin drawing the pictures of :func:`plot_timelines`; the caller writes its other files meanwhile
-    and asks :meth:`TimelineDrawing.result` for these when it needs them.
-
-    A long run's overview and windows (two windows or more) are drawn by worker processes started here
-    (:func:`warm_workers`); a short run's one picture, or every picture with one worker, on one core, in a
-    daemonic process or where there is no ``forkserver``, is drawn by :meth:`TimelineDrawing.result` in
-    this process. Either way the files are the same.
-
-    Parameters
-    ----------
-    source : Recording
-        The run (or a realizer after ``run()``).
-    out, window, threshold, title, width
-        As :func:`plot_timelines` takes them.
-    stream : PoseStream or PosePanel, optional
-        The run's poses; their :class:`PosePanel` is taken here, once (the stream may be gone by the time
-        the pictures are drawn).
-    workers : int, optional
-        How many processes draw side by side (default :data:`WORKERS`; at most one per core this process
-        may run on, and one per picture).
-
-    Returns
-    -------
-    TimelineDrawing
-        The pictures under way; use it as a context manager.
-    """
-    if not window > 0:
-        raise ValueError(f"a window must last a positive number of seconds, not {window}")
-    recording = _recording(source)
-    out = Path(out)
-    png = out if out.suffix else out / "timeline.png"
-    png.parent.mkdir(parents=True, exist_ok=True)
-    panel = None if stream is None else PosePanel.of(stream)
-    duration = run_duration(recording)
-    limit = LONG_RUN if threshold is None else threshold
-    if duration <= limit:
-        jobs = [("whole", png, title, width)]
-    else:
-        jobs = [("overview", png, title, width, window)]
-        for a, b in time_windows(duration, window):
-            part = f"{a:g}-{b:g} s of {duration:.0f} s"
-            jobs.append(("window", window_path(png, a, b), f"{title}: {part}" if title else part, width, a, b))
-    n = min(WORKERS if workers is None else workers, _cores(), len(jobs))
-    if len(jobs) < 3:  # one window at most: nothing to draw side by side
-        n = 1
-    return TimelineDrawing(jobs, png, recording, panel, n)
-
-
-def plot_timelines(source, out: str | Path, stream: PoseStream | PosePanel | None = None, window: float = WINDOW,
-                   threshold: float | None = None, title: str | None = None, width: float = 16.0,
-                   workers: int | None = None) -> list[Path]:
-    """The timeline of a run as pictures that read: one if it is short, an overview plus windows if long.
-
-    ``out``: the overview's file (``.png``, or another format matplotlib writes) or a folder (a path
-    without a suffix: ``timeline.png`` inside). A run no longer than
-    ``threshold`` seconds (default ``LONG_RUN``) is drawn whole in that file by :func:`plot_timeline`. A
-    longer one gets :func:`overview_figure` there, and each of its :func:`time_windows` of ``window``
-    seconds in detail in its own file next to it (:func:`window_path`: ``timeline_0000-0030s.png``, ...),
-    drawn by ``workers`` processes side by side (:func:`start_timelines`); window files of an earlier,
-    longer run left in the folder are removed. Returns the files written, the overview (or the one
-    picture) first.
-    """
-    with start_timelines(source, out, stream=stream, window=window, threshold=threshold, title=title, width=width,
-                         workers=workers) as drawing:
-        return drawing.result()

@@ -107,7 +107,7 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
     stages = Stages()
     pictures = not getattr(args, "no_pictures", False)
     if not args.compare and pictures:
-        from agentsim.animation.timeline import warm_workers
+        from agentsim.animation.pictures import warm_workers
 
         warm_workers()  # the processes that draw the timeline pictures get ready while the run is simulated
     for name in stages.over(list(strategies), "strategies", unit="strategy") if args.compare else strategies:

@@ -407,7 +407,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     import contextlib
 
     from agentsim.animation import evaluate_poses, write_bvh
-    from agentsim.animation.timeline import start_timelines, warm_workers
+    from agentsim.animation.pictures import start_timelines, warm_workers
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_feedback, write_text, write_wav
     from agentsim.media.report import write_report

@@ -158,7 +158,7 @@ def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: P
     plots = not getattr(args, "no_pictures", False)
     if not args.compare:
         if plots:
-            from agentsim.animation.timeline import warm_workers
+            from agentsim.animation.pictures import warm_workers
 
             warm_workers()  # the processes that draw the timeline pictures get ready while the story is told
         telling = tell(story, strategy=strategy, delivery=delivery, seed=args.seed, voice=voice, anchor=args.anchor,
@@ -303,7 +303,7 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
         return time.perf_counter()
 
     if plots and pictures:  # the processes that draw the timeline pictures get ready meanwhile
-        from agentsim.animation.timeline import warm_workers
+        from agentsim.animation.pictures import warm_workers
 
         warm_workers()
     t = time.perf_counter()
@@ -385,9 +385,9 @@ def plot_window(telling: Telling, png: Path, stream, window: float = 30.0) -> li
 
 def start_window(telling: Telling, png: Path, stream, window: float = 30.0):
     """Begin drawing the pictures of :func:`plot_window` in worker processes
-    (:func:`~agentsim.animation.timeline.start_timelines`); its ``result()`` waits for them and returns the
+    (:func:`~agentsim.animation.pictures.start_timelines`); its ``result()`` waits for them and returns the
     files, the overview first. ``stream`` is read here: it may be gone before the pictures are drawn."""
-    from agentsim.animation.timeline import start_timelines
+    from agentsim.animation.pictures import start_timelines
 
     return start_timelines(telling.recording, png, stream=stream, window=window, threshold=window, width=16.0,
                            title=f"{telling.story.title} (strategy {telling.strategy})")
