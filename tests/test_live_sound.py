@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from agentsim.errors import Unavailable
-from agentsim.live.sound import (ClockMap, DacTracker, StreamClock, Steadiness, find_onset, open_device,
-                                 render_block)
+from agentsim.live.clocks import ClockMap, DacTracker, Steadiness, StreamClock, render_block
+from agentsim.live.devices import open_device
+from agentsim.live.recorder import find_onset
 from agentsim.media.audio import FADE, Source, mix
 
 RATE = 48000

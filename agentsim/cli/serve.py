@@ -70,7 +70,7 @@ def run_server(args: argparse.Namespace) -> int:
     import signal
 
     from agentsim.live.service import Service
-    from agentsim.live.sound import GET_A_DEVICE, NoAudioDevice
+    from agentsim.live.devices import GET_A_DEVICE, NoAudioDevice
 
     # A service is stopped with SIGTERM as with Ctrl-C: it closes what it started (the poses' evaluator
     # process, the audio stream) instead of leaving them behind.

@@ -40,7 +40,7 @@ class Service:
                  calibrate: str | None = None, token: str | None = None, allow_origins=(), **realizer_options):
         device = None
         if audio != "none":
-            from agentsim.live.sound import open_device
+            from agentsim.live.devices import open_device
 
             device = open_device(audio)  # says before anything starts if there is no such device
             if calibrate is not None:

@@ -2,7 +2,7 @@
 anticipator listens to a live input, and a client's BML pegs gesture strokes to its beats. A click track plays
 into a PulseAudio null sink; the service listens to the sink's monitor; the test records the monitor as well,
 finds when each click was heard there (on ``time.monotonic()``, PortAudio's capture stamps mapped as
-:class:`agentsim.live.sound.Recorder` does) and compares the stroke feedback that reaches the client with
+:class:`agentsim.live.recorder.Recorder` does) and compares the stroke feedback that reaches the client with
 them."""
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ def heard_clicks(recorder, threshold: float = 0.2) -> np.ndarray:
 def test_strokes_pegged_to_the_live_beats_come_on_the_clicks(pulse_null_sink, tmp_path, listen):
     import sounddevice
 
-    from agentsim.live.sound import Recorder
+    from agentsim.live.recorder import Recorder
 
     track, _ = click_track()
     with Recorder("pulse", samplerate=SR, seconds=SECONDS + 15) as recorder:

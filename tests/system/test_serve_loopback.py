@@ -4,7 +4,7 @@ test records the sink's monitor, and what was heard is compared with the feedbac
 The loop is calibrated first (``calibrate=``, as ``agentsim serve --calibrate``): clicks played and recorded
 measure what the device adds to the latency PortAudio reports. Every time here is on ``time.monotonic()``:
 the arrival of a feedback at the client, and the moment a recorded frame left the monitor's ADC (PortAudio's
-capture stamps, mapped as :class:`agentsim.live.sound.Recorder` does).
+capture stamps, mapped as :class:`agentsim.live.recorder.Recorder` does).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ def media(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def served(pulse_null_sink, media):
-    from agentsim.live.sound import Recorder
+    from agentsim.live.recorder import Recorder
 
     service = Service(port=0, audio="pulse", fps=0, calibrate="pulse", tts=EspeakBackend(), media=str(media))
     with Background(service) as running:
