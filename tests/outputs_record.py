@@ -51,6 +51,7 @@ def _run(argv: list[str], tmp: Path) -> tuple[int, str]:
 def _placeheld(text: str, tmp: Path) -> str:
     text = text.replace(str(tmp), "<out>").replace(str(ROOT), "<root>")
     text = re.sub(r"wall [0-9.]+ s \([0-9.]+ % of [^)]*\)", "wall <s>", text)
+    text = re.sub(r", first synthesis [0-9.]+ s", "", text)  # said when the speech cache was cold
     return re.sub(r"(written to \S+) in [0-9.]+ s", r"\1 in <s>", text)
 
 

@@ -76,12 +76,12 @@ def test_realizer_realize_and_plot_timeline_share_the_default_backend_and_its_ti
 @pytest.fixture
 def without_espeak(monkeypatch):
     """espeak-ng's library as if it were not installed."""
-    import speech_timing.espeak as espeak
+    from speech_timing.espeak import backend, engine
 
     def missing():  # the process-wide engine as the library's absence leaves it
-        return espeak._Engine("libespeak-ng-not-installed.so.1")
+        return engine._Engine("libespeak-ng-not-installed.so.1")
 
-    monkeypatch.setattr(espeak, "_engine", missing)
+    monkeypatch.setattr(backend, "shared_engine", missing)
 
 
 def test_without_espeak_every_default_falls_back_to_the_builtin_model_and_says_what_to_install(

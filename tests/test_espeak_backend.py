@@ -17,7 +17,8 @@ import pytest
 
 from speech_timing.backend import SpeechText, TTSBackend, Utterance
 from agentsim.errors import SpeechBackendUnavailable
-from speech_timing.espeak import INSTALL_HINT, EspeakBackend, _load_library
+from speech_timing.espeak import INSTALL_HINT, EspeakBackend
+from speech_timing.espeak.engine import _load_library
 
 # Capitalised words after full stops: espeak makes a pause of about 300 ms before each.
 ISOLATED_WORDS = ("Apple Banana Cherry Dog Egg Fish Garden Hello Island Jump Kite Lemon Mango Nose Orange "
@@ -353,7 +354,8 @@ def test_invalid_arguments(backend):
 def test_stress_marked_clause_by_clause_is_that_of_the_whole_text(backend, monkeypatch):
     """The stressed vowels found by aligning each clause with its transcription are those that aligning the
     whole text at once finds (which costs the square of a long story's length)."""
-    from speech_timing import espeak
+    from speech_timing.espeak import alignment
+    from speech_timing.espeak import backend as espeak_backend
 
     text = (PARAGRAPH + " “Yes!” said the cat; and then — well. Mr. Smith paid $1,000.50 on 3/4/2021, didn't he? "
             "In the end, of a sort: it's (quite) 'odd'... isn't it?!")
@@ -361,12 +363,14 @@ def test_stress_marked_clause_by_clause_is_that_of_the_whole_text(backend, monke
     assert len(clauses) > 8 and [end for end, _ in clauses] == sorted(end for end, _ in clauses)
     assert [p for _, c in clauses for p in c] == backend._engine.transcribe(text, backend.voice, backend.rate)
     by_clause = EspeakBackend().synthesize(SpeechText(text))
+    EspeakBackend().forget(SpeechText(text))  # said again below, not answered from what was said
 
     def whole(groups, tokens, clauses):
-        espeak._mark_stress([p for g in groups for p in g.phonemes], [p for _, c in clauses for p in c])
+        alignment._mark_stress([p for g in groups for p in g.phonemes], [p for _, c in clauses for p in c])
 
-    monkeypatch.setattr(espeak, "_mark_stress_by_clause", whole)
+    monkeypatch.setattr(espeak_backend, "mark_stress_by_clause", whole)
     at_once = EspeakBackend().synthesize(SpeechText(text))
+    assert at_once is not by_clause
     marks = [(p.symbol, p.stressed) for p in by_clause.phonemes]
     assert marks == [(p.symbol, p.stressed) for p in at_once.phonemes]
     assert sum(stressed for _, stressed in marks) > 40
@@ -405,8 +409,9 @@ def test_a_text_is_said_the_same_whatever_was_said_before_and_in_every_process(t
     assert again is not first and np.array_equal(again.audio, first.audio)
     assert again.words == first.words and again.phonemes == first.phonemes
     # ... and as a fresh process says it first, in that process itself (the engine's own synthesis)
-    script = ("import sys, numpy as np; from speech_timing.espeak import EspeakBackend, _engine; "
-              "from speech_timing.backend import SpeechText; e = _engine(); e.synth = e.synth_here; "
+    script = ("import sys, numpy as np; from speech_timing.espeak import EspeakBackend; "
+              "from speech_timing.espeak.engine import shared_engine; "
+              "from speech_timing.backend import SpeechText; e = shared_engine(); e.synth = e.synth_here; "
               "np.save(sys.argv[2], EspeakBackend().synthesize(SpeechText(sys.argv[1])).audio)")
     subprocess.run([sys.executable, "-c", script, text, str(tmp_path / "fresh.npy")], check=True, timeout=120)
     assert np.array_equal(np.load(tmp_path / "fresh.npy"), first.audio)
@@ -472,7 +477,7 @@ def test_a_synthesis_cut_short_is_said_and_the_next_reply_is_read_whole():
     so; the reply is an error, and the next reply on the pipe is read from its start."""
     import io
 
-    from speech_timing.espeak import _read_reply, _relay, _send
+    from speech_timing.espeak.engine import _read_reply, _relay, _send
 
     samples = np.arange(-300, 300, dtype="<i2")
     pipe = io.BytesIO()
