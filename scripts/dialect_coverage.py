@@ -14,7 +14,8 @@ import re
 import sys
 from pathlib import Path
 
-from agentsim.bml.dialects import find_blocks, fold_case, without_doctype
+from agentsim.bml.dialects import find_blocks
+from agentsim.bml.spelling import fold_case, without_doctype
 from agentsim.core.xmltree import read_forest
 from agentsim.errors import BMLError
 from agentsim.realizer import Realizer

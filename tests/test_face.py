@@ -16,7 +16,7 @@ from helpers import bvh_reader, realize
 
 from agentsim.animation import evaluate_poses, write_bvh
 from agentsim.animation.lips import PHONEME_VISEMES, VISEMES, phoneme_viseme
-from agentsim.animation.pose import BML_FACE_LEXEMES, FACE_LEXEMES, FACS_UNITS
+from agentsim.animation.expressions import BML_FACE_LEXEMES, FACE_LEXEMES, FACS_UNITS
 
 NS = "http://www.bml-initiative.org/bml/bml-1.0"
 FPS = 20

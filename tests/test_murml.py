@@ -350,7 +350,7 @@ def test_a_posture_of_three_values_turns_the_joint_as_asap_reads_it(tmp_path):
 
 def test_asaps_face_key_frames_close_both_eyes_at_their_times(tmp_path):
     # its morph target is the eyes' closure of Asap's character: here both eyelids at CLOSE_EYES times weight/100
-    from agentsim.animation.pose import FACE_LEXEMES
+    from agentsim.animation.expressions import FACE_LEXEMES
 
     result, fk = run(tmp_path, (ASAP / "murmlfacekeyframe.xml").read_text().split("id=\"bml1\">", 1)[1]
                      .rsplit("</bml>")[0])

@@ -26,7 +26,7 @@ import numpy as np
 
 from agentsim.animation.drivers import EPSILON, PRIORITY
 from agentsim.animation import lexicon as lexicon_data
-from agentsim.animation.lexicon import builtin as builtin_lexicon, conducting_meter  # noqa: F401
+from agentsim.animation.lexicon import builtin as builtin_lexicon
 from agentsim.errors import UsageError
 from agentsim.animation.motion import EASE, HOLD, MIN_PREP, KeyTimes, MotionDriver, blend_in, frac
 
@@ -84,7 +84,6 @@ CONDUCT_CENTER = builtin_lexicon()["conducting"]["center"]
 #: the height the hand falls from into it, and how high it rebounds (from the lexicon too).
 CONDUCT_PATTERNS: dict[int, list[tuple[tuple[float, float, float], float, float]]] = dict(
     builtin_lexicon()["conducting"]["patterns"])
-
 
 
 def conducting_path(beats_per_bar: int, beat: int, amount: float = 1.0) -> StrokePath:

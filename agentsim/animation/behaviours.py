@@ -18,7 +18,8 @@ from typing import Iterable
 
 import numpy as np
 
-from agentsim.animation.arms import GESTURE_FORMS, GestureDriver, PointingDriver, conducting_meter, conducting_path
+from agentsim.animation.arms import GESTURE_FORMS, GestureDriver, PointingDriver, conducting_path
+from agentsim.animation.lexicon import conducting_meter
 from agentsim.animation.drivers import PRIORITY
 from agentsim.animation.head import GazeDriver, HeadDriver, HeadTurnDriver
 from agentsim.animation.lips import LipsDriver, SpeechMouthDriver, curves_driver, lips_values
@@ -26,8 +27,8 @@ from agentsim.animation.manager import DriverManager
 from agentsim.animation.lexicon import murml_form
 from agentsim.animation.motion import KeyTimes, ReplacementGroup
 from agentsim.animation.murml import Form, MurmlDriver, MurmlKeyframeDriver, form_of, keyframe_channels
-from agentsim.animation.pose import (POSTURES, LocomotionDriver, PoseDriver, SpeechJawDriver, TransitionDriver,
-                                     face_values)
+from agentsim.animation.expressions import POSTURES
+from agentsim.animation.pose import LocomotionDriver, PoseDriver, SpeechJawDriver, TransitionDriver, face_values
 from agentsim.animation.scene import Scene, offset_target
 from agentsim.animation.time_source import TimeSource
 from agentsim.animation.units import repetition

@@ -374,7 +374,7 @@ def keyframe_channels(form: dict, body) -> tuple[dict[str, list[tuple[float, flo
     that face lexeme's values times weight / 100)."""
     from agentsim.animation.lips import CHANNELS
     from agentsim.animation.murml_form import symbols
-    from agentsim.animation.pose import FACE_LEXEMES
+    from agentsim.animation.expressions import FACE_LEXEMES
 
     morphs = {name: FACE_LEXEMES[lexeme] for name, lexeme in symbols().get("morph_targets", {}).items()}
 

@@ -9,9 +9,9 @@ from typing import Mapping
 import numpy as np
 
 from agentsim.animation.drivers import PRIORITY
-# the tables of faces and postures (:data:`FACE_LEXEMES`, :data:`FACS_UNITS`, :data:`POSTURES`) are plain data
-# in their own module, which the BML reader reads without numpy; they are this module's names too
-from agentsim.animation.expressions import BML_FACE_LEXEMES, FACE_LEXEMES, FACS_UNITS, POSTURES  # noqa: F401
+# the tables of faces and postures are plain data in agentsim.animation.expressions, which the BML reader
+# reads without numpy
+from agentsim.animation.expressions import FACE_LEXEMES, FACS_UNITS
 from agentsim.animation.motion import EASE, STOP_HANDOVER, KeyTimes, MotionDriver, blend_in, frac
 
 

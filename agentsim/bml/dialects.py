@@ -17,11 +17,10 @@ import re
 from dataclasses import dataclass, field
 from typing import Iterable
 
-# The body's lexicons (agentsim.animation.arms and .pose, with numpy) are imported where foreign vocabulary
-# is mapped or noted: reading BML 1.0 does without them.
+# The gesture lexicon (agentsim.animation.arms, with numpy) and the posture table are imported where foreign
+# vocabulary is mapped or noted: reading BML 1.0 does without them.
 from agentsim.bml import lexemes
-from agentsim.bml.spelling import (KNOWN_ELEMENTS, REF_SYNC, SYNC_SPELLINGS, canonical_sync,  # noqa: F401
-                                   fold_case, ref_sync, without_doctype)
+from agentsim.bml.spelling import REF_SYNC, SYNC_SPELLINGS, canonical_sync, ref_sync
 from agentsim.core.xmltree import FOREST, Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
@@ -476,7 +475,7 @@ class Adapter:
     def map_body(self, node: Node) -> str | None:
         """SmartBody's ``<body posture>``: a posture shift (a lean if the clip's name says so, else a weight
         shift)."""
-        from agentsim.animation.pose import POSTURES
+        from agentsim.animation.expressions import POSTURES
 
         name = node.attrs.pop("posture", None)
         if name is None:
@@ -489,7 +488,7 @@ class Adapter:
 
     def map_torso(self, node: Node) -> str:
         """Greta's ``<torso>``: a posture shift."""
-        from agentsim.animation.pose import POSTURES
+        from agentsim.animation.expressions import POSTURES
 
         self.notes.add("Greta's <torso> played as a posture shift")
         lexeme = node.attrs.pop("lexeme", "") or node.attrs.pop("type", "")

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 from typing import Callable
 
 from agentsim.bml import lexemes
-from agentsim.bml.dialects import DRAFT_NAMESPACES, Adapter, Notes, find_blocks, fold_case, without_doctype
+from agentsim.bml.dialects import DRAFT_NAMESPACES, Adapter, Notes, find_blocks
+from agentsim.bml.spelling import fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
 from agentsim.core.xmltree import Node, encode, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,

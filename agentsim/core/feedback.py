@@ -97,13 +97,16 @@ def _clean(value: Any) -> Any:
     return value
 
 
+_isfinite = math.isfinite  # (looked up once, not as an attribute for every float)
+
+
 def _clean_dict(value: dict) -> dict:
     # (what _clean does, with floats and nested dicts, the bulk of a prediction, done here without a call each)
     out = {}
     for k, v in value.items():
         kind = type(v)
         if kind is float:
-            out[k] = round(v, DECIMALS) if isfinite(v) else None
+            out[k] = round(v, DECIMALS) if _isfinite(v) else None
         elif kind in _AS_IS:
             out[k] = v
         elif kind is dict:
@@ -111,9 +114,6 @@ def _clean_dict(value: dict) -> dict:
         else:
             out[k] = _clean(v)
     return out
-
-
-isfinite = math.isfinite
 
 
 #: The encoder of :func:`to_json` (what ``json.dumps(..., separators=(", ", ": "))`` makes anew each call).

@@ -44,7 +44,7 @@ from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
 from agentsim.animation.arms import GESTURE_FORMS
-from agentsim.animation.pose import FACE_LEXEMES
+from agentsim.animation.expressions import FACE_LEXEMES
 from agentsim.animation.scene import DEFAULT_SCENE
 from agentsim.bml.speech_text import normalize_space
 from agentsim.bml.vocabulary import BML_NAMESPACE
