@@ -12,4 +12,4 @@ $SUDO apt-get install -y -qq python3-venv python3-pip espeak-ng espeak-ng-data l
     festival festvox-us-slt-hts festvox-kallpc16k \
     fluidsynth libfluidsynth3 fluid-soundfont-gm libportaudio2 pulseaudio libasound2-plugins chromium >/dev/null
 [ -x .venv/bin/python ] || python3 -m venv .venv
-.venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test]'
+.venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test,docs]'

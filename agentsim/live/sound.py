@@ -59,6 +59,8 @@ class LiveSound:
     start_timeout : float
         Seconds to wait for the stream's callbacks to settle before giving up (Unavailable).
 
+    Notes
+    -----
     Counters, none of which the callback ever raises instead of: :attr:`underruns` (PortAudio's output
     underflow flag), :attr:`errors` and :attr:`last_error` (exceptions caught in the callback, whose block
     is then silent), :attr:`late` (``(label, seconds)`` of sounds added or stopped after the time they

@@ -26,7 +26,7 @@ __all__ = ["MAX_FILE", "BVH_BYTES_PER_VALUE", "check_budget", "pose_bytes", "gib
 
 #: The largest file a run writes (bytes): 4 GiB, the most a RIFF (WAV) file can hold.
 MAX_FILE = 4 * 1024 ** 3
-#: Bytes a BVH value takes as text: ``%.5f`` of a few degrees and its space (``-12.34567 ``).
+#: Bytes a BVH value takes as text: ``%.5f`` of a few degrees and the space after it (``-12.34567``).
 BVH_BYTES_PER_VALUE = 10
 
 

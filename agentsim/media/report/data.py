@@ -252,7 +252,7 @@ def heard_words(recording) -> list[tuple[float, float, str, int, bool]]:
 
 
 def summary(gestures) -> dict:
-    """Figures of the gesture table: how many rows, how many measured, dropped, and |error| statistics (ms)."""
+    """Figures of the gesture table: how many rows, how many measured, dropped, and statistics of the absolute errors (ms)."""
     errors = np.array([abs(g.error_ms) for g in gestures if g.error_ms is not None and math.isfinite(g.error_ms)])
     out = {"gestures": len(gestures), "measured": int(errors.size), "dropped": sum(1 for g in gestures if g.dropped)}
     if errors.size:

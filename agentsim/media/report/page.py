@@ -118,7 +118,7 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         The run (or anything with a ``recording()`` method, such as a realizer after ``run()``).
     stream : PoseStream, optional
         Its poses (:func:`~agentsim.animation.output.evaluate_poses`); None: the run has no motion.
-    track : Track, optional
+    track : agentsim.media.audio.Track, optional
         Its sound (:func:`~agentsim.media.audio.run_track`, or a
         :class:`~agentsim.media.audio.TrackStream` from :func:`~agentsim.media.audio.run_track_stream`);
         None (or an empty track): the run has no sound.
@@ -134,6 +134,8 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         for a report inside a run's folder that is staged whole
         (:func:`~agentsim.written.staged_folder`).
 
+    Notes
+    -----
     Without ``audio``, the page and its folder are whole or absent as a pair
     (:func:`~agentsim.written.staged_page`): the files are written into a staging folder beside the folder,
     which is swapped in once the report is whole, and the page is renamed into place last (the old page
