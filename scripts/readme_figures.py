@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
-"""The README's result tables, made from fresh runs, so that they cannot go stale.
+"""The result tables of the documentation's "Measured" page (``docs/measured.md``), made from fresh runs, so
+that they cannot go stale.
 
-Each table the script owns sits in README.md between ``<!-- figures:NAME -->`` and ``<!-- /figures:NAME -->``.
-``python scripts/readme_figures.py`` runs what each table reports and writes the tables into the README;
+Each table the script owns sits in the page between ``<!-- figures:NAME -->`` and ``<!-- /figures:NAME -->``.
+``python scripts/readme_figures.py`` runs what each table reports and writes the tables into the page;
 ``--check`` writes nothing and exits 1, printing the difference, when a table differs from a fresh run (CI's
 system tests run it); ``--only NAME`` does one table.
 
@@ -29,11 +30,12 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-README = ROOT / "README.md"
+#: The page whose tables the script owns.
+README = ROOT / "docs" / "measured.md"
 
 
 def figure(value: float) -> str:
-    """A figure as the README prints it: three or four significant digits, never a lost integer part."""
+    """A figure as the page prints it: three or four significant digits, never a lost integer part."""
     if abs(value) >= 1000:
         return f"{value:.0f}"
     if abs(value) >= 1:
@@ -79,7 +81,7 @@ TABLES = {"storyteller-strategies": storyteller_strategies,
 def place(text: str, name: str, table: str) -> str:
     pattern = re.compile(rf"(<!-- figures:{re.escape(name)} -->\n).*?(\n<!-- /figures:{re.escape(name)} -->)", re.S)
     if not pattern.search(text):
-        raise SystemExit(f"readme_figures: README.md has no '<!-- figures:{name} -->' ... "
+        raise SystemExit(f"readme_figures: {README.name} has no '<!-- figures:{name} -->' ... "
                          f"'<!-- /figures:{name} -->' block")
     return pattern.sub(lambda m: m.group(1) + table + m.group(2), text, count=1)
 
@@ -98,12 +100,12 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.check:
         sys.stdout.writelines(difflib.unified_diff(old.splitlines(True), new.splitlines(True),
-                                                   "README.md", "README.md (fresh run)"))
-        print("readme_figures: the README's tables differ from a fresh run; "
+                                                   README.name, f"{README.name} (fresh run)"))
+        print("readme_figures: the tables of docs/measured.md differ from a fresh run; "
               "run 'python scripts/readme_figures.py' to update them", file=sys.stderr)
         return 1
     README.write_text(new, encoding="utf-8")
-    print("readme_figures: README.md updated", file=sys.stderr)
+    print(f"readme_figures: {README.name} updated", file=sys.stderr)
     return 0
 
 

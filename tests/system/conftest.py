@@ -6,6 +6,8 @@ Every test module in this folder marks its tests ``system``; the default run lea
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 
@@ -72,3 +74,35 @@ def browser():
         pytest.fail(str(e))
     with Chromium(width=1280, height=900) as chromium:
         yield chromium
+
+
+@pytest.fixture(scope="session")
+def user_environment(tmp_path_factory) -> Path:
+    """A new virtual environment with agentsim installed from a copy of the checkout's tracked files (as a
+    package, its data included), seeing this environment's site-packages for the dependencies only: the
+    checkout's editable install is not processed there."""
+    import os
+    import site
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    home = tmp_path_factory.mktemp("user")
+    source = home / "source"
+    tracked = subprocess.run(["git", "ls-files", "-z"], cwd=root, capture_output=True, check=True).stdout
+    for name in filter(None, tracked.decode().split("\0")):
+        target = source / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if (root / name).is_symlink():
+            target.symlink_to(os.readlink(root / name))
+        elif (root / name).is_file():
+            target.write_bytes((root / name).read_bytes())
+    env = home / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(env)], check=True, timeout=300)
+    own = subprocess.run([str(env / "bin" / "python"), "-c", "import site; print(site.getsitepackages()[0])"],
+                         check=True, capture_output=True, text=True).stdout.strip()
+    ours = [p for p in site.getsitepackages() if Path(p).is_dir() and p != own]
+    (Path(own) / "agentsim-dependencies.pth").write_text("".join(f"{p}\n" for p in ours))
+    subprocess.run([str(env / "bin" / "python"), "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
+                    str(source)], check=True, timeout=600)
+    return env

@@ -10,7 +10,6 @@ from __future__ import annotations
 import os
 import re
 import subprocess
-import sys
 import threading
 from pathlib import Path
 
@@ -46,34 +45,6 @@ def test_the_readme_shows_commands_to_run():
     commands = [line for _, text in shell[SETUP_BLOCKS:] for line in text.splitlines() if line.strip()]
     assert len(commands) > 30 and any(c.startswith("agentsim sweep speech_sync") for c in commands)
     assert len(blocks("python")) >= 3
-
-
-@pytest.fixture(scope="module")
-def user_environment(tmp_path_factory) -> Path:
-    """A new virtual environment with agentsim installed from a copy of the checkout's tracked files (as a
-    package, its data included), seeing this environment's site-packages for the dependencies only: the
-    checkout's editable install is not processed there."""
-    import site
-
-    home = tmp_path_factory.mktemp("user")
-    source = home / "source"
-    tracked = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
-    for name in filter(None, tracked.decode().split("\0")):
-        target = source / name
-        target.parent.mkdir(parents=True, exist_ok=True)
-        if (ROOT / name).is_symlink():
-            target.symlink_to(os.readlink(ROOT / name))
-        elif (ROOT / name).is_file():
-            target.write_bytes((ROOT / name).read_bytes())
-    env = home / "venv"
-    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(env)], check=True, timeout=300)
-    own = subprocess.run([str(env / "bin" / "python"), "-c", "import site; print(site.getsitepackages()[0])"],
-                         check=True, capture_output=True, text=True).stdout.strip()
-    ours = [p for p in site.getsitepackages() if Path(p).is_dir() and p != own]
-    (Path(own) / "agentsim-dependencies.pth").write_text("".join(f"{p}\n" for p in ours))
-    subprocess.run([str(env / "bin" / "python"), "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
-                    str(source)], check=True, timeout=600)
-    return env
 
 
 def user_env(venv: Path) -> dict[str, str]:

@@ -1,5 +1,5 @@
-"""The README's result tables match a fresh run (``scripts/readme_figures.py --check``): a change that moves
-a figure fails here until the README says the new one."""
+"""The result tables of ``docs/measured.md`` match a fresh run (``scripts/readme_figures.py --check``): a change
+that moves a figure fails here until the page says the new one."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ pytestmark = pytest.mark.system
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_the_readme_tables_match_a_fresh_run():
+def test_the_measured_tables_match_a_fresh_run():
     proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "readme_figures.py"), "--check"],
                           capture_output=True, text=True, timeout=1800)
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -27,7 +27,7 @@ def test_the_check_fails_on_a_stale_figure(tmp_path, monkeypatch):
         import readme_figures
     finally:
         sys.path.remove(str(ROOT / "scripts"))
-    readme = tmp_path / "README.md"
+    readme = tmp_path / "measured.md"
     readme.write_text("a\n<!-- figures:storyteller-strategies -->\n| stale |\n<!-- /figures:storyteller-strategies -->\n")
     monkeypatch.setattr(readme_figures, "README", readme)
     monkeypatch.setattr(readme_figures, "TABLES", {"storyteller-strategies": lambda: "| fresh |"})
