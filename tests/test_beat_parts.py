@@ -392,3 +392,75 @@ def test_default_tracker_observes_the_four_frame_flux_and_the_comb_tracker_does_
     assert CausalBeatTracker(22050).envelope.far_lag == 4
     assert make_tracker("causal-comb", 22050).envelope.far_lag == 0
     assert CausalBeatTracker(22050, far_lag=0).envelope.far_lag == 0
+
+
+# -------------------------------------------------------------------------------------- grid arbitration
+
+
+class _Estimate:
+    """A tempo estimate of one period (``lag`` frames) as periodic as ``periodicity`` everywhere."""
+
+    def __init__(self, lag: float, periodicity: float = 0.9):
+        self.lag, self.score, self._periodicity = lag, 1.0, periodicity
+
+    def periodicity_at(self, lag: float) -> float:
+        return self._periodicity
+
+    def score_at(self, lag: float) -> float:
+        return 1.0 if abs(lag - self.lag) < 0.5 else 0.1
+
+
+def _heard(envelope: ArrayEnvelope, frames: int) -> float:
+    envelope.push(np.zeros(frames * envelope.hop))
+    return envelope.n_samples / envelope.sample_rate
+
+
+def test_comb_resync_sets_the_first_grid_on_the_latest_beat_old_enough_to_time():
+    from anticipators.beats.arbitration import CombResync
+
+    envelope = ArrayEnvelope(impulses(1000, 50, first=23), FPS)  # 120 BPM from 0.23 s
+    follower = BeatFollower(OnsetPicker(envelope).pick)
+    follower.periodicity = 0.9
+    grid = CombResync(envelope, follower, OnsetPicker(envelope), lambda: _Estimate(50.0), init_frames=300)
+    grid.sync(_heard(envelope, 250))
+    assert not follower.locked  # before init_frames
+    now = _heard(envelope, 152)  # 4.02 s: the beat at 3.73 s is the latest heard at least 60 ms ago
+    grid.sync(now)
+    assert follower.locked
+    assert follower.state[0] == pytest.approx(3.73, abs=1e-9) and follower.state[1] == pytest.approx(0.5)
+
+
+def test_comb_resync_restarts_a_grid_whose_phase_the_comb_keeps_refusing():
+    from anticipators.beats.arbitration import CombResync
+
+    envelope = ArrayEnvelope(impulses(1200, 50, first=23), FPS)
+    follower = BeatFollower(OnsetPicker(envelope).pick)
+    grid = CombResync(envelope, follower, OnsetPicker(envelope), lambda: _Estimate(50.0), init_frames=0)
+    now = _heard(envelope, 500)
+    follower.restart(4.48, 0.5, periodicity=0.9)  # the right tempo, half a beat off the clicks
+    for k in range(3):  # three estimates that refuse the phase: the grid stays
+        grid.sync(now)
+        assert follower.state[0] == pytest.approx(4.48), k
+    grid.sync(now)  # the fourth restarts it on the clicks, keeping the period
+    assert follower.state[0] == pytest.approx(4.73, abs=1e-9) and follower.state[1] == pytest.approx(0.5)
+
+
+def test_joint_filter_grid_restarts_the_follower_on_the_filters_tempo_and_phase():
+    from anticipators.beats.arbitration import JointFilterGrid
+
+    envelope = ArrayEnvelope(impulses(1000, 48, first=10), FPS)  # 125 BPM from 0.1 s
+    follower = BeatFollower(OnsetPicker(envelope).pick)
+    grid = JointFilterGrid(envelope, follower, OnsetPicker(envelope), lambda: None, min_bpm=60.0, max_bpm=200.0,
+                           odf_bias=0.0, init_frames=100)
+    now = 0.0
+    for _ in range(30):  # 3 s, stepped as the tracker steps it
+        now = _heard(envelope, 10)
+        grid.hear()
+    assert grid.dbn.n_frames == envelope.n_frames  # every frame heard is stepped
+    t_dbn, period = grid.beat()
+    assert period == pytest.approx(0.48) and t_dbn == pytest.approx(2.98, abs=1e-9)  # the latest click
+    grid.sync(now)
+    assert grid.active and follower.locked
+    assert follower.state[0] == pytest.approx(2.50, abs=1e-9) and follower.state[1] == pytest.approx(0.48)
+    assert not grid.wins()  # the follower now agrees with the filter: its grid is predicted
+    np.testing.assert_allclose(grid.predict(now, 3), follower.predict(now, 3))

@@ -33,6 +33,9 @@ It combines the parts of this package:
        over 2 s, another metrical level), or the comb persistently prefers another phase, the filter
        restarts from them; the first grid is set after ``init_seconds``.
 
+    Steps 5 and 6 are the two strategies of :mod:`anticipators.beats.arbitration` (``JointFilterGrid`` and
+    ``CombResync``), the tracker's :attr:`~CausalBeatTracker.grid`.
+
 Prediction
     :meth:`CausalBeatTracker.predict` extrapolates the filter state: about one beat period ahead of
     the latest observed beat at any time. The observation of a beat completes ``0.2 * period``
@@ -65,13 +68,13 @@ import math
 
 import numpy as np
 
+from anticipators.beats.arbitration import PHASE_MARGIN, CombResync, JointFilterGrid
 from anticipators.beats.baselines import AubioTracker, IOIBaselineTracker, librosa_offline_beats
-from anticipators.beats.dbn import BeatPointerFilter, FluxActivation
+from anticipators.beats.dbn import BeatPointerFilter
 from anticipators.beats.envelope import EnvelopeSource, SpectralFluxEnvelope, mono_samples
 from anticipators.beats.follower import BeatFollower
-from anticipators.beats.network import BandFluxEnvelope, NetworkActivation
+from anticipators.beats.network import BandFluxEnvelope
 from anticipators.beats.onsets import WAVEFORM_AFTER, OnsetPicker
-from anticipators.beats.phase import comb_phase, comb_score
 from anticipators.beats.tempo import TempoEstimate, TempoEstimator
 
 __all__ = [
@@ -203,10 +206,8 @@ class CausalBeatTracker:
     ODF_BIAS = 0.003
     #: Coarse (onset-strength peak) timing's standard deviation (seconds).
     COARSE_NOISE = 0.008
-    #: Another phase at the same tempo is taken when the onset strength of its last three beats is this
-    #: many times that of the grid held (the strength of equal clicks varies by 10 % with their alignment
-    #: to the frames).
-    PHASE_MARGIN = 1.3
+    #: See :data:`anticipators.beats.arbitration.PHASE_MARGIN`.
+    PHASE_MARGIN = PHASE_MARGIN
 
     def __init__(
         self,
@@ -264,9 +265,6 @@ class CausalBeatTracker:
         elif int(envelope.sample_rate) != self.sample_rate:
             raise ValueError(f"the envelope's sample rate {envelope.sample_rate} is not {self.sample_rate}")
         self.envelope = envelope
-        #: what the joint filter observes of the envelope, and grids are weighed on (its onset strength if it
-        #: keeps no other observation)
-        self._observed = getattr(envelope, "observation_values", envelope.values)
         fps = envelope.fps
         self._fps = fps
         self.tempo = TempoEstimator(fps, self.min_bpm, self.max_bpm, prior_bpm=self.prior_bpm,
@@ -287,33 +285,21 @@ class CausalBeatTracker:
         # tempo state
         self._estimate: TempoEstimate | None = None  # latest tempo estimate
         self._fast_level = 0.0  # moving average of finding a pulse faster than max_bpm
-        # resynchronisation state
-        self._period_bad = 0
-        self._phase_bad = 0
-        # the joint tempo-phase filter (sync="dbn")
-        self.dbn: BeatPointerFilter | None = None
+        # who sets and moves the grid (anticipators.beats.arbitration)
+        self.grid: JointFilterGrid | CombResync
         if sync == "dbn":
-            options = {"min_bpm": self.min_bpm, "max_bpm": self.max_bpm, "n_tempi": None, "prior_bpm": 100.0,
-                       "prior_octaves": 1.0, **(dbn_options or {})}
-            self.dbn = BeatPointerFilter(fps, **options)
-            self.activation = FluxActivation(fps, **{"scale": 20.0, "floor": 0.01, **(activation_options or {})})
-            #: the learned activation (observation="network"), or None
-            self.network = NetworkActivation(**(network_options or {})) if use_network else None
-            self.network_mix = float(network_mix)
             # with the fast-pulse flag on, the grid waits for init_seconds, as the flag needs some estimates
             start = max(dbn_init_seconds, init_seconds) if self.fast_pulse_check else dbn_init_seconds
-            self._dbn_init_frames = int(round(start * fps))
-            self._dbn_patience = max(int(dbn_patience), 1)
-            self._dbn_bad = 0
-            self._dbn_cache = (-1, 0.0, 0.0)
-            self._dbn_active = False
-            self._wins_cache = (None, False)
-            self._dbn_held: tuple[int, float] | None = None  # interval index and latest beat chosen
-        self.dbn_predict = bool(dbn_predict) and self.dbn is not None
-        self.agree_tempo = float(agree_tempo)
-        self.agree_phase = float(agree_phase)
-        self.follower_margin = float(follower_margin)
-        self.dbn_hysteresis = float(dbn_hysteresis)
+            self.grid = JointFilterGrid(
+                envelope, self.follower, self.picker, self._latest_estimate, min_bpm=self.min_bpm,
+                max_bpm=self.max_bpm, odf_bias=self.ODF_BIAS, init_frames=int(round(start * fps)),
+                dbn_options=dbn_options, activation_options=activation_options, network_options=network_options,
+                use_network=use_network, network_mix=network_mix, patience=dbn_patience, agree_tempo=agree_tempo,
+                agree_phase=agree_phase, follower_margin=follower_margin, hysteresis=dbn_hysteresis)
+        else:
+            self.grid = CombResync(envelope, self.follower, self.picker, self._latest_estimate,
+                                   init_frames=self._init_frames)
+        self.dbn_predict = bool(dbn_predict) and sync == "dbn"
 
     # ------------------------------------------------------------------ public API
 
@@ -321,6 +307,11 @@ class CausalBeatTracker:
     def time(self) -> float:
         """Seconds of audio heard so far."""
         return self.envelope.n_samples / self.sample_rate
+
+    @property
+    def dbn(self) -> BeatPointerFilter | None:
+        """The joint tempo-phase filter (``sync="dbn"``), or None."""
+        return getattr(self.grid, "dbn", None)
 
     @property
     def locked(self) -> bool:
@@ -399,22 +390,8 @@ class CausalBeatTracker:
             Increasing beat times in seconds, all ``>= time``; empty before the first beat grid.
         """
         if self.dbn_predict:
-            return self._predict_dbn(self.time, horizon_beats)
+            return self.grid.predict(self.time, horizon_beats)
         return self.follower.predict(self.envelope.n_samples / self.sample_rate, horizon_beats)  # at self.time
-
-    def _predict_dbn(self, now: float, horizon_beats: int) -> np.ndarray:
-        """The beat follower's predictions unless the joint filter's grid is the better one
-        (:meth:`_dbn_wins`), then the filter's."""
-        follower = self.follower
-        if follower.out_of_range:
-            return np.zeros(0)  # a pulse faster than the range (fast_pulse_check): no grid
-        if not self._dbn_active:
-            return follower.predict(now, horizon_beats) if follower.locked else np.zeros(0)
-        if follower.locked and not self._dbn_wins():
-            return follower.predict(now, horizon_beats)
-        t_beat, period = self._dbn_beat()
-        k0 = math.ceil((now - t_beat) / period - 1e-9)
-        return t_beat + period * np.arange(k0, k0 + int(horizon_beats))
 
     def track(self, audio, block_size: int = 512, horizon_beats: int = 4) -> list[dict]:
         """Hear ``audio`` block by block, predicting after each block, and return the predictions that changed.
@@ -467,7 +444,7 @@ class CausalBeatTracker:
             if quiet and now <= until:
                 continue  # the same predictions as after the block before
             if self.dbn_predict:
-                beats, until = self._predict_dbn(now, horizon_beats), now
+                beats, until = self.grid.predict(now, horizon_beats), now
             else:
                 beats, until = follower.predict_until(now, horizon_beats)
             beats = beats.tolist()
@@ -483,22 +460,11 @@ class CausalBeatTracker:
         envelope = self.envelope
         follower = self.follower
         envelope.update()
-        dbn = self.dbn
-        if dbn is not None and dbn.n_frames < envelope.n_frames:
-            a = self.activation(self._observed(dbn.n_frames, envelope.n_frames))
-            if self.network is not None:
-                learned = self.network(envelope.bands(dbn.n_frames, envelope.n_frames))
-                a = learned if self.network_mix <= 0.0 else (1.0 - self.network_mix) * learned + self.network_mix * a
-            dbn.step(a)
+        self.grid.hear()
         if envelope.n_samples >= self._next_tempo_sample:
             self._next_tempo_sample = envelope.n_samples + self._tempo_every_samples
             self._estimate_tempo()
-            if dbn is not None:
-                self._dbn_sync()
-            elif not follower.locked:
-                self._try_init()
-            else:
-                self._check_sync()
+            self.grid.sync(self.time)
         if follower.locked:
             follower.advance(self.time)
         due = self._next_tempo_sample
@@ -506,11 +472,9 @@ class CausalBeatTracker:
             due = min(due, int(math.ceil(follower.observe_time() * self.sample_rate)))
         self._due_sample = max(due, envelope.n_samples + 1)
 
-    def _recent(self, seconds: float) -> tuple[np.ndarray, int]:
-        """Onset strength of the last ``seconds`` (at most what is kept) and its first absolute frame."""
-        envelope = self.envelope
-        start = max(envelope.n_frames - int(seconds * self._fps), envelope.first_kept)
-        return envelope.values(start, envelope.n_frames), start
+    def _latest_estimate(self) -> TempoEstimate | None:
+        """The latest tempo estimate (None before the first, or in silence)."""
+        return self._estimate
 
     def _estimate_tempo(self) -> None:
         """Autocorrelation tempo estimate over the recent onset strength; updates the follower's inputs."""
@@ -532,202 +496,6 @@ class CausalBeatTracker:
         lag = follower.state[1] * self._fps if follower.locked else estimate.lag
         follower.periodicity = estimate.periodicity_at(lag)
         follower.update_confidence()
-
-    def _comb(self, lag: float) -> tuple[float, float]:
-        """Latest beat time (s) and its comb score over the last 4 s at a period of ``lag`` frames."""
-        strength, start = self._recent(4.0)
-        phase = comb_phase(strength, lag, start)
-        return float(self.envelope.frame_time(phase.frame)), phase.score
-
-    def _comb_score_at(self, lag: float, t_beat: float) -> float:
-        """Comb score over the last 4 s of the grid through ``t_beat`` seconds, ``lag`` frames apart."""
-        strength, start = self._recent(4.0)
-        return comb_score(strength, lag, float(self.envelope.frame_index(t_beat)), start)
-
-    def _try_init(self) -> None:
-        estimate = self._estimate
-        if self.envelope.n_frames < self._init_frames or estimate is None or self.follower.out_of_range:
-            return
-        if self.follower.periodicity < 0.1:
-            return
-        self._restart(estimate.lag)
-
-    def _restart(self, lag: float, keep_period: float | None = None) -> None:
-        """Set a new beat grid from the comb phase at period ``lag`` (frames)."""
-        t_beat, _ = self._comb(lag)
-        period = keep_period if keep_period is not None else lag / self._fps
-        # use the latest beat that is old enough to be timed precisely
-        while t_beat > self.time - 0.06 - self.envelope.latency:
-            t_beat -= period
-        fine = self.picker.onset_near(t_beat)
-        if math.isfinite(fine) and abs(fine - t_beat) < 0.04:
-            t_beat = fine
-        self._period_bad = 0
-        self._phase_bad = 0
-        self.follower.restart(t_beat, period, periodicity=self._estimate.periodicity_at(lag))
-
-    def _dbn_beat(self) -> tuple[float, float]:
-        """The joint filter's latest beat (s) and period (s): its most probable interval and, within it, its
-        most probable position, with hysteresis against the grid chosen before. Another interval is taken
-        once it holds ``dbn_hysteresis`` times the posterior of the one before; another phase at the same
-        interval once the onset strength of its last three beats is clearly higher (two grids as strong,
-        such as every other click of a fast pulse, would otherwise take turns, as the posterior of each
-        rises at its own beats)."""
-        dbn = self.dbn
-        if self._dbn_cache[0] != dbn.n_frames:
-            tempo = dbn.tempo_posterior()
-            k = int(np.argmax(tempo))
-            held = self._dbn_held
-            if held is not None and held[0] != k and self.dbn_hysteresis * tempo[held[0]] > tempo[k]:
-                k = held[0]
-            interval = int(dbn.intervals[k])
-            a = int(dbn.starts[k])
-            position = int(np.argmax(dbn.p[a : a + interval]))
-            t, period = self._dbn_grid(interval, position)
-            if held is not None and held[0] == k:
-                t_old = held[1]
-                d = ((t - t_old) / period + 0.5) % 1.0 - 0.5
-                if abs(d) > 0.1 and self._grid_strength(t, period) <= self.PHASE_MARGIN * self._grid_strength(t_old, period):
-                    t = t_old
-            self._dbn_held = (k, t)
-            self._dbn_cache = (dbn.n_frames, t, period)
-        return self._dbn_cache[1], self._dbn_cache[2]
-
-    def _dbn_grid(self, interval: int, position: int) -> tuple[float, float]:
-        """Latest beat (s) and period (s) of the state ``(interval, position)`` of the joint filter."""
-        frame = int(self.dbn.n_frames - 1 - position)
-        # the beat lies in the beat states after the wrap: at the strongest onset among those heard
-        count = int(self.dbn.beat_width[int(np.searchsorted(self.dbn.intervals, interval))])
-        region = self.envelope.values(frame, min(frame + count, self.dbn.n_frames))
-        if region.size > 1:
-            frame += int(np.argmax(region))
-        return float(self.envelope.frame_time(float(frame))) - self.ODF_BIAS, interval / self._fps
-
-    def _dbn_hears(self) -> bool:
-        """Whether the joint filter has onsets to go by: the last 2 s hold some onset strength against the
-        long-term mean (in silence the grid the music left is continued by the beat follower)."""
-        if self.dbn.n_frames < self._dbn_init_frames or self.activation.mean <= 0.0:
-            return False
-        recent = self.envelope.values(self.envelope.n_frames - int(2.0 * self._fps), self.envelope.n_frames)
-        return recent.size > 0 and float(recent.mean()) > 0.05 * self.activation.mean
-
-    def _dbn_sync(self) -> None:
-        """Set or move the beat grid to the joint filter's most probable tempo and phase."""
-        follower = self.follower
-        self._dbn_active = self._dbn_hears()
-        if not self._dbn_active or follower.out_of_range:
-            return
-        t_dbn, period_dbn = self._dbn_beat()
-        if not follower.locked:
-            self._restart_at(t_dbn, period_dbn)
-            return
-        if self._dbn_wins() and not self._agrees(0.06, 0.2):
-            self._dbn_bad += 1
-        else:
-            self._dbn_bad = 0
-        if self._dbn_bad >= self._dbn_patience:
-            self._dbn_bad = 0
-            self._restart_at(t_dbn, period_dbn)
-
-    def _agrees(self, tempo: float, phase: float) -> bool:
-        """Whether the follower's grid is within ``tempo`` (log ratio) and ``phase`` (periods) of the filter's."""
-        t_dbn, period_dbn = self._dbn_beat()
-        t_latest, period = self.follower.state[0], self.follower.state[1]
-        d = ((t_dbn - t_latest) / period + 0.5) % 1.0 - 0.5
-        return abs(math.log(period / period_dbn)) < tempo and abs(d) < phase
-
-    def _grid_strength(self, t_beat: float, period: float, beats: int = 3) -> float:
-        """Mean onset strength at the latest ``beats`` beats heard of the grid through ``t_beat``, ``period`` apart:
-        of what the joint filter observes (with ``far_lag``, the flux mixed with the increase over ``far_lag``
-        frames), so that grids are weighed on the evidence the filter chose them by (real recordings F 0.792
-        to 0.801 against the frame-to-frame flux)."""
-        envelope = self.envelope
-        last = envelope.n_frames - 3  # (an onset's strength peaks a frame or two after it)
-        lag = period * self._fps
-        frame = float(envelope.frame_index(t_beat + self.ODF_BIAS))
-        frame += math.floor((last - frame) / lag) * lag  # the grid's latest beat heard
-        teeth = np.rint(frame - lag * np.arange(beats)).astype(np.intp)
-        a = max(int(teeth[-1]) - 1, envelope.first_kept)
-        values = self._observed(a, last + 2)
-        if values.size < 3:
-            return 0.0
-        # the strongest frame within one of each tooth (a peak is one frame wide)
-        near = np.maximum(np.maximum(values[:-2], values[1:-1]), values[2:])  # near[i]: frames a+i .. a+i+2
-        idx = teeth - a - 1
-        idx = idx[(idx >= 0) & (idx < near.size)]
-        return float(near[idx].sum() / beats)
-
-    def _dbn_wins(self) -> bool:
-        """Whether the joint filter's grid is to be followed rather than the follower's: it agrees with it
-        (tempo within ``agree_tempo``, phase within ``agree_phase``), or it is not, and the onset strength of
-        its last three beats is higher (so a sudden change the follower found before the filter stands)."""
-        key = (self.dbn.n_frames, self.follower.state[0], self.follower.state[1])
-        if self._wins_cache[0] != key:
-            if self._agrees(self.agree_tempo, self.agree_phase):
-                wins = False
-            else:
-                t_dbn, period_dbn = self._dbn_beat()
-                s_dbn = self._grid_strength(t_dbn, period_dbn)
-                s_follower = self._grid_strength(*self.follower.state[:2])
-                if abs(math.log(self.follower.state[1] / period_dbn)) < 0.04:
-                    # the same tempo at another phase: only clearly stronger beats move the grid (two
-                    # grids as strong, such as every other click of a fast pulse, would take turns)
-                    wins = s_dbn > self.PHASE_MARGIN * s_follower
-                else:
-                    wins = self.follower_margin * s_dbn > s_follower
-            self._wins_cache = (key, wins)
-        return self._wins_cache[1]
-
-    def _restart_at(self, t_beat: float, period: float) -> None:
-        """Set a new beat grid through ``t_beat`` seconds, ``period`` seconds apart."""
-        while t_beat > self.time - 0.06 - self.envelope.latency:
-            t_beat -= period
-        fine = self.picker.onset_near(t_beat)
-        if math.isfinite(fine) and abs(fine - t_beat) < 0.04:
-            t_beat = fine
-        lag = period * self._fps
-        periodicity = self._estimate.periodicity_at(lag) if self._estimate is not None else 0.5
-        self.follower.restart(t_beat, period, periodicity=periodicity)
-
-    def _check_sync(self) -> None:
-        """Restart the grid when the autocorrelation or the comb persistently disagree with it."""
-        estimate = self._estimate
-        follower = self.follower
-        if estimate is None or follower.out_of_range:
-            self._period_bad = self._phase_bad = 0
-            return
-        t_latest, period = follower.state[0], follower.state[1]
-        lag_k = period * self._fps
-        ratio = estimate.lag / lag_k
-        # another metrical level (x2, x3, /2, /3) needs stronger and longer evidence than a new tempo
-        other_level = any(abs(math.log(ratio * m)) < 0.06 for m in (0.5, 1 / 3, 2.0, 3.0))
-        need_ratio, need_count = (0.7, 8) if other_level else (0.8, 4)
-        # a grid that keeps finding its beats is only moved to another metrical level; a tempo the
-        # autocorrelation prefers otherwise may just lag behind a tempo change
-        if (
-            estimate.score_at(lag_k) < need_ratio * estimate.score
-            and abs(math.log(ratio)) > 0.04
-            and (other_level or follower.hit_rate < 0.7)
-        ):
-            self._period_bad += 1
-        else:
-            self._period_bad = 0
-        if self._period_bad >= need_count:
-            self._restart(estimate.lag)
-            return
-        t_best, s_best = self._comb(lag_k)
-        # phase of the grid relative to the comb's beat
-        d = ((t_best - t_latest) / period + 0.5) % 1.0 - 0.5
-        if abs(d) > 0.15:
-            s_grid = self._comb_score_at(lag_k, t_best - d * period)
-            if s_grid < 0.7 * s_best:
-                self._phase_bad += 1
-            else:
-                self._phase_bad = 0
-        else:
-            self._phase_bad = 0
-        if self._phase_bad >= 4:
-            self._restart(lag_k, keep_period=period)
 
 
 TRACKER_NAMES = ("causal", "causal-net", "causal-comb", "baseline", "aubio", "librosa_offline")
