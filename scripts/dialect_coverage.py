@@ -14,7 +14,7 @@ import re
 import sys
 from pathlib import Path
 
-from agentsim.bml.dialects import find_blocks
+from agentsim.bml.documents import find_blocks
 from agentsim.bml.spelling import fold_case, without_doctype
 from agentsim.core.xmltree import read_forest
 from agentsim.errors import BMLError

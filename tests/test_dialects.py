@@ -329,3 +329,21 @@ def test_an_adaptation_names_the_behaviours_it_touched_and_the_prediction_what_t
     assert became == {"h1": ("head", "SHAKE", 0.65), "h2": ("head", "NOD", 1.55), "g1": ("head", "NOD", 2.55),
                       "g2": ("gesture", "BEAT", 3.95)}
     assert realizer.feedback.sync_times()["b1:h1:end"] == 0.65
+
+
+def test_the_dialect_tables_are_data_checked_when_read():
+    from agentsim.bml import dialect_tables
+    from agentsim.errors import AgentsimError
+
+    text = dialect_tables.TABLES_PATH.read_text(encoding="utf-8")
+    tables = dialect_tables.read_tables(text)
+    assert tables["EXPRESSIONS"]["joy"] == "SMILE" and tables["SYNC_ALIASES"]["speech"]["relax"] == "end"
+    assert tables["CLIP_WORDS"][:2] == (("beat", "BEAT"), ("chop", "CHOP"))  # tried in the file's order
+    with pytest.raises(AgentsimError, match=r"every \[\[clip_words\]\] needs word and lexeme"):
+        dialect_tables.read_tables(text.replace('word = "chop"', 'wrd = "chop"'))
+    with pytest.raises(AgentsimError, match="saccade_directions must name 8 directions"):
+        dialect_tables.read_tables(text.replace('"DOWN", "DOWNLEFT"]', '"DOWN"]'))
+    with pytest.raises(AgentsimError, match=r"\[expressions\] must map names to non-empty strings"):
+        dialect_tables.read_tables(text.replace('joy = "SMILE"', 'joy = 3'))
+    with pytest.raises(AgentsimError, match=r"missing tables \['compositions'\]"):
+        dialect_tables.read_tables(text.replace("compositions = { blend = \"MERGE\" }", ""))

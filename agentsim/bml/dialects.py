@@ -4,80 +4,37 @@ Greta, SmartBody, the Virtual Human Toolkit (NVBG), EMBR, SEMAINE and the BML dr
 does not accept: blocks in envelopes (``<act>``, ``<fml-apml>``) or several in one file, blocks and
 behaviours without ids, the draft namespace, draft attribute names (``type=`` for the lexeme,
 ``rotation``, ``stroke_start``), negative start times, and behaviours of their own (``<animation>``,
-``<lips>``, ``<saccade>``, ...). :func:`find_blocks` finds the blocks of a document and
-:class:`Adapter` rewrites one block's tree into BML 1.0 (and the few types BML 1.0 lacks, see
+``<lips>``, ``<saccade>``, ...). :func:`~agentsim.bml.documents.find_blocks` finds the blocks of a document
+and :class:`Adapter` rewrites one block's tree into BML 1.0 (and the few types BML 1.0 lacks, see
 :data:`~agentsim.bml.vocabulary.DIALECT_BEHAVIOURS`), noting every adaptation, so that the strict reader
-can read it. What has no mapping is taken out and reported, one report per kind of element.
+can read it. What has no mapping is taken out and reported, one report per kind of element. The
+vocabulary it maps (other realizers' names and what they are read as) is data:
+:mod:`agentsim.bml.dialect_tables`.
 """
 
 from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
-from typing import Iterable
 
 # The gesture lexicon (agentsim.animation.arms, with numpy) and the posture table are imported where foreign
 # vocabulary is mapped or noted: reading BML 1.0 does without them.
 from agentsim.bml import lexemes
+from agentsim.bml.dialect_tables import (CLIP_WORDS, COMPOSITIONS, DEICTIC_TARGETS, DRAFT_NAMESPACES, EXPRESSIONS,
+                                         JOINT_RANGE, SACCADE_DIRECTIONS, SYNC_ALIASES, TYPE_IS_LEXEME,
+                                         UNMAPPED_HINTS)
+from agentsim.bml.documents import (NUMBER, Envelope, implied_start, is_bml_uri, is_smartbody, remove_nodes,
+                                    seconds, speech_marks)
 from agentsim.bml.spelling import REF_SYNC, SYNC_SPELLINGS, canonical_sync, ref_sync
-from agentsim.core.xmltree import FOREST, Node
+from agentsim.core.xmltree import Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
-from agentsim.animation.units import motion_unit
-from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour
-from agentsim.core.engine import stretch_times
-from agentsim.errors import ScheduleError
+from agentsim.core.block import BEHAVIOUR_TYPES
 
-#: The namespace of the BML drafts before 1.0 (Greta, SEMAINE, the Vienna draft), read as BML 1.0.
-DRAFT_NAMESPACES = ("http://www.mindmakers.org/projects/BML", "http://www.mindmakers.org/projects/bml",
-                    "http://www.mindmakers.org/projects/BML/", "http://www.mindmakers.org/projects/bml/")
-#: Behaviour types whose ``type=`` attribute the drafts used for the lexeme.
-TYPE_IS_LEXEME = {"gesture", "head", "face", "faceLexeme", "posture", "postureShift", "faceShift"}
-#: Elements of other realizers that have no counterpart here (taken out, reported once per block).
-UNMAPPED_HINTS = {
-    "blend": "SmartBody's parametric blend of animation clips",
-    "reach": "SmartBody's reaching for an object",
-    "constraint": "SmartBody's joint constraint",
-    "states": "SmartBody's animation state machine",
-    "bodyreach": "SmartBody's reaching for an object",
-    "grab": "SmartBody's grasping",
-    "noise": "SmartBody's joint noise",
-    "interrupt": "SmartBody's interrupt (use bmla:interrupt)",
-    "sbm:command": "a SmartBody command",
-    "fml": "FML is the intent behind behaviour, not behaviour",
-    "lip": "Greta's lip sync from a phoneme file, which is not part of the document",
-    "turn": "the turn-taking of the Virtual Human Toolkit's act",
-}
-#: Greta's compositions, as BML 1.0's.
-COMPOSITIONS = {"blend": "MERGE"}
 #: The prefix given to BMLA where older BMLT names are read as BMLA's.
 BMLA_PREFIX = "bmla"
 #: Lexemes of head movements, which EMBR writes as gestures.
 HEAD_LEXEMES = lexemes.HEAD_LEXEMES
-#: What drafts, Greta and EMBR call facial expressions, as our face lexemes.
-EXPRESSIONS = {"happy": "SMILE", "joy": "SMILE", "smile": "SMILE", "angry": "FROWN", "anger": "FROWN",
-               "surprised": "SURPRISE", "surprise": "SURPRISE", "sad": "LOWER_BROWS", "sadness": "LOWER_BROWS",
-               "afraid": "WIDEN_EYES", "fear": "WIDEN_EYES", "eyebrows": "RAISE_BROWS", "disgusted": "FROWN",
-               "disgust": "FROWN", "sceptical": "FROWN", "skeptical": "FROWN", "neutral": "NEUTRAL"}
-#: Greta's deictic lexicon (``DEICTIC=YOU``) as scene targets.
-DEICTIC_TARGETS = {"YOU": "user", "THERE": "left", "HERE": "down", "UP": "up", "DOWN": "down"}
-#: Words in the names of SmartBody/NVBG animation clips, and the gesture lexeme each is closest to.
-CLIP_WORDS = (("beat", "BEAT"), ("chop", "CHOP"), ("offer", "OFFER"), ("palm", "OFFER"), ("you", "OFFER"),
-              ("present", "OFFER"), ("point", "POINT_DOWN"), ("indicat", "POINT_DOWN"), ("there", "POINT_DOWN"))
-#: The direction of a saccade (degrees, counter-clockwise from the character's right) in BML's names.
-SACCADE_DIRECTIONS = ("LEFT", "UPLEFT", "UP", "UPRIGHT", "RIGHT", "DOWNRIGHT", "DOWN", "DOWNLEFT")
-#: SmartBody's sbm:joint-range, by its highest joint, as BML's gaze influence.
-JOINT_RANGE = (("BACK", "TORSO"), ("CHEST", "TORSO"), ("NECK", "NECK"), ("HEAD", "HEAD"), ("EYES", "EYES"))
-#: Sync points as SmartBody and EMBR name them on behaviours that do not have them, by behaviour type.
-FACE_ALIASES = {"ready": "attackPeak", "stroke": "attackPeak", "strokeStart": "attackPeak", "strokeEnd": "relax"}
-SYNC_ALIASES = {
-    "face": FACE_ALIASES, "faceLexeme": FACE_ALIASES, "faceFacs": FACE_ALIASES,
-    "gaze": {"stroke": "ready", "strokeStart": "ready", "strokeEnd": "relax"},
-    "posture": {"stroke": "ready", "strokeStart": "ready", "strokeEnd": "relax"},
-    "lips": {"stroke": "ready"},
-    "speech": {"ready": "start", "stroke": "start", "strokeStart": "start", "relax": "end", "strokeEnd": "end"},
-}
 #: The sync point names that have an alias on some type, without those that hold another (``strokeStart`` holds
 #: ``stroke``): a reference with none of them in its text is never retargeted.
 _ALIASED = re.compile("|".join(sorted(
@@ -85,147 +42,6 @@ _ALIASED = re.compile("|".join(sorted(
     if not any(other != name and other in name for aliases in SYNC_ALIASES.values() for other in aliases))))
 #: Elements of BMLA and BMLT, which only count in their own namespaces.
 EXTENSION_LOCALS = set().union(*EXTENSION_BEHAVIOURS.values())
-_NUMBER = re.compile(r"^\s*[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\s*$")
-@dataclass
-class Notes:
-    """What was adapted, in order, each said once (with how many times it happened), and the behaviour
-    elements the adaptations touched (:attr:`current`: the one being read, touched by what is noted
-    meanwhile)."""
-
-    counts: dict[str, int] = field(default_factory=dict)
-    touched: dict[int, Node] = field(default_factory=dict)  # id() of an element -> it, in order
-    current: Node | None = None
-
-    def add(self, note: str, *nodes: Node) -> None:
-        self.counts[note] = self.counts.get(note, 0) + 1
-        self.touch(*(nodes or ((self.current,) if self.current is not None else ())))
-
-    def touch(self, *nodes: Node) -> None:
-        """These behaviour elements were adapted."""
-        for node in nodes:
-            self.touched.setdefault(id(node), node)
-
-    def behaviour_ids(self, kept: Iterable[str]) -> list[str]:
-        """The ids (as named at the end) of the behaviours touched that are among ``kept``, in order."""
-        kept = set(kept)
-        ids = (node.attrs.get("id", "").strip() for node in self.touched.values())
-        return list(dict.fromkeys(i for i in ids if i in kept))
-
-    def extend(self, notes) -> None:
-        for note in notes:
-            self.add(note)
-
-    def __bool__(self) -> bool:
-        return bool(self.counts)
-
-    def lines(self) -> list[str]:
-        return [note if n == 1 else f"{note} ({n} times)" for note, n in self.counts.items()]
-
-
-@dataclass
-class Envelope:
-    """A ``<bml>`` found in a document: the element, what its envelope said, and what could not be used."""
-
-    node: Node
-    notes: Notes = field(default_factory=Notes)
-    character: str | None = None
-    losses: list[tuple[str, Node]] = field(default_factory=list)
-
-
-def seconds(value: float) -> str:
-    """A time written back into an attribute, as exactly as a float prints (to the nanosecond)."""
-    return repr(round(value, 9))
-
-
-def remove_nodes(node: Node, gone: set[int]) -> None:
-    """Take the elements whose ``id()`` is in ``gone`` out of the tree under ``node``."""
-    node.children = [c for c in node.children if isinstance(c, str) or id(c) not in gone]
-    for child in node.elements():
-        remove_nodes(child, gone)
-
-
-def speech_marks(node: Node) -> set[str]:
-    """The names of the sync points written in a speech (``<sync id>``, ``<tm id>``, ``<mark name>``)."""
-    names = set()
-    for child in node.elements():
-        if child.local in ("sync", "tm"):
-            names.add(child.attrs.get("id", "").strip())
-        elif child.local == "mark":
-            names.add(child.attrs.get("name", "").strip().rsplit(":", 1)[-1])
-        names |= speech_marks(child)
-    return names
-
-
-def implied_start(node: Node) -> float:
-    """Where a behaviour would start, from its numeric sync times and its preferred timing."""
-    kind = BEHAVIOUR_TYPES[node.local]
-    numbers = {k: float(v) for k, v in node.attrs.items() if k in kind.syncs and _NUMBER.match(v)}
-    if "start" in numbers or not numbers:
-        return numbers.get("start", 0.0)
-    try:
-        preferred = motion_unit(Behaviour("", kind.name, list(kind.syncs), dict(node.attrs))).preferred()
-    except KeyError:
-        return min(numbers.values())
-    # as the planners do: the preferred timing stretched linearly between the known keys
-    try:
-        return stretch_times(preferred, {kind.syncs.index(k): t for k, t in numbers.items()}, 0.0)[0]
-    except ScheduleError:  # its times are out of order: the scheduler will say so; here, the earliest will do
-        return min(numbers.values())
-
-
-def is_smartbody(prefix: str, uri: str | None) -> bool:
-    """Whether an attribute prefix is SmartBody's (``sbm:``, declared as ict.usc.edu or not declared at all);
-    attributes of other namespaces are BML 1.0 extensions, reported as such by the strict reader."""
-    return uri is not None and "ict.usc.edu" in uri or uri is None and prefix == "sbm"
-
-
-def is_bml_uri(uri: str | None) -> bool:
-    return uri in (None, "", BML_NAMESPACE) or uri in DRAFT_NAMESPACES
-
-
-def find_blocks(root: Node, forest: bool) -> list[Envelope]:
-    """The ``<bml>`` blocks of a document, in order: the root itself, those of an ``<act>`` (VHT/NVBG: its
-    ``<participant>`` is the character) or ``<fml-apml>`` (Greta: the ``<fml>`` part is reported), or
-    several written one after another. Empty if there is none."""
-    if root.local == "bml":
-        return [Envelope(root)]
-    found: list[Envelope] = []
-    if root.tag == FOREST:
-        tops = root.elements()
-        blocks = sum(1 for top in tops if top.local == "bml")
-        for top in tops:
-            if top.local == "bml":
-                envelope = Envelope(top)
-                if blocks > 1:
-                    envelope.notes.add(f"{blocks} <bml> blocks in one document: each realized as a block, in order")
-                found.append(envelope)
-            else:
-                found.extend(find_blocks(top, False))
-        return found
-    character = None
-    losses: list[tuple[str, Node]] = []
-    for child in root.elements():
-        if child.local == "participant" and child.attrs.get("id", "").strip():
-            if child.attrs.get("role", "actor") == "actor" or character is None:
-                character = child.attrs["id"].strip()
-        elif child.local == "bml":
-            found.append(Envelope(child))
-        elif child.local == "fml":
-            losses.append((f"the <fml> part of <{root.tag}> is not supported: {UNMAPPED_HINTS['fml']}; only its "
-                           "<bml> is realized", child))
-        else:
-            inner = find_blocks(child, False)
-            if inner:
-                found.extend(inner)
-            else:
-                losses.append((f"<{child.tag}> in <{root.tag}> is not BML and is ignored", child))
-    for envelope in found:
-        envelope.notes.add(f"envelope <{root.tag}>: the <bml> inside it realized as a block")
-        if character:
-            envelope.character = character
-        envelope.losses = losses + envelope.losses
-        losses = []  # reported with the first block only
-    return found
 
 
 class Adapter:
@@ -796,12 +612,12 @@ class Adapter:
         stroke="0.68" end="2.62"``): a number smaller than the behaviour's own start is read so."""
         for b in behaviours:
             start = b.attrs.get("start", "")
-            if not _NUMBER.match(start):
+            if not NUMBER.match(start):
                 continue
             t0 = float(start)
             for key in self.sync_keys(b):
                 value = b.attrs[key]
-                if key != "start" and _NUMBER.match(value) and float(value) < t0:
+                if key != "start" and NUMBER.match(value) and float(value) < t0:
                     b.attrs[key] = seconds(t0 + float(value))
                     self.notes.add(f"{key}= smaller than start=: read as seconds after the start (Greta)", b)
 
@@ -817,7 +633,7 @@ class Adapter:
         time to prepare) and plays the block later by as much: every number in the block moves later by
         the earliest start's distance before 0 (a behaviour's start as its numbers and its preferred timing
         put it), and behaviours that had no time of their own start at that time."""
-        numbers = [(b, key) for b in behaviours for key in self.sync_keys(b) if _NUMBER.match(b.attrs[key])]
+        numbers = [(b, key) for b in behaviours for key in self.sync_keys(b) if NUMBER.match(b.attrs[key])]
         timed = {id(b) for b, _ in numbers}  # (the behaviours with a number: looked up, not searched for)
         earliest = min((implied_start(b) for b in behaviours if id(b) in timed), default=0.0)
         if not earliest < -1e-9 or not math.isfinite(earliest):

@@ -19,7 +19,9 @@ from dataclasses import dataclass
 from typing import Callable
 
 from agentsim.bml import lexemes
-from agentsim.bml.dialects import DRAFT_NAMESPACES, Adapter, Notes, find_blocks
+from agentsim.bml.dialect_tables import DRAFT_NAMESPACES
+from agentsim.bml.dialects import Adapter
+from agentsim.bml.documents import Notes, find_blocks
 from agentsim.bml.spelling import fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
 from agentsim.core.xmltree import Node, encode, read_forest, read_tree
