@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-CHECKED = ("agentsim", "speech_timing", "anticipators", "scenarios", "tests", "benchmarks", "scripts")
+CHECKED = ("agentsim", "speech_timing", "anticipators", "scenarios", "tests", "benchmarks", "scripts", "docs")
 
 
 def ruff() -> list[str]:
