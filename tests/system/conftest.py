@@ -72,3 +72,47 @@ def browser():
         pytest.fail(str(e))
     with Chromium(width=1280, height=900) as chromium:
         yield chromium
+
+
+@pytest.fixture(scope="session")
+def user_environment(tmp_path_factory):
+    """A new virtual environment with agentsim installed from a copy of the checkout's tracked files (as a
+    package, its data included), seeing this environment's site-packages for the dependencies only: the
+    checkout's editable install is not processed there. Yields the environment's folder."""
+    import os
+    import site
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    home = tmp_path_factory.mktemp("user")
+    source = home / "source"
+    tracked = subprocess.run(["git", "ls-files", "-z"], cwd=root, capture_output=True, check=True).stdout
+    for name in filter(None, tracked.decode().split("\0")):
+        target = source / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if (root / name).is_symlink():
+            target.symlink_to(os.readlink(root / name))
+        elif (root / name).is_file():
+            target.write_bytes((root / name).read_bytes())
+    env = home / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(env)], check=True, timeout=300)
+    own = subprocess.run([str(env / "bin" / "python"), "-c", "import site; print(site.getsitepackages()[0])"],
+                         check=True, capture_output=True, text=True).stdout.strip()
+    ours = [p for p in site.getsitepackages() if Path(p).is_dir() and p != own]
+    (Path(own) / "agentsim-dependencies.pth").write_text("".join(f"{p}\n" for p in ours))
+    subprocess.run([str(env / "bin" / "python"), "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
+                    str(source)], check=True, timeout=600)
+    yield env
+
+
+@pytest.fixture(scope="session")
+def user_env(user_environment) -> dict:
+    """The environment variables of a reader whose shell has :func:`user_environment` first on its PATH."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
+    env.update(PATH=f"{user_environment / 'bin'}:/usr/bin:/bin", VIRTUAL_ENV=str(user_environment))
+    return env
+
