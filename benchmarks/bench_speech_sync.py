@@ -149,7 +149,7 @@ def side_by_side(results: OrderedDict) -> list[OrderedDict]:
 
 
 def markdown(result: dict) -> str:
-    """The side-by-side table (and the speech figures) as Markdown, for the README."""
+    """The side-by-side table (and the speech figures) as Markdown, for the documentation (docs/howto/voices.md)."""
     backends = list(result["speech"])
     head = ["timing", "condition", "strategy"] + [f"{b} {k}" for b in backends for k in ("p50 / p95 / max ms",
                                                                                      "snaps", "stall s")]

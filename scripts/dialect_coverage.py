@@ -1,5 +1,5 @@
 """How much of a folder of BML documents the realizer realizes: for each document alone, the behaviour elements
-whose ``end`` is reported, by the README's naming rules for what has no id. Prints JSON, per sub-folder
+whose ``end`` is reported, by the naming rules for what has no id (docs/howto/dialects.md). Prints JSON, per sub-folder
 (one per system) and in all, with the warnings that cost behaviours, most frequent first.
 
     .venv/bin/python scripts/dialect_coverage.py CORPUS_DIR [--strict]

@@ -364,3 +364,15 @@ def cached_render(make, *args, **kwargs):
             pickle.dump(made, f, protocol=pickle.HIGHEST_PROTOCOL)
         os.replace(scratch, path)
         return made
+
+
+def fenced_blocks(path, languages=("sh", "python")) -> list[tuple[str, int, str]]:
+    """The fenced blocks of a Markdown page marked with one of ``languages``, in order: (language, the line of
+    its first command, its text). A block marked otherwise (```text, ```console, ```toml, ...) is only shown."""
+    lines = Path(path).read_text(encoding="utf-8").splitlines()
+    found = []
+    for number, line in enumerate(lines, 1):
+        if line.startswith("```") and line[3:].strip() in languages:
+            end = lines.index("```", number)
+            found.append((line[3:].strip(), number + 1, "\n".join(lines[number:end]) + "\n"))
+    return found

@@ -137,7 +137,7 @@ def test_anticipators_list_shows_the_built_in_audio_anticipator():
     assert "tracker: str = 'causal'" in audio_line
 
 
-def test_anticipate_beats_json_prints_what_the_readme_says(tmp_path):
+def test_anticipate_beats_json_prints_what_the_documentation_says(tmp_path):
     import re
     from pathlib import Path
 
@@ -151,9 +151,9 @@ def test_anticipate_beats_json_prints_what_the_readme_says(tmp_path):
                           cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     run = json.loads(proc.stdout)
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    page = Path(__file__).resolve().parents[1] / "docs" / "explanation" / "beat-tracking.md"
     said = re.search(r"`agentsim anticipate beats AUDIO --json` prints one JSON object: (.*?); `--reference",
-                     " ".join(readme.split())).group(1)
+                     " ".join(page.read_text(encoding="utf-8").split())).group(1)
     assert set(re.findall(r"`(\w+)`", said)) == set(run)  # every key it prints, and no other
     assert run["tracker"] == "causal" and run["audio_seconds"] == pytest.approx(len(audio) / sr)
     updates = run["updates"]

@@ -1,4 +1,5 @@
-"""What a newcomer types, from any folder: the README's examples are found, commands that write files say
+"""What a newcomer types, from any folder: the examples the README and the documentation use are found,
+commands that write files say
 what they wrote where and make the folders they need, and what is printed is what is saved."""
 
 from __future__ import annotations
@@ -19,9 +20,10 @@ def agentsim(*args, cwd) -> subprocess.CompletedProcess:
                           timeout=300, cwd=cwd)
 
 
-def test_every_example_the_readme_names_is_installed():
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    named = set(re.findall(r"(?<![\w/])examples/[\w/.-]+\.(?:xml|py|wav)", readme))
+def test_every_example_the_readme_and_the_documentation_name_is_installed():
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    text = "".join(page.read_text(encoding="utf-8") for page in pages)
+    named = set(re.findall(r"(?<![\w/])examples/[\w/.-]+\.(?:xml|py|wav)", text))
     assert named and named <= set(names()), named - set(names())
 
 

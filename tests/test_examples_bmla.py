@@ -1,5 +1,5 @@
-"""The BMLA/BMLT examples the README points to, realized in the pairings it gives: each does what its comment
-says, with no warning."""
+"""The BMLA/BMLT examples ``docs/howto/bmla.md`` points to, realized in the pairings it gives: each does what its
+comment says, with no warning."""
 
 from __future__ import annotations
 

@@ -379,7 +379,7 @@ def test_eval_speech_sync_runs_on_festival(slt):
 def test_the_storyteller_with_festival_strikes_its_syllables_within_2_ms_at_p95(tmp_path):
     """``run storytelling --tts festival`` with its defaults (the longest shipped story, strategy best, condition
     A, seed 0): every stroke comes, none snaps, and the sync error's p95 is under 2 ms (0.87 ms measured, as
-    the README says; espeak-ng 0.65 ms)."""
+    ``docs/howto/voices.md`` says; espeak-ng 0.65 ms)."""
     out = tmp_path / "story"
     proc = cli("run", "storytelling", "--tts", "festival", "--no-cache", "--out", str(out), timeout=1200)
     assert proc.returncode == 0, proc.stderr

@@ -1,7 +1,7 @@
 """The layers of the four packages: every module's imports point down or sideways, never up, and never in a
 circle.
 
-The layers, lowest first (the README's "Layout" says the same in prose):
+The layers, lowest first (``docs/explanation/architecture.md``, "The layers", says the same in prose):
 
 * the error root: ``agentsim.errors`` (and the ``agentsim`` package itself, which holds only its version),
   which every package can reach;

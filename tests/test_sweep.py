@@ -271,9 +271,9 @@ def test_spec_points_and_their_command_lines(tmp_path):
         "run", "conductor", "--strategy", "best", "--json"]
 
 
-def test_the_readmes_example_spec_is_a_valid_spec(tmp_path):
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
-    example = readme.split("## Sweeps")[1].split("```toml\n")[1].split("```")[0]
+def test_the_documented_example_spec_is_a_valid_spec(tmp_path):
+    page = (Path(__file__).resolve().parent.parent / "docs" / "reference" / "sweep-spec.md").read_text()
+    example = page.split("```toml\n")[1].split("```")[0]
     (tmp_path / "spec.toml").write_text(example)
     (tmp_path / "story.txt").write_text(SWEEP_TEXT)
     checked = spec.load(tmp_path / "spec.toml")

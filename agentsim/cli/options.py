@@ -206,7 +206,7 @@ def explained(result: dict, units: dict[str, str]) -> dict:
 def add_lexicon(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lexicon", action="append", default=[], metavar="FILE",
                         help="add the gesture lexemes of a lexicon file (TOML: strokes or MURML forms; see "
-                             "'agentsim lexicon list' and the README's recipe); repeatable, later files win")
+                             "'agentsim lexicon list' and docs/howto/gestures.md); repeatable, later files win")
 
 
 def use_lexicons(args: argparse.Namespace) -> None:

@@ -87,7 +87,7 @@ def add_parsers(commands) -> None:
     new.add_argument("--dir", default=".", help="where to write the folder (default: here)")
     new.set_defaults(handler=new_anticipator)
 
-    examples = commands.add_parser("examples", help="the example documents and programs the README uses",
+    examples = commands.add_parser("examples", help="the example documents and programs the documentation uses",
                                    description="List the installed examples (a command given examples/NAME "
                                                "that is not where it runs reads the installed one), or copy "
                                                "them into DIR/examples.")

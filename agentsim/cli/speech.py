@@ -13,7 +13,7 @@ from agentsim.core.progress import Stages
 
 DEFAULT_MODEL = Path("linear_model.json")
 
-#: The units of ``eval speech-sync``'s figures (README.md, Glossary, says what each one is).
+#: The units of ``eval speech-sync``'s figures (docs/reference/glossary.md says what each one is).
 SYNC_UNITS = {"error_ms": "ms (|stroke - the word's onset as heard|; signed_mean keeps the sign, positive: late)",
               "snaps": "frames (60 per s) in which animator time jumps a frame ahead of the clock or goes back",
               "stall_s": "s (clock time in frames where animator time ran at under half speed)",

@@ -1,8 +1,8 @@
-"""The example documents and programs the README uses, installed with the package.
+"""The example documents and programs the README and the documentation use, installed with the package.
 
 ``agentsim examples`` lists them and ``agentsim examples copy DIR`` copies them into ``DIR/examples``; a
 command given ``examples/NAME`` that does not exist where it runs reads the installed one
-(:func:`resolve`), so that the README's commands work from any folder.
+(:func:`resolve`), so that the documented commands work from any folder.
 """
 
 from __future__ import annotations

@@ -10,5 +10,6 @@ track; :mod:`~agentsim.media.tables` makes the tables people analyse (one row pe
 #: What every file a run writes says of its time axis (where its format has room for it).
 AXIS = "simulated time of the run: 0 s = WAV sample 0 = BVH/npz frame 0 = feedback globalTime 0"
 
-#: Where every JSON a run writes points for what its fields mean (the README's glossary).
+#: Where every JSON a run writes points for what its fields mean: the README's "Glossary", which leads to the
+#: documentation's (docs/reference/glossary.md).
 GLOSSARY = "README.md#glossary"

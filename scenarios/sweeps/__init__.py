@@ -1,5 +1,6 @@
-"""The sweep specs that reproduce the README's tables, shipped with the package: ``agentsim sweep NAME`` runs
-one by its short name (``speech_sync``, ``conductor``), ``agentsim sweep --list-specs`` lists them."""
+"""The sweep specs that reproduce the measured tables (``docs/measured.md``), shipped with the package:
+``agentsim sweep NAME`` runs one by its short name (``speech_sync``, ``conductor``), ``agentsim sweep
+--list-specs`` lists them."""
 
 from __future__ import annotations
 

@@ -6,8 +6,6 @@ Every test module in this folder marks its tests ``system``; the default run lea
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 
@@ -77,14 +75,15 @@ def browser():
 
 
 @pytest.fixture(scope="session")
-def user_environment(tmp_path_factory) -> Path:
+def user_environment(tmp_path_factory):
     """A new virtual environment with agentsim installed from a copy of the checkout's tracked files (as a
     package, its data included), seeing this environment's site-packages for the dependencies only: the
-    checkout's editable install is not processed there."""
+    checkout's editable install is not processed there. Yields the environment's folder."""
     import os
     import site
     import subprocess
     import sys
+    from pathlib import Path
 
     root = Path(__file__).resolve().parents[2]
     home = tmp_path_factory.mktemp("user")
@@ -105,4 +104,15 @@ def user_environment(tmp_path_factory) -> Path:
     (Path(own) / "agentsim-dependencies.pth").write_text("".join(f"{p}\n" for p in ours))
     subprocess.run([str(env / "bin" / "python"), "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
                     str(source)], check=True, timeout=600)
+    yield env
+
+
+@pytest.fixture(scope="session")
+def user_env(user_environment) -> dict:
+    """The environment variables of a reader whose shell has :func:`user_environment` first on its PATH."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
+    env.update(PATH=f"{user_environment / 'bin'}:/usr/bin:/bin", VIRTUAL_ENV=str(user_environment))
     return env
+
