@@ -57,7 +57,9 @@ class DriverManager:
 
     # ------------------------------------------------------------------ drivers and motor functions
     def add(self, driver: Driver) -> Driver:
-        """Register a driver: it will be ticked while it holds DOFs; its setup schedules its requests."""
+        """Register a driver: it will be ticked while it holds DOFs; its setup schedules its requests. It is
+        numbered (:attr:`~agentsim.animation.drivers.Driver.uid`) in the order drivers join."""
+        driver.uid = len(self.drivers)
         self.drivers.append(driver)
         driver.attach(self)
         return driver
