@@ -205,14 +205,18 @@ def explained(result: dict, units: dict[str, str]) -> dict:
 
 def add_lexicon(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lexicon", action="append", default=[], metavar="FILE",
-                        help="add the gesture lexemes of a lexicon file (TOML: strokes or MURML forms; see "
-                             "'agentsim lexicon list' and the README's recipe); repeatable, later files win")
+                        help="add the lexemes of a lexicon file to the built-in ones, replacing those of the same "
+                             "name (TOML: gestures as strokes or MURML forms, conducting patterns, face lexemes, "
+                             "FACS units, postures, visemes; see 'agentsim lexicon list' and the README's recipe); "
+                             "repeatable, later files win")
 
 
-def use_lexicons(args: argparse.Namespace) -> None:
-    """Load the ``--lexicon`` files (a usage error naming the file and the table if one cannot be used)."""
-    if getattr(args, "lexicon", None):
-        from agentsim.animation.arms import use_lexicon
+def lexicon(args: argparse.Namespace):
+    """The built-in lexicon extended with the ``--lexicon`` files in order (a usage error naming the file and
+    the entry if one cannot be used)."""
+    from agentsim.animation.lexicon import Lexicon
 
-        for path in args.lexicon:
-            use_lexicon(path)
+    made = Lexicon.builtin()
+    for path in getattr(args, "lexicon", None) or ():
+        made = made.extended(path)
+    return made
