@@ -145,3 +145,16 @@ def test_a_realizer_leaves_the_collector_alone_unless_given_a_pause(pause, monke
     assert paused.submit(DOCUMENT) is not None
     assert calls == ["disable", "enable"]  # one pause for reading and planning the document
     assert len(paused.read_document(DOCUMENT)) == 1 and calls == ["disable", "enable"] * 2
+
+
+def test_the_command_line_pauses_the_collector_while_it_reads_and_plans(pause, monkeypatch, tmp_path, capsys):
+    from agentsim.cli import main
+    from agentsim.cli.options import collection_pause
+
+    document = tmp_path / "doc.xml"
+    document.write_text(DOCUMENT)
+    calls = _collector_switches(monkeypatch)
+    assert main(["realize", str(document), "--tts", "builtin"]) == 0
+    assert calls == ["disable", "enable"]  # one pause: the document read and planned
+    assert collection_pause() is collection_pause()  # one for the process, whose collector it is
+    assert '"id": "b1:end"' in capsys.readouterr().out

@@ -4,6 +4,7 @@ strategy and timing, seed, output, frame rate and anticipators, with what turns 
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import sys
 import warnings
@@ -209,6 +210,16 @@ def add_lexicon(parser: argparse.ArgumentParser) -> None:
                              "name (TOML: gestures as strokes or MURML forms, conducting patterns, face lexemes, "
                              "FACS units, postures, visemes; see 'agentsim lexicon list' and the README's recipe); "
                              "repeatable, later files win")
+
+
+@functools.lru_cache(maxsize=1)
+def collection_pause():
+    """The command line's pause of the garbage collector (:class:`~agentsim.core.gcpause.CollectionPause`),
+    which every realizer it makes is given: one for the process, whose collector it is (a sweep may run
+    points side by side in one worker)."""
+    from agentsim.core.gcpause import CollectionPause
+
+    return CollectionPause()
 
 
 def lexicon(args: argparse.Namespace):

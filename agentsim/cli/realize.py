@@ -233,7 +233,6 @@ def list_lexicon(args: argparse.Namespace) -> int:
 
 def realize_files(args: argparse.Namespace) -> int:
     from agentsim.core.feedback import to_json
-    from agentsim.core.gcpause import CollectionPause
     from agentsim.realizer import Realizer
 
     lexicon = options.lexicon(args)
@@ -255,7 +254,7 @@ def realize_files(args: argparse.Namespace) -> int:
     problems: list[str] = []
     made = options.anticipators(args, problems)
     realizer = Realizer(realtime=args.realtime, anticipators=made, strict=args.strict, tts=tts, lexicon=lexicon,
-                        gc_pause=CollectionPause())
+                        gc_pause=options.collection_pause())
 
     def emit(feedback):
         out.write(to_json(feedback) + "\n")
@@ -285,7 +284,6 @@ def plot_timeline(args: argparse.Namespace) -> int:
     lexicon = options.lexicon(args)
     from agentsim.animation import evaluate_poses, plot_timeline as draw, plot_timelines
     from agentsim.animation.timeline import run_duration
-    from agentsim.core.gcpause import CollectionPause
     from agentsim.realizer import Realizer
 
     def seconds(option: str, text: str | None) -> float | None:
@@ -306,7 +304,8 @@ def plot_timeline(args: argparse.Namespace) -> int:
         raise UsageError(f"--to ({end:g} s) must come after --from ({start:g} s)")
     check_writable([args.out], inputs=[resolve(args.file)])
     tts = options.backend(args.tts, args.voice)
-    realizer = Realizer(anticipators=options.anticipators(args), tts=tts, lexicon=lexicon, gc_pause=CollectionPause())
+    realizer = Realizer(anticipators=options.anticipators(args), tts=tts, lexicon=lexicon,
+                        gc_pause=options.collection_pause())
     realizer.submit(read_document(args.file), source=str(resolve(args.file)))
     realizer.run()
     recording = realizer.recording()
