@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import replace
+from pathlib import Path
 from typing import Iterable
 
 import simpy
 
+from agentsim.animation.lexicon import Lexicon, as_lexicon
 from agentsim.bml.parser import Refused, parse_document
 from agentsim.core.block import Block
 from agentsim.core.clock import make_environment, run_until
 from agentsim.core.feedback import FeedbackLog
+from agentsim.core.gcpause import CollectionPause
 from agentsim.core.pegboard import PegBoard
 from agentsim.core.recording import Recording
 from agentsim.core.scheduler import FRAME, Scheduler
@@ -52,12 +56,24 @@ class Realizer:
         Read only BML 1.0 (one block a document). By default BML as other realizers write it is read too,
         each block's adaptations said in one ``NONSTANDARD_BML`` warning; blocks without an id are named
         ``bml1``, ``bml2``, ... in the order they come, skipping ids already used.
+    lexicon : Lexicon, str or Path, optional
+        What the lexemes of gestures, faces, FACS units, postures and visemes play: a
+        :class:`~agentsim.animation.lexicon.Lexicon`, or the path of a lexicon file (the built-in lexicon
+        extended with it, its entries winning); by default the built-in one. It is this realizer's alone: the
+        BML reader, the animation engine and the poses of its recording use it.
+    gc_pause : CollectionPause, optional
+        Hold the garbage collector off while documents are read and planned, as this
+        :class:`~agentsim.core.gcpause.CollectionPause` does (the command line and the live service pass
+        theirs); by default the collector is left alone.
     """
 
     def __init__(self, env: simpy.Environment | None = None, realtime: bool = False,
                  tts: TTSBackend | None = None, anticipators: Iterable = (), speech: SpeechConfig | None = None,
-                 prediction_tolerance: float = FRAME, strict: bool = False, keep: int | None = None):
+                 prediction_tolerance: float = FRAME, strict: bool = False, keep: int | None = None,
+                 lexicon: Lexicon | str | Path | None = None, gc_pause: CollectionPause | None = None):
         self.strict = strict
+        self.lexicon = as_lexicon(lexicon)
+        self.gc_pause = gc_pause
         self._unnamed = 0
         self.env = env if env is not None else make_environment(realtime)
         self.board = PegBoard()
@@ -68,7 +84,7 @@ class Realizer:
         self.scheduler = Scheduler(self.env, self.board, self.feedback, prediction_tolerance, keep=keep)
         context = self.scheduler.context
         self.speech = SpeechEngine(context, tts, speech)
-        self.animation = AnimationEngine(context)
+        self.animation = AnimationEngine(context, self.lexicon)
         self.wait = WaitEngine(context)
         self.control = ControlEngine(context)
         self.audio = AudioEngine(context)
@@ -94,19 +110,30 @@ class Realizer:
 
     def submit_document(self, bml: str | bytes | Block, source: str = "") -> list[BlockRun | None]:
         """Submit every block of a BML document now, in order. Returns their runs (None where refused)."""
-        if isinstance(bml, Block):
-            return [self._submit_block(bml, source)]
-        runs: list[BlockRun | None] = []
-        for block in parse_document(bml, strict=self.strict, name_block=self.name_block):
-            if isinstance(block, Refused):
-                where = f" in {source}" if source else ""
-                error = block.error
-                self.scheduler.warn(block.block_id, "PARSING_FAILURE", f"block refused{where}: {error}", "agent",
-                                    line=error.line, column=error.column)
-                runs.append(None)
-            else:
-                runs.append(self._submit_block(block, source))
-        return runs
+        with self._paused():
+            if isinstance(bml, Block):
+                return [self._submit_block(bml, source)]
+            runs: list[BlockRun | None] = []
+            for block in self.read_document(bml):
+                if isinstance(block, Refused):
+                    where = f" in {source}" if source else ""
+                    error = block.error
+                    self.scheduler.warn(block.block_id, "PARSING_FAILURE", f"block refused{where}: {error}",
+                                        "agent", line=error.line, column=error.column)
+                    runs.append(None)
+                else:
+                    runs.append(self._submit_block(block, source))
+            return runs
+
+    def read_document(self, bml: str | bytes) -> list[Block | Refused]:
+        """The blocks of a BML document as this realizer reads them (strictly or not, with its lexicon, blocks
+        without an id named by :meth:`name_block`), each parsed or refused; nothing is submitted."""
+        with self._paused():
+            return parse_document(bml, strict=self.strict, name_block=self.name_block, lexicon=self.lexicon)
+
+    def _paused(self):
+        """The garbage collector held off as :attr:`gc_pause` does, if the realizer was given one."""
+        return self.gc_pause.paused() if self.gc_pause is not None else contextlib.nullcontext()
 
     def name_block(self) -> str:
         """The next free ``bml<n>`` for a block without id."""
@@ -152,7 +179,7 @@ class Realizer:
         """What the run has done so far, as values: behaviours with their actual key times, blocks, drops,
         anticipator pegs, feedback and the speech as heard."""
         return replace(self.scheduler.recording(), speech=tuple(self.speech.heard()),
-                       audio=tuple(self.audio.played))
+                       audio=tuple(self.audio.played), lexicon=self.lexicon)
 
     def all_ended(self) -> simpy.Process:
         """An event that happens when every block submitted (or due to be submitted) so far has ended,

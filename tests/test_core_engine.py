@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -22,9 +23,12 @@ class FakeEngine:
         self.planner = Planner()
 
 
+PLANNED = itertools.count()  # the order in which the tests plan behaviours
+
+
 def gesture(run, keys, name="g"):
     behaviour = Behaviour(name, "gesture", list(GESTURE_SYNCS))
-    return TimedBehaviour(run, behaviour, PREFERRED, keys, FakeEngine())
+    return TimedBehaviour(run, behaviour, PREFERRED, keys, FakeEngine(), next(PLANNED))
 
 
 @pytest.fixture

@@ -10,7 +10,7 @@ from agentsim.bml.parser import parse_ref
 from agentsim.core.anticipator import Anticipator
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block
 from agentsim.core.feedback import FeedbackLog
-from agentsim.core.pegboard import ComputedPeg, OffsetPeg, PegBoard, invalidate_times
+from agentsim.core.pegboard import ComputedPeg, OffsetPeg, PegBoard
 from agentsim.core.scheduler import FRAME, Scheduler
 from agentsim.core.timed import KeyRef
 from agentsim.engines.animation import AnimationEngine
@@ -121,8 +121,8 @@ class Source(ComputedPeg):
 
     __slots__ = ("base", "s")
 
-    def __init__(self, base, s):
-        super().__init__(None, name=f"source{s}")
+    def __init__(self, base, s, board):
+        super().__init__(None, name=f"source{s}", cache=board.cache)
         self.base, self.s = base, s
 
     def compute(self):
@@ -135,11 +135,11 @@ def test_pegs_that_move_often_re_time_only_what_is_within_the_horizon(world):
     base = [0.0]
     near, far = ({t.id: t for t in run.timed}[name] for name in ("near", "far"))
     # hang both from a moving timeline (as a speech hangs what is tied to its marks from animator time)
-    timeline = Source(base, 0.0)
+    timeline = Source(base, 0.0, scheduler.board)  # on the board's cache, as a speech's pegs are
     for timed in (near, far):
         peg = OffsetPeg(timeline, 0.0)
         timed.keys = [None if k is None else KeyRef(peg, k.offset) for k in timed.keys]
-    invalidate_times()
+    scheduler.board.invalidate_times()
     dependants = scheduler.dependants_of([timeline])
     assert dependants.all() == [near, far]
 

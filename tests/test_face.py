@@ -15,8 +15,11 @@ import pytest
 from helpers import bvh_reader, realize
 
 from agentsim.animation import evaluate_poses, write_bvh
-from agentsim.animation.lips import PHONEME_VISEMES, VISEMES, phoneme_viseme
-from agentsim.animation.expressions import BML_FACE_LEXEMES, FACE_LEXEMES, FACS_UNITS
+from agentsim.animation.lexicon import BML_FACE_LEXEMES, Lexicon
+from agentsim.animation.lips import PHONEME_VISEMES, phoneme_viseme
+
+LEXICON = Lexicon.builtin()
+FACE_LEXEMES, FACS_UNITS, VISEMES = LEXICON.faces, LEXICON.facs, LEXICON.visemes
 
 NS = "http://www.bml-initiative.org/bml/bml-1.0"
 FPS = 20

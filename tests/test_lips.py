@@ -11,10 +11,16 @@ import pytest
 
 from agentsim.animation import evaluate_poses, write_bvh
 from agentsim.animation.body import Body
-from agentsim.animation.lips import CHANNELS, MIN_RAMP, MOUTH_DOFS, NEUTRAL, VISEMES, monotone_cubic
+from agentsim.animation.lexicon import Lexicon
+from agentsim.animation.lips import MIN_RAMP, MOUTH_DOFS, NEUTRAL, MouthShape, channel_shape, monotone_cubic
 from agentsim.bml.parser import parse_ref
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block
 from agentsim.realizer import Realizer
+
+LEXICON = Lexicon.builtin()
+#: the built-in lexicon's mouth shapes of visemes, and of every face channel (the visemes and the others)
+VISEMES = {name: MouthShape(**entry) for name, entry in LEXICON.visemes.items()}
+CHANNELS = {name: channel_shape(name, LEXICON) for name in {**LEXICON.visemes, **LEXICON.channels}}
 
 FPS = 100
 DT = 1.0 / FPS
@@ -366,7 +372,7 @@ def test_the_speaking_mouth_counts_the_visemes_near_each_time_and_gives_the_same
     for i, d in enumerate(MOUTH_DOFS):
         every = sum(share[k] * (VISEMES.get(n.lower()) or NEUTRAL).dofs()[d] for k, (n, _, _) in enumerate(segments))
         assert np.abs(whole[d] - every).max() < 1e-12, d
-    track = VisemeTrack(phonemes)  # built once, as the speaking mouth builds it per speech
+    track = VisemeTrack(phonemes, LEXICON)  # built once, as the speaking mouth builds it per speech
     for width in (1, 7, 600):
         cut = [track.at(u[a:a + width]) for a in range(0, len(u), width)]
         assert all(np.array_equal(np.concatenate([c[d] for c in cut]), whole[d]) for d in MOUTH_DOFS), width

@@ -350,13 +350,13 @@ def test_a_posture_of_three_values_turns_the_joint_as_asap_reads_it(tmp_path):
 
 def test_asaps_face_key_frames_close_both_eyes_at_their_times(tmp_path):
     # its morph target is the eyes' closure of Asap's character: here both eyelids at CLOSE_EYES times weight/100
-    from agentsim.animation.expressions import FACE_LEXEMES
+    from agentsim.animation.lexicon import Lexicon
 
     result, fk = run(tmp_path, (ASAP / "murmlfacekeyframe.xml").read_text().split("id=\"bml1\">", 1)[1]
                      .rsplit("</bml>")[0])
     assert result.warnings == []
     start = result.t("face1:start")
-    closed = FACE_LEXEMES["CLOSE_EYES"]["l_eyelid.pitch"]
+    closed = Lexicon.builtin().faces["CLOSE_EYES"]["l_eyelid.pitch"]
     for side in "lr":
         column = fk.column[(f"{side}_eyelid", "Xrotation")]
         for ftime, weight in ((0.5, 100.0), (1.0, 0.0), (1.5, 100.0), (2.0, 0.0)):

@@ -26,8 +26,9 @@ module           what lives there
                  pointing by inverse kinematics, hand shapes and key frame sequences.
 ``head``         nods, shakes and tilts, head turns, gaze with its eyes, saccades and held eyelids.
 ``pose``         face expressions and postures blended to and held, locomotion, the jaw during speech.
-``expressions``  the tables of face lexemes, FACS units and postures (plain data, read without numpy).
-``lips``         lip sync: the viseme table (jaw, lip spread and rounding, lip closure), the drivers of
+``lexicon``      the Lexicon: what gesture, face and posture lexemes, FACS units and visemes play, read
+                 from the data files beside it and from users' lexicon files (no numpy); one a realizer.
+``lips``         lip sync: mouth shapes (jaw, lip spread and rounding, lip closure), the drivers of
                  visemes and of keyframed face channels, and the monotone cubic their keys follow.
 ``functions``    motor functions by name with default parameters (background drivers, motion units).
 ``manager``      the DriverManager: drivers, Arbitrator and motor functions of one body, and the event
@@ -51,7 +52,7 @@ import importlib
 #: What the package offers, and the module it comes from: imported on first use, so that the modules that
 #: need only a part (the units, when planning) do not load the body, numpy and the plots with it.
 _EXPORTS = {
-    "Arbitrator": "arbitrator", "Body": "body", "Driver": "drivers", "DriverManager": "manager",
+    "Arbitrator": "arbitrator", "Body": "body", "Driver": "drivers", "DriverManager": "manager", "Lexicon": "lexicon",
     "PoseStream": "output", "evaluate_poses": "output", "write_bvh": "output", "write_npz": "output",
     "TimeSource": "time_source", "plot_timeline": "timeline", "plot_timelines": "pictures",
 }

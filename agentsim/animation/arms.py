@@ -20,14 +20,11 @@ wrist on the target, or on the line to it at arm's length).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from agentsim.animation.drivers import EPSILON, PRIORITY
-from agentsim.animation import lexicon as lexicon_data
-from agentsim.animation.lexicon import builtin as builtin_lexicon
-from agentsim.errors import UsageError
+from agentsim.animation.lexicon import Lexicon
 from agentsim.animation.motion import EASE, HOLD, MIN_PREP, KeyTimes, MotionDriver, blend_in, frac
 
 
@@ -72,24 +69,20 @@ class StrokePath:
                           self.twist)
 
 
-#: Gesture lexemes and their strokes (unknown lexemes use DEFAULT), from the lexicon
-#: (``data/lexicon.toml``; :mod:`agentsim.animation.lexicon` adds users' files).
-GESTURE_FORMS: dict[str, StrokePath] = {name: StrokePath(**v) for name, v in builtin_lexicon()["strokes"].items()}
+def stroke_path(lexicon: Lexicon, lexeme: str) -> StrokePath:
+    """The stroke of a gesture lexeme in ``lexicon`` (of its ``DEFAULT`` for a lexeme it has no stroke for)."""
+    strokes = lexicon.strokes
+    return StrokePath(**strokes.get(lexeme.upper(), strokes["DEFAULT"]))
 
 
 # --------------------------------------------------------------------------------------------- conducting
-#: Where conducting happens: the centre of the beat pattern relative to the shoulder (outward, up, forward).
-CONDUCT_CENTER = builtin_lexicon()["conducting"]["center"]
-#: Conducting patterns by beats per bar: each beat's ictus offset from the centre (outward, up, forward),
-#: the height the hand falls from into it, and how high it rebounds (from the lexicon too).
-CONDUCT_PATTERNS: dict[int, list[tuple[tuple[float, float, float], float, float]]] = dict(
-    builtin_lexicon()["conducting"]["patterns"])
-
-
-def conducting_path(beats_per_bar: int, beat: int, amount: float = 1.0) -> StrokePath:
-    """The stroke of beat ``beat`` (1-based) of a conducting pattern: down into the beat's ictus from
-    above (arriving from the side of the previous beat) and rebounding towards the next."""
-    pattern = CONDUCT_PATTERNS.get(beats_per_bar)
+def conducting_path(lexicon: Lexicon, beats_per_bar: int, beat: int, amount: float = 1.0) -> StrokePath:
+    """The stroke of beat ``beat`` (1-based) of a conducting pattern of ``lexicon``: down into the beat's
+    ictus from above (arriving from the side of the previous beat) and rebounding towards the next. The
+    lexicon's ``conducting`` says where the pattern's centre is (relative to the shoulder) and, for each
+    meter it knows, each beat's ictus offset from the centre, the height the hand falls from into it and
+    how high it rebounds."""
+    pattern = lexicon.conducting["patterns"].get(beats_per_bar)
     if pattern is None:  # other meters: one down-beat, then alternating inside and outside
         pattern = [((0.0, 0.0, 0.0), 0.20, 0.10)] + [
             (((-0.12 if k % 2 else 0.14), 0.03, 0.0), 0.12, 0.08) for k in range(1, max(beats_per_bar, 1))]
@@ -98,7 +91,7 @@ def conducting_path(beats_per_bar: int, beat: int, amount: float = 1.0) -> Strok
     ictus, fall, rise = pattern[k]
     prev = pattern[(k - 1) % n][0]
     nxt = pattern[(k + 1) % n][0]
-    center = np.asarray(CONDUCT_CENTER)
+    center = np.asarray(lexicon.conducting["center"])
     bottom = center + np.asarray(ictus)
     top = bottom + np.array([0.35 * (prev[0] - ictus[0]), fall * amount, 0.0])
     rebound = bottom + np.array([0.25 * (nxt[0] - ictus[0]), rise * amount, 0.0])
@@ -319,46 +312,3 @@ class KeyframeDriver(MotionDriver):
                 prev = v
             out[name] = a
         self.write_held(out)
-
-
-def use_lexicon(path: str | Path) -> list[str]:
-    """Add the lexemes of a lexicon file (replacing those of the same name) for the rest of the process;
-    returns their names."""
-    from agentsim.core.inputs import read_text
-
-    path = Path(path)
-    try:  # weighed before it is read, as every input: past 8 MB it is refused unread
-        text = read_text(path, what=f"the lexicon {path}")
-    except UnicodeDecodeError as exc:
-        raise UsageError(f"cannot read the lexicon {path}: it is not UTF-8 text ({exc.reason})") from None
-    except OSError as exc:
-        raise UsageError(f"cannot read the lexicon {path}: {exc.strerror or exc}") from None
-    lexicon = lexicon_data.read_lexicon(text, str(path))
-    builtin_lexicon()
-    for name, stroke in lexicon["strokes"].items():
-        GESTURE_FORMS[name] = StrokePath(**stroke)
-        lexicon_data.MURML_LEXEMES.pop(name, None)
-        lexicon_data.SOURCES[name] = str(path)
-    for name, form in lexicon["forms"].items():
-        lexicon_data.MURML_LEXEMES[name] = form
-        GESTURE_FORMS.pop(name, None)
-        lexicon_data.SOURCES[name] = str(path)
-    global CONDUCT_CENTER
-    if lexicon["conducting"] is not None:
-        CONDUCT_CENTER = lexicon["conducting"]["center"]
-        CONDUCT_PATTERNS.clear()
-        CONDUCT_PATTERNS.update(lexicon["conducting"]["patterns"])
-        lexicon_data.SOURCES["CONDUCT_*"] = str(path)
-    return [*lexicon["strokes"], *lexicon["forms"]]
-
-
-def lexicon_rows() -> list[tuple[str, str, str]]:
-    """(lexeme, kind, where it comes from) of every gesture lexeme known now, by name."""
-    builtin_lexicon()
-    rows = [(name, "stroke", lexicon_data.SOURCES.get(name, lexicon_data.BUILTIN)) for name in GESTURE_FORMS]
-    rows += [(name, "form (MURML)", lexicon_data.SOURCES.get(name, lexicon_data.BUILTIN))
-             for name in lexicon_data.MURML_LEXEMES]
-    meters = ", ".join(str(m) for m in sorted(CONDUCT_PATTERNS))
-    rows.append(("CONDUCT_<beats>_<unit>[_<beat>]", f"conducting (patterns of {meters} beats; others alternate)",
-                 lexicon_data.SOURCES.get("CONDUCT_*", lexicon_data.BUILTIN)))
-    return sorted(rows)

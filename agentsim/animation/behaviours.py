@@ -18,16 +18,14 @@ from typing import Iterable
 
 import numpy as np
 
-from agentsim.animation.arms import GESTURE_FORMS, GestureDriver, PointingDriver, conducting_path
-from agentsim.animation.lexicon import conducting_meter
+from agentsim.animation.arms import GestureDriver, PointingDriver, conducting_path, stroke_path
 from agentsim.animation.drivers import PRIORITY
 from agentsim.animation.head import GazeDriver, HeadDriver, HeadTurnDriver
+from agentsim.animation.lexicon import conducting_meter
 from agentsim.animation.lips import LipsDriver, SpeechMouthDriver, curves_driver, lips_values
 from agentsim.animation.manager import DriverManager
-from agentsim.animation.lexicon import murml_form
 from agentsim.animation.motion import KeyTimes, ReplacementGroup
 from agentsim.animation.murml import Form, MurmlDriver, MurmlKeyframeDriver, form_of, keyframe_channels
-from agentsim.animation.expressions import POSTURES
 from agentsim.animation.pose import LocomotionDriver, PoseDriver, SpeechJawDriver, TransitionDriver, face_values
 from agentsim.animation.scene import Scene, offset_target
 from agentsim.animation.time_source import TimeSource
@@ -75,9 +73,11 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
     ``records``: what each behaviour did (:class:`~agentsim.core.recording.BehaviourRecord`, as in a
     realizer's recording). A behaviour that never started is left out; one that was dropped or cut after
     it started plays until then. Behaviours tied to speech are advanced by ``animator_time`` when given.
+    Their lexemes play as the manager's lexicon has them.
     """
     records = list(records)
     scene = manager.scene
+    lexicon = manager.lexicon
     speech_ids = {r.name for r in records if r.type == "speech"}
     groups = {"gaze": ReplacementGroup("gaze")}
     infos: list[UnitInfo] = []
@@ -95,7 +95,7 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
             passed = [t for t, p in zip(record.times, record.passed) if p]
             stop = record.stopped if record.stopped is not None else (passed[-1] if passed else None)
         try:
-            keys = KeyTimes.from_record(record, fill=stop)
+            keys = KeyTimes.from_record(record, fill=stop, lexicon=lexicon)
         except ValueError:
             continue
         lexeme = b.attributes.get("lexeme", "")
@@ -108,7 +108,7 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
         if b.type in ("murmlgesture", "murmlface"):
             form = form_of(b)
             if form.get("keyframing"):
-                channels, unknown = keyframe_channels(form, manager.body)
+                channels, unknown = keyframe_channels(form, manager.body, lexicon)
                 if unknown:
                     info.note = f"no DOFs for {', '.join(unknown)}"
                 if channels:
@@ -119,7 +119,7 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
             arm_items.append((record, keys, info, common))
             continue
         if b.type in ("gesture", "pointing"):
-            form = murml_form(lexeme) if b.type == "gesture" and lexeme else None
+            form = lexicon.form(lexeme) if b.type == "gesture" and lexeme else None
             if form is not None:  # a lexeme whose lexicon entry is a MURML form (its mode may mirror it)
                 mode = b.attributes.get("mode", "").upper()
                 hand = "l" if mode in ("LEFT_HAND", "LEFT") else "r" if mode in ("RIGHT_HAND", "RIGHT") else None
@@ -132,7 +132,7 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
         if b.type == "speech":
             phonemes = getattr(record, "phonemes", ())
             if phonemes:  # the visemes of what it said; without phonemes, the jaw at syllable rate
-                drv = manager.add(SpeechMouthDriver(name, keys, phonemes, record.preferred, **common))
+                drv = manager.add(SpeechMouthDriver(name, keys, phonemes, record.preferred, lexicon, **common))
             else:
                 drv = manager.add(SpeechJawDriver(name, keys, **common))
         elif b.type == "head":
@@ -151,7 +151,7 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
         elif b.type == "headDirectionShift":
             drv = manager.add(HeadTurnDriver(name, keys, _bml_target(scene, b), arrive="end", shift=True, **common))
         elif b.type in ("faceLexeme", "faceFacs", "face", "faceShift"):
-            values = face_values("faceFacs" if b.type == "faceFacs" else "faceLexeme", b.attributes)
+            values = face_values("faceFacs" if b.type == "faceFacs" else "faceLexeme", b.attributes, lexicon)
             if not values:
                 info.note = "no DOFs for this expression"
                 continue
@@ -161,14 +161,14 @@ def build_drivers(manager: DriverManager, records: Iterable, animator_time: Time
                 drv = manager.add(PoseDriver(name, keys, values, PRIORITY["behaviour"], "attackPeak", **common))
         elif b.type in ("posture", "postureShift"):
             label = (b.attributes.get("lexeme") or b.attributes.get("type") or "WEIGHT_SHIFT").upper()
-            values = POSTURES.get(label, POSTURES["WEIGHT_SHIFT"])
+            values = lexicon.postures.get(label, lexicon.postures["WEIGHT_SHIFT"])
             if b.type == "posture":
                 drv = manager.add(PoseDriver(name, keys, values, PRIORITY["behaviour"], "ready", **common))
             else:
                 drv = manager.add(PoseDriver(name, keys, values, PRIORITY["shift"], "end", release="end",
                                              rest_after=True, **common))
         elif b.type == "curves":
-            drv, note = curves_driver(name, keys, b, **common)
+            drv, note = curves_driver(name, keys, b, lexicon, **common)
             info.note = note
             if drv is None:
                 continue
@@ -220,7 +220,7 @@ def _build_lips(manager: DriverManager, items: list[tuple]) -> None:
     starts during its relax..end, so consecutive visemes blend from one shape into the next."""
     items = sorted(items, key=lambda it: (it[1].start, it[0].order))
     for k, (record, keys, info, common) in enumerate(items):
-        values, note = lips_values(record.behaviour.attributes)
+        values, note = lips_values(record.behaviour.attributes, manager.lexicon)
         info.note = note
         following = items[k + 1][1].start if k + 1 < len(items) else None
         hold_until = following if following is not None and following < keys.end else None
@@ -331,10 +331,10 @@ def _build_arms(manager: DriverManager, items: list[tuple], scene: Scene) -> Non
                     amount = float(b.attributes.get("amount", "1"))
                 except ValueError:
                     amount = 1.0
-                path = conducting_path(meter[0], beat_of.get((s, id(item)), 1), amount)
+                path = conducting_path(manager.lexicon, meter[0], beat_of.get((s, id(item)), 1), amount)
                 info.note = (info.note + f" beat {beat_of.get((s, id(item)), 1)} of {meter[0]}").strip()
             else:
-                path = GESTURE_FORMS.get(lexeme, GESTURE_FORMS["DEFAULT"])
+                path = stroke_path(manager.lexicon, lexeme)
             scale = amplitude(record, keys)
             if scale != 1.0:
                 path = path.scaled(scale)

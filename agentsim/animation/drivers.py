@@ -14,7 +14,6 @@ manager (:meth:`Driver.attach`).
 
 from __future__ import annotations
 
-import itertools
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -43,8 +42,6 @@ def smoothstep(s):
     s = np.clip(s, 0.0, 1.0)
     return s * s * (3.0 - 2.0 * s)
 
-
-_uids = itertools.count()
 
 
 class Driver:
@@ -75,7 +72,9 @@ class Driver:
         self._priority = priority
         self.dof_names: list[str] = list(dofs)
         self.time_source = time_source or CLOCK
-        self.uid = next(_uids)
+        #: its number in its manager, in the order drivers joined it (-1 until it joins one): the pose's
+        #: writers are these numbers, and ties between drivers are broken by them
+        self.uid = -1
         self.body: Body | None = None
         #: the DriverManager and its Arbitrator, known once the driver joins a manager (:meth:`attach`)
         self.manager = None

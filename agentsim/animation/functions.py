@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from agentsim.animation.arms import (
-    GESTURE_FORMS, KEYFRAMES, GestureDriver, HandShapeDriver, KeyframeDriver, PointingDriver, conducting_path,
+    KEYFRAMES, GestureDriver, HandShapeDriver, KeyframeDriver, PointingDriver, conducting_path, stroke_path,
 )
 from agentsim.animation.background import Breathing, EyeBlinkReflex
 from agentsim.animation.drivers import Driver
@@ -96,10 +96,9 @@ class MotionFunctions(MotorFunctionExporter):
             keys = KeyTimes.scaled(GESTURE_SYNCS, BEAT.preferred(), at, "stroke", float(a["approach"]),
                                    float(a["retract"]) + 0.2)
             if name == "beat":
-                path = GESTURE_FORMS.get(str(a["lexeme"]).upper(), GESTURE_FORMS["DEFAULT"])
-                path = path.scaled(float(a["amount"]))
+                path = stroke_path(manager.lexicon, str(a["lexeme"])).scaled(float(a["amount"]))
             else:
-                path = conducting_path(int(a["meter"]), int(a["beat"]), float(a["amount"]))
+                path = conducting_path(manager.lexicon, int(a["meter"]), int(a["beat"]), float(a["amount"]))
             return manager.add(GestureDriver(label, keys, side, path))
         if name == "point":
             target = scene.point(str(a["target"])) if a["target"] else np.array([a["x"], a["y"], a["z"]], float)

@@ -10,27 +10,17 @@ The viseme table
 A :class:`MouthShape` describes a viseme on the two axes a viseme needs (open/closed and wide/narrow,
 the way animators read visemes) plus the lips' closure: how far the jaw opens, how far the corners
 spread (positive) or round and protrude (negative), how far the upper lip comes down and the lower lip up.
-The values follow the standard articulation of each viseme class:
-
-* open vowels open the jaw most (Aa 16 degrees, as the ``OPEN_MOUTH`` face lexeme; Ah, Ao a little less),
-  mid vowels half (Eh, Oh 9), close vowels little (Ih, Uh 5; Iy, Uw 3);
-* front vowels spread the lips, the more the closer (Eh 6, Ih 8, Iy/EE 12);
-* back rounded vowels and W round them, the more the closer (Ao -8, Oh -14, Uw/OO -18, W -20), as do
-  Er, R (-6, -10) and the postalveolars ShCh (-10, lips flared: the upper lip lifts a little);
-* bilabials BMP (PBM) close the lips on an almost closed jaw: upper lip down, lower lip up;
-* labiodentals F (FV) raise the lower lip to the upper teeth, the upper lip lifting clear of them;
-* the tongue consonants (D, Th, Z, L, K, N) leave the lips near rest on a slightly open jaw (Z, the
-  sibilants, with the teeth close and the lips spread);
-* ``_`` is silence: the rest pose.
+The shapes are the lexicon's (``data/visemes.toml``, whose comments give the articulation of each viseme
+class; :class:`~agentsim.animation.lexicon.Lexicon`), so a user's lexicon file may retune or add them.
 
 An unknown name gets a neutral half-open mouth (jaw 8 degrees) and a note. Names are matched without
 regard to case; a few aliases (PBM, FV, EE, OO, KG, S, Sh, Ch, J) name the same shapes.
 
 Face channels (``curves``) use the same table: a channel named like a viseme moves the mouth to that
-shape scaled by its value, and the FaceFX channel names map onto it (``open``: the jaw alone, ``wide``:
-the spread alone, ``W``, ``ShCh``, ``PBM``, ``FV``: those visemes). Channels add up, as blend shapes do.
-The tongue channels (``tBack``, ``tRoof``, ``tTeeth``) have nothing to move in this skeleton and are
-noted, like unknown channels.
+shape scaled by its value, and the FaceFX channel names map onto it (the lexicon's face channels ``open``:
+the jaw alone, ``wide``: the spread alone; ``W``, ``ShCh``, ``PBM``, ``FV``: those visemes). Channels add
+up, as blend shapes do. The tongue channels (``tBack``, ``tRoof``, ``tTeeth``) have nothing to move in this
+skeleton and are noted, like unknown channels.
 
 Timing and arbitration
 ----------------------
@@ -58,6 +48,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from agentsim.animation.drivers import EPSILON, PRIORITY
+from agentsim.animation.lexicon import Lexicon
 from agentsim.animation.motion import KeyTimes, MotionDriver, blend_in
 from agentsim.animation.units import curve_keys, curves_duration
 
@@ -88,51 +79,26 @@ class MouthShape:
                 "lower_lip.pitch": 0.0 - self.lower * scale}
 
 
-#: Viseme name (lower case) -> mouth shape; see the module's description for the rationale.
-VISEMES: dict[str, MouthShape] = {
-    "_": MouthShape(),
-    "aa": MouthShape(jaw=16, spread=2),
-    "ah": MouthShape(jaw=12),
-    "ao": MouthShape(jaw=13, spread=-8),
-    "eh": MouthShape(jaw=9, spread=6),
-    "er": MouthShape(jaw=6, spread=-6),
-    "ih": MouthShape(jaw=5, spread=8),
-    "iy": MouthShape(jaw=3, spread=12),
-    "ee": MouthShape(jaw=3, spread=12),
-    "uh": MouthShape(jaw=5, spread=-10),
-    "uw": MouthShape(jaw=3, spread=-18),
-    "oo": MouthShape(jaw=3, spread=-18),
-    "oh": MouthShape(jaw=9, spread=-14),
-    "w": MouthShape(jaw=2, spread=-20),
-    "bmp": MouthShape(jaw=1, upper=8, lower=12),
-    "pbm": MouthShape(jaw=1, upper=8, lower=12),
-    "f": MouthShape(jaw=1, spread=2, upper=-3, lower=12),
-    "fv": MouthShape(jaw=1, spread=2, upper=-3, lower=12),
-    "d": MouthShape(jaw=4, spread=4),
-    "th": MouthShape(jaw=5, spread=3),
-    "z": MouthShape(jaw=2, spread=8),
-    "s": MouthShape(jaw=2, spread=8),
-    "r": MouthShape(jaw=4, spread=-10),
-    "l": MouthShape(jaw=7, spread=2),
-    "k": MouthShape(jaw=6, spread=2),
-    "kg": MouthShape(jaw=6, spread=2),
-    "n": MouthShape(jaw=4, spread=2),
-    "shch": MouthShape(jaw=3, spread=-10, upper=-3),
-    "sh": MouthShape(jaw=3, spread=-10, upper=-3),
-    "ch": MouthShape(jaw=3, spread=-10, upper=-3),
-    "j": MouthShape(jaw=3, spread=-10, upper=-3),
-}
 #: A viseme the table does not know: a neutral half-open mouth.
 NEUTRAL = MouthShape(jaw=8)
-#: Face channel name (lower case) -> mouth shape at weight 1: the visemes, and the FaceFX components.
-CHANNELS: dict[str, MouthShape] = {**VISEMES, "open": MouthShape(jaw=16), "wide": MouthShape(spread=12)}
 #: Channels that move the tongue, which this skeleton does not have.
 TONGUE_CHANNELS = frozenset({"tback", "troof", "tteeth"})
 
 
-def viseme_shape(name: str) -> MouthShape | None:
-    """The mouth shape of a viseme (any case), or None if the table does not know it."""
-    return VISEMES.get(name.strip().lower())
+def viseme_shape(name: str, lexicon: Lexicon) -> MouthShape | None:
+    """The mouth shape of a viseme (any case) in ``lexicon``, or None if it does not know it."""
+    entry = lexicon.visemes.get(name.strip().lower())
+    return None if entry is None else MouthShape(**entry)
+
+
+def channel_shape(name: str, lexicon: Lexicon) -> MouthShape | None:
+    """The mouth shape at weight 1 of a face channel (any case) in ``lexicon``: one of its face channels, or
+    else a viseme; None if it knows neither."""
+    low = name.strip().lower()
+    entry = lexicon.channels.get(low)
+    if entry is None:
+        entry = lexicon.visemes.get(low)
+    return None if entry is None else MouthShape(**entry)
 
 
 def articulation_of(attrs: Mapping[str, str]) -> tuple[float, str]:
@@ -150,12 +116,12 @@ def articulation_of(attrs: Mapping[str, str]) -> tuple[float, str]:
     return value, ""
 
 
-def lips_values(attrs: Mapping[str, str]) -> tuple[dict[str, float], str]:
-    """The DOF values a lips behaviour holds (its viseme's shape times its articulation), and a note
-    (an unknown viseme, a changed articulation; empty if none)."""
+def lips_values(attrs: Mapping[str, str], lexicon: Lexicon) -> tuple[dict[str, float], str]:
+    """The DOF values a lips behaviour holds (its viseme's shape in ``lexicon`` times its articulation), and
+    a note (an unknown viseme, a changed articulation; empty if none)."""
     notes = []
     name = attrs.get("viseme", "")
-    shape = viseme_shape(name)
+    shape = viseme_shape(name, lexicon)
     if shape is None:
         shape = NEUTRAL
         notes.append(f"unknown viseme {name!r}: a neutral half-open mouth")
@@ -176,9 +142,9 @@ class Channel:
     values: dict[str, float]
 
 
-def curve_channels(behaviour) -> tuple[list[Channel], list[str]]:
-    """The channels of a curves behaviour that move the mouth, and notes on those that do not (the
-    tongue, names without a mapping, channels without keys)."""
+def curve_channels(behaviour, lexicon: Lexicon) -> tuple[list[Channel], list[str]]:
+    """The channels of a curves behaviour that move the mouth (as ``lexicon`` has their shapes), and notes on
+    those that do not (the tongue, names without a mapping, channels without keys)."""
     channels: list[Channel] = []
     notes: list[str] = []
     for name, keys in curve_keys(behaviour).items():
@@ -187,10 +153,10 @@ def curve_channels(behaviour) -> tuple[list[Channel], list[str]]:
             notes.append(f"{name}: no keys")
         elif low in TONGUE_CHANNELS:
             notes.append(f"{name}: no tongue in this skeleton")
-        elif low not in CHANNELS:
+        elif channel_shape(low, lexicon) is None:
             notes.append(f"{name}: no mapping")
         else:
-            values = {d: v for d, v in CHANNELS[low].dofs().items() if v != 0.0}
+            values = {d: v for d, v in channel_shape(low, lexicon).dofs().items() if v != 0.0}
             if not values:  # the silence channel: the rest pose, which the mouth returns to anyway
                 notes.append(f"{name}: the rest pose, nothing to move")
                 continue
@@ -292,10 +258,10 @@ class CurvesDriver(MotionDriver):
         self.write_held(out)
 
 
-def curves_driver(name: str, keys: KeyTimes, behaviour, **kw) -> tuple[CurvesDriver | None, str]:
-    """The driver of a curves behaviour (None if none of its channels moves the mouth) and a note on the
-    channels left out."""
-    channels, notes = curve_channels(behaviour)
+def curves_driver(name: str, keys: KeyTimes, behaviour, lexicon: Lexicon, **kw) -> tuple[CurvesDriver | None, str]:
+    """The driver of a curves behaviour (None if none of its channels moves the mouth, as ``lexicon`` has
+    their shapes) and a note on the channels left out."""
+    channels, notes = curve_channels(behaviour, lexicon)
     note = ("channels without DOFs: " + ", ".join(notes)) if notes else ""
     if not channels:
         return None, (note + "; " if note else "") + "no channel moves this body"
@@ -304,7 +270,7 @@ def curves_driver(name: str, keys: KeyTimes, behaviour, **kw) -> tuple[CurvesDri
 
 # ------------------------------------------------------------------------------------ phonemes to visemes
 #: The phoneme-to-viseme table: an IPA phoneme (as espeak-ng names them; length marks and stress left out)
-#: -> the viseme of :data:`VISEMES` that shows it. Consonants by place of articulation (bilabials PBM,
+#: -> the viseme of the lexicon that shows it. Consonants by place of articulation (bilabials PBM,
 #: labiodentals FV, dentals Th, alveolar stops and nasals D/N, sibilants Z, postalveolars ShCh, velars K,
 #: the approximants R, L and W), vowels by openness and rounding (open Aa/Ah/Ao, mid Eh/Oh/Er, close
 #: Ih/Iy/Uh/Uw). A diphthong shows the viseme of its first element; ``h`` and the glottal stop take the
@@ -413,14 +379,15 @@ def speech_segments(phonemes: Sequence[tuple[str, float, float]]) -> list[tuple[
 
 
 class VisemeTrack:
-    """The mouth of one speech while it is spoken: its visemes' middles, dominances and shapes, built once
-    from its phonemes (:func:`speech_segments`), and evaluated at any times with :meth:`at`."""
+    """The mouth of one speech while it is spoken: its visemes' middles, dominances and shapes (those of
+    ``lexicon``), built once from its phonemes (:func:`speech_segments`), and evaluated at any times with
+    :meth:`at`."""
 
-    def __init__(self, phonemes: Sequence[tuple[str, float, float]]):
+    def __init__(self, phonemes: Sequence[tuple[str, float, float]], lexicon: Lexicon):
         segments = speech_segments(phonemes)
         self.mids = np.array([0.5 * (a + b) for _, a, b in segments])
         self.alphas = np.array([DOMINANCE.get(name.lower(), DOMINANCE_DEFAULT) for name, _, _ in segments])
-        shapes = {name: (viseme_shape(name) or NEUTRAL).dofs() for name in {name for name, _, _ in segments}}
+        shapes = {name: (viseme_shape(name, lexicon) or NEUTRAL).dofs() for name in {name for name, _, _ in segments}}
         self.shapes = np.array([[shapes[name][d] for d in MOUTH_DOFS] for name, _, _ in segments])
         self.ordered = np.sort(self.mids)
 
@@ -459,7 +426,8 @@ def _running_sum(terms: np.ndarray) -> np.ndarray:
     return out
 
 
-def viseme_track(phonemes: Sequence[tuple[str, float, float]], u) -> dict[str, np.ndarray]:
+def viseme_track(phonemes: Sequence[tuple[str, float, float]], u, lexicon: Lexicon | None = None
+                 ) -> dict[str, np.ndarray]:
     """The mouth DOF values (degrees) at times ``u`` (seconds on the speech's timeline) while the phonemes
     are spoken, with co-articulation: each viseme's shape is weighted by its dominance
     ``alpha * exp(-|u - middle| / COARTICULATION)`` and the shapes are averaged by weight, so each viseme
@@ -471,18 +439,19 @@ def viseme_track(phonemes: Sequence[tuple[str, float, float]], u) -> dict[str, n
     :data:`TRACK_CHUNK` at a time: the cost and the memory grow with the speech's length, not with its length
     squared (a 70-minute speech is some 250,000 frames and 50,000 phonemes), and a time's value is the same
     whichever other times it is computed with. A speech evaluated at many times builds its
-    :class:`VisemeTrack` once."""
-    return VisemeTrack(phonemes).at(u)
+    :class:`VisemeTrack` once. The shapes are those of ``lexicon`` (default: the built-in one)."""
+    return VisemeTrack(phonemes, lexicon if lexicon is not None else Lexicon.builtin()).at(u)
 
 
 class SpeechMouthDriver(MotionDriver):
     """The mouth while speech plays (start to end): the visemes of its phonemes (:func:`viseme_track`),
     placed on the driver's time by linear time warping between the speech's sync points (``preferred``:
     their times on the speech's own timeline), so the mouth stays with the words wherever its sync points
-    went. It blends from the pose it finds over :data:`SPEECH_BLEND` s and back to it by the end."""
+    went. It blends from the pose it finds over :data:`SPEECH_BLEND` s and back to it by the end. The
+    visemes' shapes are those of ``lexicon``."""
 
     def __init__(self, name: str, keys: KeyTimes, phonemes: Sequence[tuple[str, float, float]],
-                 preferred: Sequence[float], **kw):
+                 preferred: Sequence[float], lexicon: Lexicon, **kw):
         super().__init__(name, keys, PRIORITY["speech"], list(MOUTH_DOFS), **kw)
         self.release_key = keys.sync_ids[-1]
         self.phonemes = [(str(s), float(a), float(b)) for s, a, b in phonemes]
@@ -490,7 +459,7 @@ class SpeechMouthDriver(MotionDriver):
         if len(pref) != len(keys.times):
             pref = np.asarray(keys.times, dtype=float) - keys.times[0]
         self.preferred = np.maximum.accumulate(pref)
-        self.track = VisemeTrack(self.phonemes)
+        self.track = VisemeTrack(self.phonemes, lexicon)
 
     def release_time(self) -> float:
         return self.keys.end

@@ -19,6 +19,7 @@ from agentsim.animation.background import Breathing, EyeBlinkReflex, EyeFixation
 from agentsim.animation.body import Body
 from agentsim.animation.drivers import EPSILON, Driver
 from agentsim.animation.functions import BackgroundFunctions, MotionFunctions, MotorFunctionExporter
+from agentsim.animation.lexicon import Lexicon
 from agentsim.animation.scene import Scene
 
 
@@ -29,11 +30,15 @@ class DriverManager:
     ``background=True`` adds the background drivers (:attr:`idle`, :attr:`breathing`, :attr:`eyes`,
     :attr:`blink`), each with its own Generator spawned from ``seed``. Motor functions are registered by
     exporters; the first exporter to register a name keeps it. :meth:`evaluate` runs the event sweep.
+    ``lexicon``: what the lexemes of its behaviours and motor functions play (default: the built-in
+    :class:`~agentsim.animation.lexicon.Lexicon`).
     """
 
     def __init__(self, body: Body | None = None, seed: int | np.random.SeedSequence = 0,
-                 background: bool = True, scene: Mapping[str, Sequence[float]] | None = None):
+                 background: bool = True, scene: Mapping[str, Sequence[float]] | None = None,
+                 lexicon: Lexicon | None = None):
         self.body = body or Body()
+        self.lexicon = lexicon if lexicon is not None else Lexicon.builtin()
         self.arbitrator = Arbitrator(self.body)
         self.scene = Scene(scene)
         self.drivers: list[Driver] = []
@@ -57,7 +62,9 @@ class DriverManager:
 
     # ------------------------------------------------------------------ drivers and motor functions
     def add(self, driver: Driver) -> Driver:
-        """Register a driver: it will be ticked while it holds DOFs; its setup schedules its requests."""
+        """Register a driver: it will be ticked while it holds DOFs; its setup schedules its requests. It is
+        numbered (:attr:`~agentsim.animation.drivers.Driver.uid`) in the order drivers join."""
+        driver.uid = len(self.drivers)
         self.drivers.append(driver)
         driver.attach(self)
         return driver

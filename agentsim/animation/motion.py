@@ -57,9 +57,10 @@ class KeyTimes:
         self._index = {s: i for i, s in enumerate(self.sync_ids)}
 
     @classmethod
-    def from_record(cls, timed, fill: float | None = None) -> "KeyTimes":
+    def from_record(cls, timed, fill: float | None = None, lexicon=None) -> "KeyTimes":
         """Keys of what a behaviour did (a :class:`~agentsim.core.recording.BehaviourRecord`: its actual
-        times once passed); unknown times become ``fill``."""
+        times once passed); unknown times become ``fill``. ``lexicon``: the one it was planned with (its
+        forms are timed as forms; default: the built-in one)."""
         times = list(timed.times)
         known = [t for t in times if t is not None]
         if not known:
@@ -73,7 +74,7 @@ class KeyTimes:
             else:
                 following = times[i]
         try:
-            pref = motion_unit(timed.behaviour).preferred(repetition(timed.behaviour))
+            pref = motion_unit(timed.behaviour, lexicon).preferred(repetition(timed.behaviour))
         except KeyError:
             pref = [t - times[0] for t in times]
         if len(pref) != len(times):

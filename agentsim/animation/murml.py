@@ -366,17 +366,16 @@ def posture_angles(values) -> tuple[float, float, float]:
     return float(r), float(p), float(y)
 
 
-def keyframe_channels(form: dict, body) -> tuple[dict[str, list[tuple[float, float]]], list[str]]:
+def keyframe_channels(form: dict, body, lexicon) -> tuple[dict[str, list[tuple[float, float]]], list[str]]:
     """DOF name -> [(ftime, degrees)] of a key frame animation, and the names it has that this body has
     not. Three values of a joint are its rotation as AsapRealizer reads them: roll about Z, pitch about X,
     yaw about Y (:func:`posture_angles`); one value is a DOF (``l_eyebrow.pitch``), a viseme or face channel of
-    :mod:`agentsim.animation.lips` or a morph target of the symbol table's ``morph_targets`` (weight 0..100:
-    that face lexeme's values times weight / 100)."""
-    from agentsim.animation.lips import CHANNELS
+    ``lexicon`` (:func:`agentsim.animation.lips.channel_shape`) or a morph target of the symbol table's
+    ``morph_targets`` (weight 0..100: that face lexeme's values in ``lexicon`` times weight / 100)."""
+    from agentsim.animation.lips import channel_shape
     from agentsim.animation.murml_form import symbols
-    from agentsim.animation.expressions import FACE_LEXEMES
 
-    morphs = {name: FACE_LEXEMES[lexeme] for name, lexeme in symbols().get("morph_targets", {}).items()}
+    morphs = {name: lexicon.faces[lexeme] for name, lexeme in symbols().get("morph_targets", {}).items()}
 
     channels: dict[str, list[tuple[float, float]]] = {}
     unknown: list[str] = []
@@ -388,8 +387,8 @@ def keyframe_channels(form: dict, body) -> tuple[dict[str, list[tuple[float, flo
                     channels.setdefault(f"{joint}.{axis}", []).append((frame["ftime"], x))
             elif len(v) == 1 and joint in names:
                 channels.setdefault(joint, []).append((frame["ftime"], float(v[0])))
-            elif len(v) == 1 and joint.lower() in CHANNELS:
-                for dof, x in CHANNELS[joint.lower()].dofs(v[0] / 100.0).items():
+            elif len(v) == 1 and channel_shape(joint, lexicon) is not None:
+                for dof, x in channel_shape(joint, lexicon).dofs(v[0] / 100.0).items():
                     channels.setdefault(dof, []).append((frame["ftime"], x))
             elif len(v) == 1 and joint in morphs:
                 for dof, x in morphs[joint].items():

@@ -19,6 +19,7 @@ import numpy as np
 
 from agentsim.animation.behaviours import build_drivers
 from agentsim.animation.body import FK_ROWS, Body
+from agentsim.animation.lexicon import Lexicon
 from agentsim.animation.manager import DriverManager
 from agentsim.animation.time_source import TimeSource
 from agentsim.written import written
@@ -181,6 +182,14 @@ def records_of(source) -> list:
     return list(source)
 
 
+def lexicon_of(source) -> Lexicon:
+    """What the lexemes of a run play: the lexicon of a Recording (or of a realizer), else the built-in one."""
+    if hasattr(source, "recording") and not hasattr(source, "lexicon"):
+        source = source.recording()
+    lexicon = getattr(source, "lexicon", None)
+    return lexicon if lexicon is not None else Lexicon.builtin()
+
+
 def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | None = None, start: float = 0.0,
                    scene: dict | None = None, animator_time: TimeSource | None = None,
                    manager: DriverManager | None = None, body: Body | None = None,
@@ -203,7 +212,8 @@ def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | N
     animator_time : TimeSource, optional
         Time source for the drivers of speech and of behaviours tied to speech (default: the clock).
     manager : DriverManager, optional
-        A manager to use (for instance with motor functions already executed); by default a new one.
+        A manager to use (for instance with motor functions already executed), with its own lexicon; by
+        default a new one with the lexicon of ``source`` (a Recording's, a realizer's; else the built-in one).
     body : Body, optional
         The skeleton of a new manager (default: a new :class:`~agentsim.animation.body.Body`).
     times : array of float, optional
@@ -218,9 +228,9 @@ def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | N
     """
     if fps <= 0:
         raise ValueError("fps must be positive")
-    records = records_of(source)
     if manager is None:
-        manager = DriverManager(body=body, seed=seed, scene=scene)
+        manager = DriverManager(body=body, seed=seed, scene=scene, lexicon=lexicon_of(source))
+    records = records_of(source)
     infos = build_drivers(manager, records, animator_time)
     if times is not None:
         times = np.asarray(times, dtype=float)

@@ -9,14 +9,13 @@ from typing import Mapping
 import numpy as np
 
 from agentsim.animation.drivers import PRIORITY
-# the tables of faces and postures are plain data in agentsim.animation.expressions, which the BML reader
-# reads without numpy
-from agentsim.animation.expressions import FACE_LEXEMES, FACS_UNITS
+from agentsim.animation.lexicon import Lexicon
 from agentsim.animation.motion import EASE, STOP_HANDOVER, KeyTimes, MotionDriver, blend_in, frac
 
 
-def face_values(behaviour_type: str, attrs: Mapping[str, str]) -> dict[str, float]:
-    """DOF values of a face behaviour at full attack (scaled by ``amount``, one side if ``side`` says so)."""
+def face_values(behaviour_type: str, attrs: Mapping[str, str], lexicon: Lexicon) -> dict[str, float]:
+    """DOF values of a face behaviour at full attack, as ``lexicon`` has its lexeme or FACS unit (scaled by
+    ``amount``, one side if ``side`` says so)."""
     try:
         amount = float(attrs.get("amount", "1"))
     except ValueError:
@@ -27,12 +26,12 @@ def face_values(behaviour_type: str, attrs: Mapping[str, str]) -> dict[str, floa
             au = int(float(attrs.get("au", "0")))
         except ValueError:
             au = 0
-        values = dict(FACS_UNITS.get(au, {}))
+        values = dict(lexicon.facs.get(au, {}))
     else:
-        values = dict(FACE_LEXEMES.get(attrs.get("lexeme", "").upper(), {}))
+        values = dict(lexicon.faces.get(attrs.get("lexeme", "").upper(), {}))
     side = attrs.get("side", "BOTH").upper()
-    if behaviour_type == "faceFacs" and au == 46 and side == "RIGHT":
-        values = {"r_eyelid.pitch": values["l_eyelid.pitch"]}
+    if behaviour_type == "faceFacs" and au == 46 and side == "RIGHT":  # the wink: its left eye's on the right
+        values = {f"r_{k[2:]}" if k.startswith("l_") else k: v for k, v in values.items()}
     if side in ("LEFT", "RIGHT"):
         keep = "l_" if side == "LEFT" else "r_"
         values = {k: v for k, v in values.items() if not (k[:2] in ("l_", "r_") and not k.startswith(keep))}

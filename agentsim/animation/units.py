@@ -12,6 +12,7 @@ import json
 import math
 from dataclasses import dataclass
 
+from agentsim.animation.lexicon import Lexicon
 from agentsim.core.block import Behaviour
 
 
@@ -103,15 +104,14 @@ def _murml_unit(kind: str, description: str) -> MotionUnit:
     return MURML_DYNAMIC if dynamic(form.get("constraints", ())) else MURML_STATIC
 
 
-def motion_unit(behaviour: Behaviour) -> MotionUnit:
-    """The motion unit a behaviour is bound to (the gesture binding)."""
+def motion_unit(behaviour: Behaviour, lexicon: Lexicon | None = None) -> MotionUnit:
+    """The motion unit a behaviour is bound to (the gesture binding): a gesture lexeme that is a MURML form in
+    ``lexicon`` (default: the built-in one) is timed as that form."""
     if behaviour.type in ("murmlgesture", "murmlface"):
         return _murml_unit(behaviour.type, behaviour.params.get("murml", ""))
     lexeme = behaviour.attributes.get("lexeme", "").upper()
     if behaviour.type == "gesture":
-        from agentsim.animation.lexicon import murml_form
-
-        form = murml_form(lexeme) if lexeme else None
+        form = (lexicon if lexicon is not None else Lexicon.builtin()).form(lexeme) if lexeme else None
         if form is not None:  # a lexeme of the lexicon that is a MURML form
             return _murml_unit("murmlgesture", form)
         return BEAT if lexeme in ("", "BEAT") else GESTURE
@@ -177,16 +177,16 @@ PHASE_NAMES = {
 }
 
 
-def motion_state(timed, t: float) -> tuple[str, float] | None:
+def motion_state(timed, t: float, lexicon: Lexicon | None = None) -> tuple[str, float] | None:
     """Where a timed motion unit is at global time ``t``: its phase and canonical time alpha (0..1).
 
     Alpha is found by linear time warping between the keys around ``t`` (Elckerlyc's f^-1(t)); None
-    before the start or after the end.
+    before the start or after the end. ``lexicon``: as for :func:`motion_unit`.
     """
     times = timed.times()
     if t < times[0] or t > times[-1]:
         return None
-    unit = motion_unit(timed.behaviour)
+    unit = motion_unit(timed.behaviour, lexicon)
     alphas = unit.canonical(repetition(timed.behaviour))
     syncs = timed.sync_ids
     for i in range(len(times) - 1):

@@ -29,6 +29,7 @@ from agentsim.bml.spelling import REF_SYNC, SYNC_SPELLINGS, canonical_sync, ref_
 from agentsim.core.xmltree import Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
+from agentsim.animation.lexicon import Lexicon
 from agentsim.core.block import BEHAVIOUR_TYPES
 
 #: The prefix given to BMLA where older BMLT names are read as BMLA's.
@@ -47,11 +48,13 @@ EXTENSION_LOCALS = set().union(*EXTENSION_BEHAVIOURS.values())
 class Adapter:
     """Rewrites one block's element tree into BML 1.0 as the strict reader reads it, noting each change.
 
-    ``name_block`` gives an id to a block without one.
+    ``name_block`` gives an id to a block without one; foreign names become the lexemes of ``lexicon``
+    (default: the built-in one).
     """
 
-    def __init__(self, envelope: Envelope, name_block, drafts: bool = True):
+    def __init__(self, envelope: Envelope, name_block, drafts: bool = True, lexicon: Lexicon | None = None):
         self.envelope = envelope
+        self.lexicon = lexicon if lexicon is not None else Lexicon.builtin()
         self.drafts = drafts  # False: no namespace declared in the document is a draft's
         self.node = envelope.node
         self.notes = envelope.notes
@@ -122,9 +125,9 @@ class Adapter:
     def note_lexemes(self, behaviours: list[Node]) -> None:
         """Say which lexemes of the foreign vocabulary have no motion of their own here, and what plays
         instead."""
-        found = lexemes.fallbacks((b.tag, b.attrs.get("id", ""), b.attrs) for b in behaviours)
+        found = lexemes.fallbacks(((b.tag, b.attrs.get("id", ""), b.attrs) for b in behaviours), self.lexicon)
         self.notes.extend(lexemes.describe(found))
-        self.notes.touch(*(b for b in behaviours if lexemes.fallback(b.tag, b.attrs) is not None))
+        self.notes.touch(*(b for b in behaviours if lexemes.fallback(b.tag, b.attrs, self.lexicon) is not None))
 
     def read_namespaces(self, node: Node) -> None:
         """The draft namespace is read as BML 1.0 (in every element's declarations)."""
@@ -236,9 +239,7 @@ class Adapter:
             return "head"
         if local == "gesture" and instance and not attrs.get("lexeme"):
             attrs.pop("type")
-            from agentsim.animation.arms import GESTURE_FORMS
-
-            attrs["lexeme"] = family if family in GESTURE_FORMS else instance.strip().upper()
+            attrs["lexeme"] = family if family in self.lexicon.strokes else instance.strip().upper()
             self.notes.add("Greta's lexicon key type=\"class=instance\" read as the lexeme")
         if local == "gesture" and "hand" in attrs and "mode" not in attrs:
             hand = attrs.pop("hand").strip().upper()
@@ -277,11 +278,9 @@ class Adapter:
 
     def map_animation(self, node: Node) -> str:
         """SmartBody/NVBG ``<animation name>``: a gesture of the closest lexeme, or a beat, timing kept."""
-        from agentsim.animation.arms import GESTURE_FORMS
-
         name = node.attrs.pop("name", "")
         low = name.lower()
-        lexeme = next((lex for word, lex in CLIP_WORDS if word in low and lex in GESTURE_FORMS), "BEAT")
+        lexeme = next((lex for word, lex in CLIP_WORDS if word in low and lex in self.lexicon.strokes), "BEAT")
         node.attrs.setdefault("lexeme", lexeme)
         self.clips[name] = lexeme
         for key in ("speed", "ref"):
@@ -291,26 +290,23 @@ class Adapter:
     def map_body(self, node: Node) -> str | None:
         """SmartBody's ``<body posture>``: a posture shift (a lean if the clip's name says so, else a weight
         shift)."""
-        from agentsim.animation.expressions import POSTURES
-
         name = node.attrs.pop("posture", None)
         if name is None:
             return None
         low = name.lower().replace("_", "")
-        lexeme = next((p for p in POSTURES if p.lower().replace("_", "") in low), "WEIGHT_SHIFT")
+        lexeme = next((p for p in self.lexicon.postures if p.lower().replace("_", "") in low), "WEIGHT_SHIFT")
         node.attrs.setdefault("lexeme", lexeme)
         self.notes.add(f"<body posture={name!r}> played as a posture shift ({lexeme})")
         return "postureShift"
 
     def map_torso(self, node: Node) -> str:
         """Greta's ``<torso>``: a posture shift."""
-        from agentsim.animation.expressions import POSTURES
-
         self.notes.add("Greta's <torso> played as a posture shift")
         lexeme = node.attrs.pop("lexeme", "") or node.attrs.pop("type", "")
         reference = next((c.text().strip() for c in node.elements() if c.local == "description"), "")
         low = (lexeme + " " + reference).lower().replace("_", "").replace("=", "")
-        node.attrs["lexeme"] = next((p for p in POSTURES if p.lower().replace("_", "") in low), "WEIGHT_SHIFT")
+        node.attrs["lexeme"] = next((p for p in self.lexicon.postures if p.lower().replace("_", "") in low),
+                                    "WEIGHT_SHIFT")
         return "postureShift"
 
     def map_saccade(self, node: Node) -> str | None:
@@ -635,7 +631,7 @@ class Adapter:
         put it), and behaviours that had no time of their own start at that time."""
         numbers = [(b, key) for b in behaviours for key in self.sync_keys(b) if NUMBER.match(b.attrs[key])]
         timed = {id(b) for b, _ in numbers}  # (the behaviours with a number: looked up, not searched for)
-        earliest = min((implied_start(b) for b in behaviours if id(b) in timed), default=0.0)
+        earliest = min((implied_start(b, self.lexicon) for b in behaviours if id(b) in timed), default=0.0)
         if not earliest < -1e-9 or not math.isfinite(earliest):
             return
         shift = -earliest

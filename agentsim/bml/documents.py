@@ -11,6 +11,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Iterable
 
+from agentsim.animation.lexicon import Lexicon
 from agentsim.animation.units import motion_unit
 from agentsim.bml.dialect_tables import DRAFT_NAMESPACES, UNMAPPED_HINTS
 from agentsim.bml.vocabulary import BML_NAMESPACE
@@ -93,14 +94,15 @@ def speech_marks(node: Node) -> set[str]:
     return names
 
 
-def implied_start(node: Node) -> float:
-    """Where a behaviour would start, from its numeric sync times and its preferred timing."""
+def implied_start(node: Node, lexicon: Lexicon | None = None) -> float:
+    """Where a behaviour would start, from its numeric sync times and its preferred timing (as the animation
+    planner with ``lexicon`` times it)."""
     kind = BEHAVIOUR_TYPES[node.local]
     numbers = {k: float(v) for k, v in node.attrs.items() if k in kind.syncs and NUMBER.match(v)}
     if "start" in numbers or not numbers:
         return numbers.get("start", 0.0)
     try:
-        preferred = motion_unit(Behaviour("", kind.name, list(kind.syncs), dict(node.attrs))).preferred()
+        preferred = motion_unit(Behaviour("", kind.name, list(kind.syncs), dict(node.attrs)), lexicon).preferred()
     except KeyError:
         return min(numbers.values())
     # as the planners do: the preferred timing stretched linearly between the known keys

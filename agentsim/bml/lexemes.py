@@ -9,6 +9,9 @@ from __future__ import annotations
 
 from typing import Iterable, Mapping
 
+# the lexicon's tables are read without numpy (the modules that move the body to them import it)
+from agentsim.animation.lexicon import Lexicon
+
 #: The lexemes of ``<head>`` (BML 1.0's).
 HEAD_LEXEMES = ("NOD", "SHAKE", "TILT")
 #: Gestures that are signals to the world rather than forms of their own: the conductor's ensemble plays
@@ -16,9 +19,9 @@ HEAD_LEXEMES = ("NOD", "SHAKE", "TILT")
 SIGNALS = ("LOUDER", "STOP")
 
 
-def fallback(tag: str, attrs: Mapping[str, str]) -> tuple[str, str] | None:
-    """(the lexeme as written, what plays instead) if a behaviour's lexeme has no motion of its own here;
-    None if it has one, names none, or its type has no lexemes."""
+def fallback(tag: str, attrs: Mapping[str, str], lexicon: Lexicon | None = None) -> tuple[str, str] | None:
+    """(the lexeme as written, what plays instead) if a behaviour's lexeme has no motion of its own in
+    ``lexicon`` (default: the built-in one); None if it has one, names none, or its type has no lexemes."""
     lexeme = str(attrs.get("lexeme", "")).strip()
     if tag == "head":
         return None if not lexeme or lexeme.upper() in HEAD_LEXEMES else (lexeme, "a nod")
@@ -26,30 +29,29 @@ def fallback(tag: str, attrs: Mapping[str, str]) -> tuple[str, str] | None:
         return None
     if not lexeme and tag != "faceFacs":
         return None
-    # the body's tables, read without numpy (the modules that move the body to them import it)
-    from agentsim.animation.expressions import FACE_LEXEMES, FACS_UNITS, POSTURES
-    from agentsim.animation.lexicon import conducting_meter, murml_form, stroke_names
-
+    if lexicon is None:
+        lexicon = Lexicon.builtin()
     if tag == "faceFacs":
         au = str(attrs.get("au", "")).strip()
-        known = au.isdigit() and int(au) in FACS_UNITS
+        known = au.isdigit() and int(au) in lexicon.facs
         return None if known else (f"AU{au}", "no motion")
     if tag in ("face", "faceLexeme", "faceShift"):
-        return None if lexeme.upper() in FACE_LEXEMES else (lexeme, "no motion")
+        return None if lexeme.upper() in lexicon.faces else (lexeme, "no motion")
     if tag == "gesture":
-        known = (lexeme.upper() in stroke_names() or lexeme.upper() in SIGNALS or murml_form(lexeme) is not None
-                 or conducting_meter(lexeme.upper()) is not None)
+        known = lexeme.upper() in SIGNALS or lexicon.knows_gesture(lexeme)
         return None if known else (lexeme, "a generic gesture")
     if tag in ("posture", "postureShift"):
-        return None if lexeme.upper() in POSTURES else (lexeme, "a weight shift")
+        return None if lexeme.upper() in lexicon.postures else (lexeme, "a weight shift")
     return None
 
 
-def fallbacks(behaviours: Iterable[tuple[str, str, Mapping[str, str]]]) -> dict[str, list[str]]:
-    """For ``(tag, id, attrs)`` of behaviours: what plays instead -> ``["WAVE (g)", ...]``, in order."""
+def fallbacks(behaviours: Iterable[tuple[str, str, Mapping[str, str]]],
+              lexicon: Lexicon | None = None) -> dict[str, list[str]]:
+    """For ``(tag, id, attrs)`` of behaviours: what plays instead (in ``lexicon``, default the built-in one)
+    -> ``["WAVE (g)", ...]``, in order."""
     found: dict[str, list[str]] = {}
     for tag, bid, attrs in behaviours:
-        unknown = fallback(tag, attrs)
+        unknown = fallback(tag, attrs, lexicon)
         if unknown is not None:
             found.setdefault(unknown[1], []).append(f"{unknown[0]} ({bid})")
     return found

@@ -18,6 +18,7 @@ import re
 from dataclasses import dataclass
 from typing import Callable
 
+from agentsim.animation.lexicon import Lexicon
 from agentsim.bml import lexemes
 from agentsim.bml.dialect_tables import DRAFT_NAMESPACES
 from agentsim.bml.dialects import Adapter
@@ -29,7 +30,6 @@ from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_
                                      EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
 from agentsim.errors import BMLError
-from agentsim.core.gcpause import paused_collection
 
 #: Largest time or offset (seconds) accepted in a reference; beyond it a behaviour is refused.
 MAX_TIME = 1.0e6
@@ -162,12 +162,12 @@ def _checked(text: str | bytes) -> bytes:
     return data
 
 
-def parse_bml(text: str | bytes) -> Block:
-    """Parse one BML 1.0 block, strictly. Raises :class:`BMLError` if the block as a whole cannot be used."""
-    with paused_collection():
-        defaults: list[str] = []
-        block = warn_lexemes(read_block(read_tree(_checked(text), defaults), None))
-        return warn_defaults(block, defaults)
+def parse_bml(text: str | bytes, lexicon: Lexicon | None = None) -> Block:
+    """Parse one BML 1.0 block, strictly. Raises :class:`BMLError` if the block as a whole cannot be used.
+    Lexemes that ``lexicon`` (default: the built-in one) has no motion for are warned of."""
+    defaults: list[str] = []
+    block = warn_lexemes(read_block(read_tree(_checked(text), defaults), None), lexicon)
+    return warn_defaults(block, defaults)
 
 
 def warn_defaults(block: Block, defaults: list[str]) -> Block:
@@ -181,33 +181,29 @@ def warn_defaults(block: Block, defaults: list[str]) -> Block:
     return block
 
 
-def warn_lexemes(block: Block) -> Block:
-    """Add a warning for each kind of lexeme in ``block`` that no motion here is made for (it plays as its
+def warn_lexemes(block: Block, lexicon: Lexicon | None = None) -> Block:
+    """Add a warning for each kind of lexeme in ``block`` that ``lexicon`` has no motion for (it plays as its
     type's default, :mod:`agentsim.bml.lexemes`); the block itself."""
-    found = lexemes.fallbacks((b.type, b.id, b.attributes) for b in block.behaviours)
+    found = lexemes.fallbacks(((b.type, b.id, b.attributes) for b in block.behaviours), lexicon)
     for (instead, items), line in zip(found.items(), lexemes.describe(found)):
         ids = [item.rsplit(" (", 1)[1][:-1] for item in items]
         block.warnings.append(ParseWarning("CUSTOM_ATTRIBUTE_NOT_SUPPORTED", line, ids))
     return block
 
 
-def parse_document(text: str | bytes, strict: bool = False,
-                   name_block: Callable[[], str] | None = None) -> list[Block | Refused]:
+def parse_document(text: str | bytes, strict: bool = False, name_block: Callable[[], str] | None = None,
+                   lexicon: Lexicon | None = None) -> list[Block | Refused]:
     """The blocks of a document, in order, each parsed or refused.
 
     ``strict``: one BML 1.0 block, read as :func:`parse_bml` reads it. Otherwise BML as other realizers
     write it is read too (see :mod:`agentsim.bml.dialects`): a block that needed adapting carries one
     ``NONSTANDARD_BML`` warning listing the adaptations, first among its warnings. ``name_block`` names the
     blocks that have no id (by default ``bml1``, ``bml2``, ... skipping the ids the document uses).
+    ``lexicon`` (default: the built-in one) says which lexemes have a motion, and what foreign names become.
     """
-    with paused_collection():
-        return _parse_document(text, strict, name_block)
-
-
-def _parse_document(text: str | bytes, strict: bool, name_block: Callable[[], str] | None) -> list[Block | Refused]:
     if strict:
         try:
-            return [parse_bml(text)]
+            return [parse_bml(text, lexicon)]
         except BMLError as exc:
             return [Refused(guess_block_id(text), exc)]
     try:
@@ -240,13 +236,13 @@ def _parse_document(text: str | bytes, strict: bool, name_block: Callable[[], st
     results: list[Block | Refused] = []
     for envelope in envelopes:
         try:
-            Adapter(envelope, name_free, drafts).adapt()
+            Adapter(envelope, name_free, drafts, lexicon).adapt()
             block = read_block(envelope.node, envelope.notes)
         except BMLError as exc:
             results.append(Refused(envelope.node.attrs.get("id", ""), exc))
             continue
         if not envelope.notes:  # a foreign document's lexemes are among its adaptations
-            warn_lexemes(block)
+            warn_lexemes(block, lexicon)
         if envelope.notes:
             lines = envelope.notes.lines()
             block.warnings.insert(0, ParseWarning(

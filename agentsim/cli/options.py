@@ -4,6 +4,7 @@ strategy and timing, seed, output, frame rate and anticipators, with what turns 
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import sys
 import warnings
@@ -205,14 +206,28 @@ def explained(result: dict, units: dict[str, str]) -> dict:
 
 def add_lexicon(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lexicon", action="append", default=[], metavar="FILE",
-                        help="add the gesture lexemes of a lexicon file (TOML: strokes or MURML forms; see "
-                             "'agentsim lexicon list' and docs/howto/gestures.md); repeatable, later files win")
+                        help="add the lexemes of a lexicon file to the built-in ones, replacing those of the same "
+                             "name (TOML: gestures as strokes or MURML forms, conducting patterns, face lexemes, "
+                             "FACS units, postures, visemes; see 'agentsim lexicon list' and docs/howto/gestures.md); "
+                             "repeatable, later files win")
 
 
-def use_lexicons(args: argparse.Namespace) -> None:
-    """Load the ``--lexicon`` files (a usage error naming the file and the table if one cannot be used)."""
-    if getattr(args, "lexicon", None):
-        from agentsim.animation.arms import use_lexicon
+@functools.lru_cache(maxsize=1)
+def collection_pause():
+    """The command line's pause of the garbage collector (:class:`~agentsim.core.gcpause.CollectionPause`),
+    which every realizer it makes is given: one for the process, whose collector it is (a sweep may run
+    points side by side in one worker)."""
+    from agentsim.core.gcpause import CollectionPause
 
-        for path in args.lexicon:
-            use_lexicon(path)
+    return CollectionPause()
+
+
+def lexicon(args: argparse.Namespace):
+    """The built-in lexicon extended with the ``--lexicon`` files in order (a usage error naming the file and
+    the entry if one cannot be used)."""
+    from agentsim.animation.lexicon import Lexicon
+
+    made = Lexicon.builtin()
+    for path in getattr(args, "lexicon", None) or ():
+        made = made.extended(path)
+    return made

@@ -61,13 +61,15 @@ def add_parsers(commands) -> None:
     options.add_lexicon(plot)
     plot.set_defaults(handler=plot_timeline)
 
-    lexicon = commands.add_parser("lexicon", help="the gesture lexicon: what <gesture lexeme=...> plays",
-                                  description="The gesture lexemes known (built in, and those of --lexicon "
-                                              "files): each one's name, kind (a stroke or a MURML form) and "
-                                              "where it comes from.")
+    lexicon = commands.add_parser("lexicon", help="the lexicon: what gesture, face and posture lexemes, FACS "
+                                                  "units and visemes play",
+                                  description="The lexicon's entries (built in, and those of --lexicon files): "
+                                              "gestures (strokes and MURML forms), the conducting patterns, face "
+                                              "lexemes, FACS units, postures, visemes and face channels, each with "
+                                              "its name, kind and the file it comes from.")
     lexicon_actions = lexicon.add_subparsers(dest="action", required=True)
-    lexicon_list = lexicon_actions.add_parser("list", help="the gesture lexemes, their kind and source",
-                                              description="One line a lexeme: name, kind, source.")
+    lexicon_list = lexicon_actions.add_parser("list", help="every entry, its kind and source",
+                                              description="One line an entry: name, kind, source.")
     options.add_lexicon(lexicon_list)
     lexicon_list.set_defaults(handler=list_lexicon)
 
@@ -220,11 +222,8 @@ def resolve(path: str) -> Path:
 
 
 def list_lexicon(args: argparse.Namespace) -> int:
-    """``agentsim lexicon list``: the gesture lexemes, one a line (name, kind, source)."""
-    options.use_lexicons(args)
-    from agentsim.animation.arms import lexicon_rows
-
-    rows = lexicon_rows()
+    """``agentsim lexicon list``: the lexicon's entries, one a line (name, kind, source)."""
+    rows = options.lexicon(args).rows()
     width = max(len(name) for name, _, _ in rows)
     kinds = max(len(kind) for _, kind, _ in rows)
     for name, kind, source in rows:
@@ -236,7 +235,7 @@ def realize_files(args: argparse.Namespace) -> int:
     from agentsim.core.feedback import to_json
     from agentsim.realizer import Realizer
 
-    options.use_lexicons(args)
+    lexicon = options.lexicon(args)
     documents = [(path, read_document(path)) for path in args.files]
     at = args.at if args.at is not None else [0.0] * len(documents)
     if len(at) != len(documents):
@@ -254,7 +253,8 @@ def realize_files(args: argparse.Namespace) -> int:
         raise UsageError("standard output is closed: there is nowhere to write the feedback")
     problems: list[str] = []
     made = options.anticipators(args, problems)
-    realizer = Realizer(realtime=args.realtime, anticipators=made, strict=args.strict, tts=tts)
+    realizer = Realizer(realtime=args.realtime, anticipators=made, strict=args.strict, tts=tts, lexicon=lexicon,
+                        gc_pause=options.collection_pause())
 
     def emit(feedback):
         out.write(to_json(feedback) + "\n")
@@ -281,7 +281,7 @@ def plot_timeline(args: argparse.Namespace) -> int:
     of it (a usage error, before anything runs, if the window is not seconds that end after they start)."""
     import math
 
-    options.use_lexicons(args)
+    lexicon = options.lexicon(args)
     from agentsim.animation import evaluate_poses, plot_timeline as draw, plot_timelines
     from agentsim.animation.timeline import run_duration
     from agentsim.realizer import Realizer
@@ -304,7 +304,8 @@ def plot_timeline(args: argparse.Namespace) -> int:
         raise UsageError(f"--to ({end:g} s) must come after --from ({start:g} s)")
     check_writable([args.out], inputs=[resolve(args.file)])
     tts = options.backend(args.tts, args.voice)
-    realizer = Realizer(anticipators=options.anticipators(args), tts=tts)
+    realizer = Realizer(anticipators=options.anticipators(args), tts=tts, lexicon=lexicon,
+                        gc_pause=options.collection_pause())
     realizer.submit(read_document(args.file), source=str(resolve(args.file)))
     realizer.run()
     recording = realizer.recording()

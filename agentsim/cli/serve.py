@@ -61,6 +61,7 @@ def add_parsers(commands) -> None:
     limits.add_argument("--max-block-seconds", type=float, default=live.BLOCK_SECONDS, metavar="S",
                         help=f"seconds a block's speeches may last together ({live.BLOCK_SECONDS:g})")
     options.add_tts(serve)
+    options.add_lexicon(serve)
     serve.add_argument("--strict", action="store_true", help="read pure BML 1.0 only")
     serve.add_argument("--fps", type=float, default=30.0, help="poses per second streamed to viewers (30)")
     serve.set_defaults(handler=run_server)
@@ -95,13 +96,14 @@ def run_server(args: argparse.Namespace) -> int:
     from agentsim.live.limits import Limits
 
     limits = Limits(args.max_speech_chars, args.max_speech_seconds, args.max_block_chars, args.max_block_seconds)
+    lexicon = options.lexicon(args)  # a file that cannot be used: said before anything starts
     anticipators = options.anticipators(args)  # one that cannot be made: said before anything starts
     try:
         tts = options.backend(args.tts, args.voice)
         service = Service(host=args.host, port=args.port, audio=args.audio, tts=tts,
                           strict=args.strict, fps=args.fps, calibrate=args.calibrate,
                           token=args.token, allow_origins=args.allow_origins, media=args.media,
-                          anticipators=anticipators, limits=limits)
+                          anticipators=anticipators, limits=limits, lexicon=lexicon)
     except NoAudioDevice as exc:  # say which option chooses the device, and how to do without one
         if exc.kind == "input":
             raise Unavailable(f"{exc.problem}. Leave --calibrate out, or {GET_A_DEVICE} and name its input "

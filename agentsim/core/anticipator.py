@@ -77,7 +77,7 @@ class Anticipator:
         self.env = env
         self.board = board
         for peg in self.pegs.values():
-            peg.board = board
+            peg.board, peg.cache = board, board.cache
         run = self.run()
         if run is not None:
             self.process = env.process(self._guarded(run))

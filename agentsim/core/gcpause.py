@@ -1,11 +1,10 @@
-"""Building many objects at once without the garbage collector's passes over them.
+"""Building many objects at once without the garbage collector's passes over them, when a program asks.
 
 Reading a large BML block and scheduling it make tens of thousands of small objects that all live on
 (tree nodes, references, pegs, timed behaviours). Each few hundred allocations trigger a collection, and
 every tenth of those looks at all younger objects again; as the block grows, so does the work of each
 pass, and the total grows faster than the block. None of those objects is garbage while the block is
-being built, so :func:`paused_collection` holds the collector off for that stretch (nested uses hold it
-off until the outermost one ends).
+being built, so a :class:`CollectionPause` holds the collector off for that stretch.
 
 When it ends, the objects made meanwhile would all be in the youngest generation, and the next
 collection would look at every one of them, and the one after at them again, only to find them alive.
@@ -16,12 +15,17 @@ collection is made here once the objects moved since the last one outnumber :dat
 alive after it (or made in the pause that called for it, if they were more). Nothing is moved while
 objects are frozen by the program itself (``gc.freeze``, as the live service does once it has warmed
 up): unfreezing would put those back among the collected.
+
+The collector is the process's, so pausing it is the program's choice: the command line and the live
+service each make one pause and hand it to their realizer (``Realizer(gc_pause=...)``); a realizer given
+none leaves the collector alone.
 """
 
 from __future__ import annotations
 
 import contextlib
 import gc
+import threading
 from typing import Iterator
 
 #: Fewer new objects than this are left in the youngest generation as usual (their collection is cheap).
@@ -31,36 +35,55 @@ FEW = 5_000
 GROWTH = 16
 FLOOR = 100_000
 
-_moved = 0
-_budget = GROWTH * FLOOR
 
+class CollectionPause:
+    """A program's policy of holding automatic garbage collection off while blocks are read and planned.
 
-@contextlib.contextmanager
-def paused_collection() -> Iterator[None]:
-    """Hold automatic garbage collection off for the ``with`` block (a no-op if it is already off)."""
-    if not gc.isenabled():
-        yield
-        return
-    gc.disable()
-    try:
-        yield
-    finally:
-        _settle()
-        gc.enable()
+    ``with pause.paused():`` holds the collector off for the ``with`` block. A program has one pause, shared
+    by its threads (the live service reads documents in one and plans them in another): the collector is off
+    while any of them is inside and comes back on when the last one leaves. A pause that finds the collector
+    off (the program turned it off) leaves it off. :attr:`moved` counts the objects moved to the oldest
+    generation since the last full collection; :attr:`budget` is how many may be before the next one.
+    """
 
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._inside = 0  # how many ``with`` blocks (of any thread) are running
+        self._holding = False  # whether this pause turned the collector off
+        self.moved = 0
+        self.budget = GROWTH * FLOOR
 
-def _settle() -> None:
-    """Move what the pause made to the oldest generation if it is much, collecting fully now and then."""
-    global _moved, _budget
-    young = gc.get_count()[0]
-    if young < FEW or gc.get_freeze_count():
-        return
-    gc.freeze()
-    gc.unfreeze()
-    _moved += young
-    if _moved > _budget:
-        gc.collect()
+    @contextlib.contextmanager
+    def paused(self) -> Iterator[None]:
+        """Hold automatic garbage collection off for the ``with`` block."""
+        with self._lock:
+            if self._inside == 0 and gc.isenabled():
+                gc.disable()
+                self._holding = True
+            self._inside += 1
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._inside -= 1
+                if self._inside == 0 and self._holding:
+                    self._holding = False
+                    try:
+                        self._settle()
+                    finally:
+                        gc.enable()
+
+    def _settle(self) -> None:
+        """Move what the pause made to the oldest generation if it is much, collecting fully now and then."""
+        young = gc.get_count()[0]
+        if young < FEW or gc.get_freeze_count():
+            return
         gc.freeze()
-        alive = gc.get_freeze_count()
         gc.unfreeze()
-        _moved, _budget = 0, GROWTH * max(alive, young, FLOOR)
+        self.moved += young
+        if self.moved > self.budget:
+            gc.collect()
+            gc.freeze()
+            alive = gc.get_freeze_count()
+            gc.unfreeze()
+            self.moved, self.budget = 0, GROWTH * max(alive, young, FLOOR)

@@ -38,9 +38,10 @@ def set_key_time(timed: TimedBehaviour, i: int, t: float) -> None:
     if key is not None and isinstance(key.peg, ComputedPeg) and key.offset == 0.0:
         key.peg.pin(t)
     elif key is not None and timed.owns[i] and isinstance(key.peg, OffsetPeg):
-        key.peg.rebase(TimePeg(t - key.offset, name=f"{timed.block_id}:{timed.id}:cut"), 0.0)
+        key.peg.rebase(TimePeg(t - key.offset, name=f"{timed.block_id}:{timed.id}:cut", cache=key.peg.cache), 0.0)
     else:
-        timed.keys[i] = KeyRef(TimePeg(t, name=f"{timed.block_id}:{timed.id}:{timed.sync_ids[i]}:cut"))
+        timed.keys[i] = KeyRef(TimePeg(t, name=f"{timed.block_id}:{timed.id}:{timed.sync_ids[i]}:cut",
+                                       cache=timed.run.block_peg.cache))
 
 
 def pegs_left_behind(timed: TimedBehaviour, indices, board: PegBoard) -> set[int]:

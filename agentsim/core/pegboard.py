@@ -3,7 +3,8 @@
 A :class:`TimePeg` holds a global time in seconds (or ``None`` while unknown). An :class:`OffsetPeg` is
 tied to another peg at a fixed offset, so moving the base moves every peg tied to it. Block pegs stand
 for the start of a BML block; anticipator pegs stand for predicted events in the world and are moved by
-their anticipator. Sync points that constraints tie together share one peg.
+their anticipator. Sync points that constraints tie together share one peg. The pegs of one board share a
+:class:`TimeCache`: the pegs of two realizers in one process never disturb each other's.
 """
 
 from __future__ import annotations
@@ -11,29 +12,44 @@ from __future__ import annotations
 import contextlib
 from typing import Callable
 
-# Any change to any peg invalidates every cached time: cheap to bump, and evaluation stays O(1)
-# amortised for long chains of offset pegs.
-_generation = 0
+class TimeCache:
+    """Whether the times that offset pegs remember are still good: any change to a peg starts a new
+    generation, and a remembered time is good in the generation it was computed in. Cheap to bump, and
+    evaluation stays O(1) amortised for long chains of offset pegs.
 
+    The pegs of one :class:`PegBoard` share its cache; a peg made without a board or a cache gets one of
+    its own, and an offset peg shares its base's.
+    """
 
-def invalidate_times() -> None:
-    """Forget every cached peg time: call it when a :class:`ComputedPeg`'s source changed (a speech's
-    animator time learnt something), since no ``set`` tells the pegs tied to it."""
-    global _generation
-    _generation += 1
+    __slots__ = ("generation",)
+
+    def __init__(self) -> None:
+        self.generation = 0
+
+    def invalidate(self) -> None:
+        """Forget every time remembered so far."""
+        self.generation += 1
 
 
 class TimePeg:
-    """A symbolic time: a global time in seconds, or ``None`` while it is not known yet."""
+    """A symbolic time: a global time in seconds, or ``None`` while it is not known yet.
 
-    __slots__ = ("name", "board", "_time", "_cache", "_cache_gen")
+    ``board``: the board told of its moves (None: nobody is told); ``cache``: the :class:`TimeCache` its
+    changes invalidate (by default the board's, else one of its own).
+    """
 
-    def __init__(self, time: float | None = None, name: str = "", board: "PegBoard | None" = None):
+    __slots__ = ("name", "board", "cache", "_time", "_cached", "_cached_in")
+
+    def __init__(self, time: float | None = None, name: str = "", board: "PegBoard | None" = None,
+                 cache: TimeCache | None = None):
         self.name = name
         self.board = board
+        if cache is None:
+            cache = board.cache if board is not None else TimeCache()
+        self.cache = cache
         self._time = time
-        self._cache: float | None = None
-        self._cache_gen = -1
+        self._cached: float | None = None
+        self._cached_in = -1
 
     @property
     def time(self) -> float | None:
@@ -45,7 +61,7 @@ class TimePeg:
         if time == self._time:
             return
         self._time = time
-        invalidate_times()
+        self.cache.invalidate()
         if self.board is not None:
             self.board.moved(self)
 
@@ -68,25 +84,26 @@ class OffsetPeg(TimePeg):
 
     def __init__(self, base: TimePeg | None, offset: float = 0.0, name: str = "", anchor: bool = False,
                  board: "PegBoard | None" = None):
-        super().__init__(None, name, board)
+        cache = None if board is not None or base is None else base.cache
+        super().__init__(None, name, board, cache)
         self.base = base
         self.offset = offset
         self.anchor = anchor
 
     @property
     def time(self) -> float | None:
-        if self._cache_gen == _generation:
-            return self._cache
-        # Walk up iteratively (chains can be long), then fill the caches on the way back.
+        if self._cached_in == self.cache.generation:
+            return self._cached
+        # Walk up iteratively (chains can be long), then remember the times on the way back.
         chain: list[OffsetPeg] = []
         peg: TimePeg | None = self
-        while isinstance(peg, OffsetPeg) and peg._cache_gen != _generation:
+        while isinstance(peg, OffsetPeg) and peg._cached_in != peg.cache.generation:
             chain.append(peg)
             peg = peg.base
         value = None if peg is None else peg.time
         for p in reversed(chain):
             value = None if value is None else value + p.offset
-            p._cache, p._cache_gen = value, _generation
+            p._cached, p._cached_in = value, p.cache.generation
         return value
 
     def set(self, time: float | None) -> None:
@@ -101,7 +118,7 @@ class OffsetPeg(TimePeg):
         """Change the offset by ``delta`` seconds, moving this peg and all tied to it."""
         if delta:
             self.offset += delta
-            invalidate_times()
+            self.cache.invalidate()
             if self.board is not None:
                 self.board.moved(self)
 
@@ -109,7 +126,7 @@ class OffsetPeg(TimePeg):
         """Tie this peg to another ``base`` at ``offset``."""
         self.base = base
         self.offset = offset
-        invalidate_times()
+        self.cache.invalidate()
         if self.board is not None:
             self.board.moved(self)
 
@@ -129,15 +146,17 @@ class OffsetPeg(TimePeg):
 class ComputedPeg(TimePeg):
     """A peg whose time is computed from something else (a behaviour's timing, a speech's animator time).
 
-    Subclasses define :meth:`compute`; the peg cannot be set. Whoever changes its source calls
-    :func:`invalidate_times` and reports the move (an engine through its context). :meth:`pin` ends the
+    Subclasses define :meth:`compute`; the peg cannot be set. Whoever changes its source invalidates the
+    times of the board (:meth:`PegBoard.invalidate_times`) and reports the move (an engine through its
+    context). :meth:`pin` ends the
     computing: the peg keeps one time from then on (an interrupted speech's end).
     """
 
     __slots__ = ("pinned",)
 
-    def __init__(self, time: float | None = None, name: str = "", board: "PegBoard | None" = None):
-        super().__init__(time, name, board)
+    def __init__(self, time: float | None = None, name: str = "", board: "PegBoard | None" = None,
+                 cache: TimeCache | None = None):
+        super().__init__(time, name, board, cache)
         self.pinned: float | None = None
 
     def compute(self) -> float | None:
@@ -151,7 +170,7 @@ class ComputedPeg(TimePeg):
     def pin(self, time: float) -> None:
         """Stop computing: the peg stays at ``time`` (global seconds) from now on."""
         self.pinned = float(time)
-        invalidate_times()
+        self.cache.invalidate()
 
     def set(self, time: float | None) -> None:
         raise ValueError(f"{self.name} is computed from its source and cannot be moved directly")
@@ -161,16 +180,32 @@ class PegBoard:
     """The shared board of time pegs: block pegs, anticipator pegs and named behaviour sync pegs.
 
     Listeners registered with :meth:`on_move` are called whenever a peg is moved after planning, so that
-    the scheduler can re-time what is tied to it.
+    the scheduler can re-time what is tied to it. The board owns what its realizer's pegs and behaviours
+    share: the :class:`TimeCache` of its pegs (:attr:`cache`) and the order in which behaviours are planned
+    (:meth:`plan_order`).
     """
 
     def __init__(self) -> None:
+        self.cache = TimeCache()
+        #: how many behaviours were planned on this board (:meth:`plan_order`)
+        self.planned = 0
         self.block_pegs: dict[str, TimePeg] = {}
         # block id -> {(behaviour id, sync id): (peg, offset)}, and block id -> {behaviour id: ...}
         self._sync_pegs: dict[str, dict[tuple[str, str], tuple[TimePeg, float]]] = {}
         self._behaviours: dict[str, dict[str, tuple[list[str], Callable[[int], TimePeg]]]] = {}
         self._listeners: list[Callable[[TimePeg], None]] = []
         self.muted = 0
+
+    def invalidate_times(self) -> None:
+        """Forget every time its pegs remember: call it when a :class:`ComputedPeg`'s source changed (a
+        speech's animator time learnt something), since no ``set`` tells the pegs tied to it."""
+        self.cache.invalidate()
+
+    def plan_order(self) -> int:
+        """The place of a behaviour planned now among those planned on this board (0, 1, 2, ...): ties at
+        one time are passed in this order."""
+        self.planned += 1
+        return self.planned - 1
 
     def block_peg(self, block_id: str, time: float | None = None) -> TimePeg:
         """The peg standing for the start of block ``block_id`` (created on first use)."""

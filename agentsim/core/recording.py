@@ -144,6 +144,9 @@ class Recording:
         The sound files played: one :class:`~agentsim.engines.audio.HeardAudio` each, in order.
     now : float
         Simulated time when the recording was made (s).
+    lexicon : object
+        What the run's lexemes play (its realizer's :class:`~agentsim.animation.lexicon.Lexicon`; None: the
+        built-in one), for the poses evaluated from the recording.
     """
 
     behaviours: tuple[BehaviourRecord, ...]
@@ -154,6 +157,7 @@ class Recording:
     speech: tuple = ()
     audio: tuple = ()
     now: float = 0.0
+    lexicon: object = field(default=None, repr=False, compare=False)
 
     def __iter__(self) -> Iterator[BehaviourRecord]:
         return iter(self.behaviours)

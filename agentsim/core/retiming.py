@@ -12,7 +12,7 @@ import math
 from typing import Iterable
 
 from agentsim.core import feedback as fb
-from agentsim.core.pegboard import TimePeg, invalidate_times
+from agentsim.core.pegboard import TimePeg
 from agentsim.core.timed import BlockRun, TimedBehaviour
 
 #: Predictions are sent again for a behaviour when one of its sync points moved by more than this
@@ -102,7 +102,7 @@ class Retiming:
         with ``pegs`` given as :class:`Dependants` and a ``horizon`` (seconds), only those that start
         within it. The re-timing itself happens once per instant, after everything that moved pegs then.
         """
-        invalidate_times()
+        self.board.invalidate_times()
         if self._pending is not None:
             if horizon is not None and isinstance(pegs, Dependants):
                 self._pending_until = self.env.now + horizon

@@ -20,7 +20,6 @@ from agentsim.core.block import Block
 from agentsim.core.composition import Composition
 from agentsim.core.engine import Engine, EngineContext
 from agentsim.errors import ScheduleError
-from agentsim.core.gcpause import paused_collection
 from agentsim.core.interruption import Interruption
 from agentsim.core.pegboard import PegBoard, TimePeg
 from agentsim.core.recording import BlockRecord, DropRecord, Recording, record_behaviours
@@ -149,8 +148,7 @@ class Scheduler(Composition, Interruption, Retiming):
 
     def submit(self, block: Block, source: str = "") -> BlockRun | None:
         """Submit one parsed block now. Returns its run, or None if it was refused."""
-        with paused_collection():
-            return self._submit(block, source)
+        return self._submit(block, source)
 
     def _submit(self, block: Block, source: str) -> BlockRun | None:
         where = f" in {source}" if source else ""

@@ -372,7 +372,7 @@ class BlockSolver:
                 keys[i] = KeyRef(peg, d)
             else:
                 keys[i] = KeyRef(ref_key.peg, offset)
-        timed = TimedBehaviour(self.run, beh, preferred, keys, engine)
+        timed = TimedBehaviour(self.run, beh, preferred, keys, engine, self.board.plan_order())
         timed.tied = [sync_id in groups for sync_id in beh.sync_ids]
         timed.fixed = [sync_id in groups and groups[sync_id][0] in self.ties.fixed_node for sync_id in beh.sync_ids]
         timed.owns = [i in owned for i in range(n)]

@@ -9,7 +9,6 @@ ended, with the timed behaviours the solver made of it and what was last predict
 from __future__ import annotations
 
 import heapq
-import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Iterator, Sequence
@@ -37,18 +36,17 @@ class KeyRef:
 
 
 _LIVE = ("planned", "active")
-_planned = itertools.count()
-_versions = itertools.count()
 
 
 class TimedBehaviour:
     """A behaviour placed in time: its sync points, preferred timing, keys and what has been played.
 
-    ``engine`` is the :class:`~agentsim.core.engine.Engine` that plays it.
+    ``engine`` is the :class:`~agentsim.core.engine.Engine` that plays it; ``order`` its place in the
+    order its realizer planned behaviours (:meth:`~agentsim.core.pegboard.PegBoard.plan_order`).
     """
 
     def __init__(self, run: "BlockRun", behaviour: Behaviour, preferred: Sequence[float],
-                 keys: list[KeyRef | None], engine: Any):
+                 keys: list[KeyRef | None], engine: Any, order: int):
         self.run = run
         self.behaviour = behaviour
         self.sync_ids = list(behaviour.sync_ids)
@@ -56,7 +54,7 @@ class TimedBehaviour:
         self.keys = keys
         self.engine = engine
         self.passed: list[float | None] = [None] * len(self.sync_ids)
-        self.order = next(_planned)  # ties at one time are passed in planning order
+        self.order = order  # ties at one time are passed in planning order
         self.tied = [False] * len(self.sync_ids)  # which keys share a peg with other sync points
         # which of those pegs are held by a time given from outside: a number, an anticipator, another block
         self.fixed = [False] * len(self.sync_ids)
@@ -218,7 +216,8 @@ class SyncPeg(ComputedPeg):
     __slots__ = ("timed", "index")
 
     def __init__(self, timed: TimedBehaviour, index: int):
-        super().__init__(None, name=f"{timed.block_id}:{timed.id}:{timed.sync_ids[index]}")
+        super().__init__(None, name=f"{timed.block_id}:{timed.id}:{timed.sync_ids[index]}",
+                         cache=timed.run.block_peg.cache)
         self.timed = timed
         self.index = index
 
@@ -297,6 +296,7 @@ class BlockRun:
     #: how many behaviours made for it are planned or playing (kept by :attr:`TimedBehaviour.state`)
     live_count: int = 0
     _end_version: dict[TimedBehaviour, int] = field(default_factory=dict, repr=False)
+    _ends_noted: int = field(default=0, repr=False)  # how many predicted ends were noted: the next version
 
     @property
     def id(self) -> str:
@@ -304,7 +304,8 @@ class BlockRun:
 
     def note_end(self, timed: TimedBehaviour, end: float | None) -> None:
         """Remember the predicted end (global seconds) of one of its behaviours (None, inf: not known)."""
-        version = next(_versions)
+        version = self._ends_noted
+        self._ends_noted += 1
         self._end_version[timed] = version
         if end is not None and math.isfinite(end):
             heapq.heappush(self._ends, (-end, version, timed))

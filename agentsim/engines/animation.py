@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from agentsim.animation.lexicon import Lexicon
 from agentsim.animation.units import curves_duration, motion_unit, repetition
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
@@ -11,20 +12,25 @@ from agentsim.core.timed import TimedBehaviour
 
 
 class AnimationPlanner(Planner):
-    """Binds behaviours to motion units and resolves their keys by linear stretch between constraints."""
+    """Binds behaviours to motion units and resolves their keys by linear stretch between constraints; a
+    gesture lexeme that is a MURML form in ``lexicon`` (default: the built-in one) is timed as that form."""
 
     behaviour_types = ("gesture", "pointing", "head", "gaze", "gazeShift", "headDirectionShift", "faceLexeme",
                        "faceFacs", "face", "faceShift", "posture", "postureShift", "locomotion", "transition",
                        "lips", "curves", "murmlgesture", "murmlface")
 
+    def __init__(self, lexicon: Lexicon | None = None):
+        super().__init__()
+        self.lexicon = lexicon if lexicon is not None else Lexicon.builtin()
+
     def preferred(self, behaviour: Behaviour) -> list[float]:
         if behaviour.type == "curves":
             return [0.0, curves_duration(behaviour)]
-        return motion_unit(behaviour).preferred(repetition(behaviour))
+        return motion_unit(behaviour, self.lexicon).preferred(repetition(behaviour))
 
     def check_times(self, behaviour, preferred, times) -> None:
         super().check_times(behaviour, preferred, times)
-        unit = motion_unit(behaviour)
+        unit = motion_unit(behaviour, self.lexicon)
         duration = times[-1] - times[0]
         if duration < unit.min_duration - 1e-9:
             raise ScheduleError(f"{duration:.3f} s is shorter than the shortest {unit.name} "
@@ -35,12 +41,14 @@ class AnimationPlanner(Planner):
 
 
 class AnimationEngine(Engine):
-    """Plays motion units; an interrupted one goes into its retraction at once."""
+    """Plays motion units; an interrupted one goes into its retraction at once. ``lexicon``: what its
+    lexemes play (default: the built-in :class:`~agentsim.animation.lexicon.Lexicon`)."""
 
     name = "animation"
 
-    def __init__(self, context: EngineContext):
-        super().__init__(context, AnimationPlanner())
+    def __init__(self, context: EngineContext, lexicon: Lexicon | None = None):
+        super().__init__(context, AnimationPlanner(lexicon))
+        self.lexicon = self.planner.lexicon
 
     def interruption(self, timed: TimedBehaviour, now: float) -> tuple[set[int], dict[int, float]] | None:
         """A motion with a retraction (gestures, head movements, gaze, face, posture) relaxes now and ends

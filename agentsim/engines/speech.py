@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from agentsim.core.block import Behaviour
 from agentsim.core.engine import Engine, EngineContext, Planner
 from agentsim.errors import ScheduleError
-from agentsim.core.pegboard import ComputedPeg, OffsetPeg
+from agentsim.core.pegboard import ComputedPeg, OffsetPeg, TimeCache
 from agentsim.core.interruption import set_key_time
 from agentsim.core.timed import KeyRef, TimedBehaviour, parameter_at
 from speech_timing.backend import Prosody, SpeechText, TTSBackend, Utterance
@@ -164,8 +164,8 @@ class SpeechTimePeg(ComputedPeg):
 
     __slots__ = ("playback", "s")
 
-    def __init__(self, playback: "Playback", s: float, name: str = ""):
-        super().__init__(None, name=name)
+    def __init__(self, playback: "Playback", s: float, name: str = "", cache: TimeCache | None = None):
+        super().__init__(None, name=name, cache=cache)
         self.playback = playback
         self.s = s
 
@@ -436,7 +436,8 @@ class SpeechEngine(Engine):
         self.playbacks.append(playback)
         planner.speaking.add(id(timed.behaviour))
         # Tie the speech's sync points, and every peg shared with them, to animator time.
-        speech_pegs = [SpeechTimePeg(playback, p, name=f"{timed.block_id}:{timed.id}:{s}")
+        speech_pegs = [SpeechTimePeg(playback, p, name=f"{timed.block_id}:{timed.id}:{s}",
+                                     cache=self.context.board.cache)
                        for p, s in zip(timed.preferred, timed.sync_ids)]
         # (A peg held by a time given from outside, a number or an anticipator, keeps that time: what shares
         # it with the speech's start is tied to the number, not to the audio.)

@@ -215,11 +215,12 @@ class Liveliness:
 _EVALUATORS: dict[tuple[float, int], tuple[Body, Liveliness]] = {}
 
 
-def evaluate_window(records, k0: int, k1: int, fps: float, seed: int) -> tuple[np.ndarray, int]:
+def evaluate_window(records, k0: int, k1: int, fps: float, seed: int, lexicon=None) -> tuple[np.ndarray, int]:
     """Joint positions (frames, points * 3) of frames ``k0`` to ``k1`` of the grid ``k / fps`` given the
     ``records`` of what the body may be doing, and how many frames it took to evaluate them (those before
     the window where a motion takes over a joint, :func:`frames_before`, and the start of a blink under
-    way). The body and the background drawn from ``seed`` are kept from one call to the next."""
+    way). The body and the background drawn from ``seed`` are kept from one call to the next; the lexemes
+    play as ``lexicon`` (the realizer's; default: the built-in one) has them."""
     key = (float(fps), int(seed))
     if key not in _EVALUATORS:
         _EVALUATORS[key] = (Body(), Liveliness(seed))
@@ -230,7 +231,7 @@ def evaluate_window(records, k0: int, k1: int, fps: float, seed: int) -> tuple[n
     frames.add(max(0, k0 - int(math.ceil(BLINK * fps))))
     frames = np.array(sorted(frames))
     times = frames / fps
-    manager = DriverManager(body=body, seed=seed)
+    manager = DriverManager(body=body, seed=seed, lexicon=lexicon)
     liveliness.pin(manager, float(times[0]), float(times[-1]) + 1.0)
     stream = evaluate_poses(chosen, fps=fps, manager=manager, times=times)
     first = int(np.searchsorted(frames, k0))
@@ -254,6 +255,8 @@ class LivePoses:
         self.fps = float(fps)
         self.period = float(period)
         self.seed = seed
+        #: what the lexemes play: the realizer's lexicon
+        self.lexicon = live.realizer.lexicon
         self.body = Body()
         self.names, self.parents = point_names(self.body)
         self.liveliness = Liveliness(seed)
@@ -421,8 +424,9 @@ class LivePoses:
         """Joint positions (frames, points * 3) of frames ``k0`` to ``k1``, and how many frames it took: in
         the evaluator process if :meth:`start_process` started one, else here."""
         if self.process is not None:
-            return self.process.submit(evaluate_window, records, k0, k1, self.fps, self.seed).result()
-        return evaluate_window(records, k0, k1, self.fps, self.seed)
+            return self.process.submit(evaluate_window, records, k0, k1, self.fps, self.seed,
+                                       self.lexicon).result()
+        return evaluate_window(records, k0, k1, self.fps, self.seed, self.lexicon)
 
     def start_process(self) -> None:
         """Evaluate in a process of its own from now on (on another core, and not holding this one's

@@ -52,6 +52,7 @@ from typing import Callable
 
 from agentsim.core import feedback as fb
 from agentsim.core.clock import make_environment
+from agentsim.core.gcpause import CollectionPause
 from agentsim.errors import AgentsimError, ScheduleError, UsageError
 from agentsim.live.limits import Limits
 from speech_timing.backend import audio_bytes
@@ -227,7 +228,9 @@ class LiveRealizer:
     fn)`` calls ``fn(now)`` every ``period`` simulated seconds while it runs. ``media``: the directory sound
     files that clients name are read from (:class:`MediaDirectory`; None: none are). ``limits``: how much
     speech a block may ask for (:class:`Limits`). Realizer options (``tts``, ``strict``, ``speech``,
-    ``anticipators``) are passed on.
+    ``anticipators``, ``lexicon``) are passed on. The service holds the garbage collector off while its two
+    threads read and plan blocks, with one :class:`~agentsim.core.gcpause.CollectionPause` they share
+    (``gc_pause``, unless another is given).
 
     The audio synthesised for a block is weighed (:attr:`audio_bytes`, by block) and released when the block
     ends: nothing but the block's own speeches holds it (the backend is not asked to remember it).
@@ -239,6 +242,7 @@ class LiveRealizer:
 
         self.env = make_environment(realtime=True)
         realizer_options.setdefault("keep", KEEP_BLOCKS)
+        realizer_options.setdefault("gc_pause", CollectionPause())
         self.realizer = Realizer(env=self.env, **realizer_options)
         self.realizer.audio.planner.locate = MediaDirectory(media)
         self.realizer.feedback.keep = KEEP_FEEDBACK
@@ -393,10 +397,10 @@ class LiveRealizer:
 
     def read_one(self, text, reply: Callable[[dict], None], sender, realizer) -> None:
         """Parse one document and hand its blocks on (in the reader's thread)."""
-        from agentsim.bml.parser import Refused, parse_document
+        from agentsim.bml.parser import Refused
 
         try:
-            blocks = parse_document(text, strict=realizer.strict, name_block=realizer.name_block)
+            blocks = realizer.read_document(text)
         except Exception as exc:  # the reader's own fault: the client hears of it, the operator too
             self.reader_failed(reply, exc)
             return

@@ -43,8 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
-from agentsim.animation.arms import GESTURE_FORMS
-from agentsim.animation.expressions import FACE_LEXEMES
+from agentsim.animation.lexicon import Lexicon
 from agentsim.animation.scene import DEFAULT_SCENE
 from agentsim.bml.speech_text import normalize_space
 from agentsim.bml.vocabulary import BML_NAMESPACE
@@ -61,8 +60,10 @@ KINDS = {"beat": "gesture", "point": "pointing", "icon": "gesture", "nod": "head
          "gaze": "gazeShift", "brows": "faceLexeme", "face": "faceLexeme"}
 #: Hand arguments and their BML ``mode``.
 HANDS = {"left": "LEFT_HAND", "right": "RIGHT_HAND", "both": "BOTH_HANDS"}
-#: Gesture lexemes an ``icon`` may name: the stroke forms of the motion module other than the beat.
-ICON_LEXEMES = tuple(sorted(k for k in GESTURE_FORMS if k not in ("BEAT", "DEFAULT")))
+#: Gesture lexemes an ``icon`` may name: the strokes of the built-in lexicon other than the beat.
+ICON_LEXEMES = tuple(sorted(k for k in Lexicon.builtin().strokes if k not in ("BEAT", "DEFAULT")))
+#: Face lexemes a ``face`` may name: those of the built-in lexicon.
+FACE_LEXEMES = tuple(sorted(Lexicon.builtin().faces))
 
 _TAG = re.compile(r"\[([^\[\]\n]*)\]")
 _SCENE = re.compile(r"^(?P<name>[A-Za-z_][\w\-]*)\s*[:=]?\s+(?P<x>\S+)[\s,]+(?P<y>\S+)[\s,]+(?P<z>\S+)\s*$")
@@ -334,8 +335,7 @@ def gesture_from_tag(tag: str, word: int, targets: set[str], where: str, line: i
     if kind == "face":
         lexeme = args[0].upper()
         if lexeme not in FACE_LEXEMES:
-            raise StoryError(f"{where}: unknown face [{tag}]; the motion module knows "
-                             f"{', '.join(sorted(FACE_LEXEMES))}")
+            raise StoryError(f"{where}: unknown face [{tag}]; the motion module knows {', '.join(FACE_LEXEMES)}")
         return Gesture(kind, word, lexeme=lexeme, line=line, column=column)
     lexeme = {"beat": "BEAT", "nod": "NOD", "shake": "SHAKE", "brows": "RAISE_BROWS"}[kind]
     return Gesture(kind, word, lexeme=lexeme, hand=hand, line=line, column=column)
