@@ -61,7 +61,7 @@ MADE = {
         ["welcome-festival.wav", "welcome-us.wav", "festival.json", "espeak.json", "linear_model.json",
          "linear.json", "story.wav", "story.TextGrid"],
         [r"^ ?\d+\.\d{3} s  Welcome$", r'"id": "p:h1:stroke"']),
-    "howto/gestures.md": (["mine.toml", "present.bvh"], [r"^PRESENT +form \(MURML\) +mine\.toml$"]),
+    "howto/gestures.md": (["mine.toml", "present.bvh"], [r"^PRESENT +gesture form \(MURML\) +mine\.toml$"]),
     "howto/praat-blender.md": (
         ["talk.wav", "talk.bvh", "talk.npz", "talk.TextGrid", "tables/gestures.csv", "story.wav",
          "story.TextGrid"],
