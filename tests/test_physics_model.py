@@ -1,0 +1,99 @@
+"""The physical body: the MuJoCo model is the skeleton (same joints, offsets and rotation order), with de
+Leva's masses; mixed dynamics keeps the kinematic joints on the animation and a standing body on its feet."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from agentsim.animation.body import Body
+from agentsim.physics import Push, controller_spec, simulate
+from agentsim.physics.controllers import default_balance
+from agentsim.physics.model import MASS, build_model, inertial, simulated_joints
+
+BODY = Body()
+
+
+def test_the_model_weighs_the_body_and_has_three_hinges_a_joint():
+    model, layout = build_model(BODY, 0.001)
+    assert math.isclose(float(np.sum(model.body_mass)), MASS, rel_tol=1e-9)
+    joints = simulated_joints(BODY)
+    assert len(joints) == 20 and "l_index1" not in joints and "temporomandibular" not in joints
+    assert model.nv == 6 + 3 * (len(joints) - 1)
+    # de Leva 1996: the thigh is 14.16 % of the body mass, its centre 40.95 % of the way to the knee
+    mass, com, _ = inertial(BODY, "l_hip")
+    assert math.isclose(mass, 0.1416 * MASS) and math.isclose(com[1], 0.4095 * -0.42)
+
+
+def test_the_model_turns_its_joints_as_the_skeleton_does():
+    model, layout = build_model(BODY, 0.001)
+    data = mujoco.MjData(model)
+    rng = np.random.default_rng(3)
+    pose = BODY.rest_pose()
+    for name in joints_of(layout):
+        for col in BODY.rotation_columns[name]:
+            pose[col] = rng.uniform(-40, 40)
+    pose[list(BODY.rotation_columns["HumanoidRoot"])] = (10.0, -20.0, 30.0)
+    data.qpos[0:3] = pose[list(BODY.translation_columns)]
+    rot = BODY.forward_kinematics(pose[None], ["HumanoidRoot"])["HumanoidRoot"][0][0]
+    mujoco.mju_mat2Quat(data.qpos[3:7], rot.ravel())
+    for name in joints_of(layout):
+        data.qpos[list(layout.qpos[name])] = np.radians(pose[list(BODY.rotation_columns[name])])
+    mujoco.mj_kinematics(model, data)
+    fk = BODY.forward_kinematics(pose[None])
+    for name in layout.joints:
+        np.testing.assert_allclose(data.xpos[layout.body_id[name]], fk[name][1][0], atol=1e-9)
+        np.testing.assert_allclose(data.xmat[layout.body_id[name]].reshape(3, 3), fk[name][0][0], atol=1e-9)
+
+
+def joints_of(layout):
+    return layout.joints[1:]
+
+
+def _standing(seconds: float, controllers, pushes=()):
+    fps = 60.0
+    n = int(seconds * fps) + 1
+    times = np.arange(n) / fps
+    values = np.tile(BODY.rest_pose(), (n, 1))
+    nod = BODY.dof("skullbase.pitch")
+    values[:, nod] = 15.0 * np.sin(2 * np.pi * times)
+    out = np.empty_like(values)
+
+    def sink(k, pose):
+        out[k] = pose
+
+    result = simulate(BODY, fps, times, lambda a, b: values[a:b], controllers, list(pushes), sink)
+    return values, out, np.array(result.rows), result
+
+
+def test_a_standing_body_keeps_its_feet_and_the_kinematic_joints_their_angles():
+    values, out, rows, result = _standing(1.0, [default_balance()])
+    assert result.fell_at is None and rows[:, 10].max() == 0
+    kinematic = [BODY.dof(f"{j}.{a}") for j in ("skullbase", "vc4", "l_shoulder", "r_elbow", "l_index2")
+                 for a in ("roll", "pitch", "yaw")]
+    np.testing.assert_array_equal(out[:, kinematic], values[:, kinematic])  # physics never moves them
+    assert np.all(np.abs(rows[:, 9] - 0.90) < 0.005)  # the pelvis stays at its height
+
+
+@pytest.mark.parametrize("cls, params, message", [
+    ("Balance", {}, "unknown controller class 'Balance'"),
+    ("HangController", {"part": "tail"}, "unknown part 'tail'"),
+    ("BalanceController", {"kpp": "3"}, "unknown parameter 'kpp'"),
+    ("JointController", {"l_elbow.pitch": "x"}, "is not a number"),
+])
+def test_a_controller_that_is_not_known_is_refused_by_name(cls, params, message):
+    with pytest.raises(ValueError, match=message):
+        controller_spec(cls, params)
+
+
+def test_a_hanging_arm_drops_under_gravity_and_returns_to_the_animation_without_a_jump():
+    hang = controller_spec("HangController", {"part": "left_arm"})
+    hang.start, hang.end = 0.2, 0.7
+    values, out, rows, result = _standing(1.2, [default_balance(), hang], [Push(0.3, (0.0, 0.0, 100.0), 0.1)])
+    roll = BODY.dof("l_shoulder.roll")
+    assert abs(out[int(0.6 * 60), roll]) < 2.0 < values[0, roll]  # hung from its 6 degrees of abduction
+    assert np.abs(np.diff(out[:, roll])).max() < 1.0  # no jump a frame, taking over or giving back
+    assert out[-1, roll] == values[-1, roll]  # back on the animation once the transition is over
