@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from agentsim.animation.body import Body
-from agentsim.physics import Push, controller_spec, simulate
-from agentsim.physics.controllers import default_balance
+from agentsim.physics.controllers import controller_spec, default_balance
 from agentsim.physics.model import MASS, build_model, inertial, simulated_joints
+from agentsim.physics.simulation import Push, simulate
 
 BODY = Body()
 
@@ -97,3 +97,19 @@ def test_a_hanging_arm_drops_under_gravity_and_returns_to_the_animation_without_
     assert abs(out[int(0.6 * 60), roll]) < 2.0 < values[0, roll]  # hung from its 6 degrees of abduction
     assert np.abs(np.diff(out[:, roll])).max() < 1.0  # no jump a frame, taking over or giving back
     assert out[-1, roll] == values[-1, roll]  # back on the animation once the transition is over
+
+
+def test_a_joint_controller_and_a_lower_pelvis_are_reached_smoothly_and_given_back():
+    squat = controller_spec("BalanceController", {"pelvis_height": "0.8"})
+    squat.start, squat.end = 0.3, 1.3
+    elbow = controller_spec("JointController", {"l_elbow.pitch": "-90"})
+    elbow.start, elbow.end = 0.3, 1.3
+    under = default_balance()
+    under.start = -math.inf
+    values, out, rows, result = _standing(2.0, [under, squat, elbow])
+    assert result.fell_at is None
+    at = {t: int(round(t * 60)) for t in (1.2, 2.0)}
+    assert abs(rows[at[1.2], 9] - 0.8) < 0.015 and abs(rows[at[2.0], 9] - 0.90) < 0.005
+    pitch = BODY.dof("l_elbow.pitch")
+    assert abs(out[at[1.2], pitch] + 90.0) < 1.5 and out[at[2.0], pitch] == values[at[2.0], pitch]
+    assert np.abs(np.diff(out[:, pitch])).max() < 8.0 and np.abs(np.diff(rows[:, 9])).max() < 0.01

@@ -6,10 +6,6 @@ default), is simulated, and feels the kinematic parts' motion through inverse dy
 controllers (``<bmlt:controller class="BalanceController|HangController|JointController">``) are timed
 behaviours; while one is active its joints are physical. :mod:`~agentsim.physics.model` builds the body,
 :mod:`~agentsim.physics.controllers` reads the controllers, :mod:`~agentsim.physics.simulation` steps it,
-:mod:`~agentsim.physics.run` plays a realized run's poses through it.
+:mod:`~agentsim.physics.run` plays a realized run's poses through it. The package itself loads nothing
+(the realizer reads controllers without numpy or MuJoCo): import what is needed from its modules.
 """
-
-from agentsim.physics.controllers import CLASSES, ControllerSpec, controller_spec
-from agentsim.physics.simulation import CSV_COLUMNS, PhysicsResult, Push, simulate
-
-__all__ = ["CLASSES", "CSV_COLUMNS", "ControllerSpec", "PhysicsResult", "Push", "controller_spec", "simulate"]

@@ -40,7 +40,8 @@ MAX_STEP = 0.001
 KINEMATIC_ARMATURE = 20.0
 #: The armature of a physical joint's hinges (that of the model).
 PHYSICAL_ARMATURE = 0.02
-#: How long a part given back to the animation takes to reach it (s).
+#: How long a part given back to the animation takes to reach it, and a joint's servo target takes to go
+#: from where the joint is to where a controller that takes it over wants it (s).
 RELEASE = 0.3
 #: The body has fallen when the pelvis is below this fraction of its standing height.
 FALL_FRACTION = 0.6
@@ -124,6 +125,7 @@ class Simulation:
         self.physical = np.zeros(len(self.joints), dtype=bool)
         self.release: dict[int, tuple[float, np.ndarray]] = {}  # joint -> (time given back, angle offsets)
         self.taken: dict[int, np.ndarray] = {}  # joint -> its angles (rad) when a JointController took it
+        self.handover: dict[int, tuple[float, np.ndarray]] = {}  # joint -> (time taken, its angles then)
         self.owner: list[ControllerSpec | None] = [None] * len(self.joints)
         self.model.dof_armature[self.dadr.ravel()] = KINEMATIC_ARMATURE
         self.result = PhysicsResult()
@@ -169,8 +171,9 @@ class Simulation:
                 continue
             if new is None:  # given back: reach the animation from where it is
                 self.release[i] = (time, d.qpos[self.qadr[i]].copy())
-            else:
+            else:  # taken over: its servo's target goes from where it is to the controller's in a transition
                 self.release.pop(i, None)
+                self.handover[i] = (time, d.qpos[self.qadr[i]].copy())
                 if new.kind == "JointController":
                     self.taken[i] = d.qpos[self.qadr[i]].copy()
             if new is None:
@@ -256,6 +259,13 @@ class Simulation:
         balance = next((o for o in self.owner if o is not None and o.kind == "BalanceController"), None)
         if balance is not None:
             self._balance(balance, ctrl)
+        for i, (t0, start) in list(self.handover.items()):
+            u = min(max((time + self.frame_time - t0) / RELEASE, 0.0), 1.0)
+            if u >= 1.0:
+                del self.handover[i]
+                continue
+            w = u * u * (3 - 2 * u)
+            ctrl[i] = start + w * _wrapped_rad(ctrl[i] - start)
         d.ctrl[self.aadr.ravel()] = ctrl.ravel()
 
     def _balance(self, spec: ControllerSpec, ctrl: np.ndarray) -> None:
