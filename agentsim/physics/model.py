@@ -187,7 +187,7 @@ def build_xml(body: Body, timestep: float) -> str:
     visit(names[0], 2)
     return f"""<mujoco model="agentsim">
   <compiler angle="degree" inertiafromgeom="false"/>
-  <option timestep="{timestep:.9g}" gravity="0 -9.81 0" integrator="implicitfast" cone="elliptic" impratio="10"/>
+  <option timestep="{timestep:.9g}" gravity="0 -9.81 0" integrator="implicitfast" cone="elliptic" impratio="10" tolerance="1e-6"/>
   <default>
     <joint armature="0.02" damping="0.5"/>
     <geom contype="1" conaffinity="0" condim="3" friction="1 0.005 0.0001" rgba="0.7 0.7 0.8 1"/>
