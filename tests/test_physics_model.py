@@ -113,3 +113,26 @@ def test_a_joint_controller_and_a_lower_pelvis_are_reached_smoothly_and_given_ba
     pitch = BODY.dof("l_elbow.pitch")
     assert abs(out[at[1.2], pitch] + 90.0) < 1.5 and out[at[2.0], pitch] == values[at[2.0], pitch]
     assert np.abs(np.diff(out[:, pitch])).max() < 8.0 and np.abs(np.diff(rows[:, 9])).max() < 0.01
+
+
+def test_the_kinematic_arms_motion_pushes_the_physical_trunk():
+    fps, n = 60.0, 61
+    times = np.arange(n) / fps
+
+    def run(raise_arms: bool):
+        values = np.tile(BODY.rest_pose(), (n, 1))
+        if raise_arms:  # both arms swing forward to the horizontal in 0.3 s from 0.5 s
+            u = np.clip((times - 0.5) / 0.3, 0.0, 1.0)
+            for side in "lr":
+                values[:, BODY.dof(f"{side}_shoulder.pitch")] = -90.0 * u * u * (3 - 2 * u)
+        out = np.empty_like(values)
+        simulate(BODY, fps, times, lambda a, b: values[a:b], [default_balance()], [],
+                 lambda k, pose: out.__setitem__(k, pose))
+        return values, out
+
+    _, still = run(False)
+    values, swung = run(True)
+    tz, arm = BODY.dof("HumanoidRoot.tz"), BODY.dof("l_shoulder.pitch")
+    k = int(0.6 * fps)
+    assert still[k, tz] - swung[k, tz] > 0.01  # the arms' reaction drives the pelvis back
+    np.testing.assert_array_equal(swung[:, arm], values[:, arm])
