@@ -136,3 +136,10 @@ def test_the_kinematic_arms_motion_pushes_the_physical_trunk():
     k = int(0.6 * fps)
     assert still[k, tz] - swung[k, tz] > 0.01  # the arms' reaction drives the pelvis back
     np.testing.assert_array_equal(swung[:, arm], values[:, arm])
+
+
+def test_an_unstable_simulation_is_said_once_and_mujoco_writes_no_log(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    values, out, rows, result = _standing(0.3, [default_balance()], [Push(0.1, (0.0, float("nan"), 0.0), 0.05)])
+    assert result.unstable_at == pytest.approx(7 / 60) and "unstable" in result.unstable
+    assert len(rows) == len(values) and list(tmp_path.iterdir()) == []

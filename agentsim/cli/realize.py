@@ -231,6 +231,9 @@ def _physical(args, realizer, stream, scratch: Path):
     if result.fell_at is not None:
         realizer.feedback.send(fb.warning("", "BODY_FELL", f"the physical body fell at {result.fell_at:.3f} s",
                                           result.fell_at, "agent"))
+    if result.unstable_at is not None:
+        print(f"agentsim: the physical body's simulation became unstable at {result.unstable_at:.3f} s and started "
+              f"again from its rest pose (MuJoCo: {result.unstable})", file=sys.stderr)
     if args.physics_csv:
         write_physics_csv(args.physics_csv, result)
     return stream

@@ -65,10 +65,14 @@ class Push:
 
 @dataclass
 class PhysicsResult:
-    """What a simulation gave: the CSV rows (one a frame), when the body fell (None: it did not)."""
+    """What a simulation gave: the CSV rows (one a frame), when the body fell (None: it did not), and when
+    MuJoCo found the simulation unstable (it then starts the body again from the model's rest pose) with
+    what it said."""
 
     rows: list[tuple] = field(default_factory=list)
     fell_at: float | None = None
+    unstable_at: float | None = None
+    unstable: str = ""
 
 
 def _hermite(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -370,8 +374,16 @@ def simulate(body: Body, fps: float, times: np.ndarray, frames, controllers: lis
             cache = frames(cache_first, min(n, cache_first + 256))
         return cache[k - cache_first]
 
-    sink(0, sim.start(float(times[0]), np.stack([row(0), row(1)])))
-    for k in range(n - 1):
-        rows = np.stack([row(k - 1), row(k), row(k + 1), row(k + 2)])
-        sink(k + 1, sim.advance(float(times[k]), rows))
+    said: list[str] = []  # MuJoCo's warnings are kept here, not printed nor logged to a file
+    previous = sim.mj.get_mju_user_warning()
+    sim.mj.set_mju_user_warning(said.append)
+    try:
+        sink(0, sim.start(float(times[0]), np.stack([row(0), row(1)])))
+        for k in range(n - 1):
+            rows = np.stack([row(k - 1), row(k), row(k + 1), row(k + 2)])
+            sink(k + 1, sim.advance(float(times[k]), rows))
+            if said and sim.result.unstable_at is None:
+                sim.result.unstable_at, sim.result.unstable = float(times[k + 1]), said[0]
+    finally:
+        sim.mj.set_mju_user_warning(previous)
     return sim.result
