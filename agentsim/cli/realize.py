@@ -190,15 +190,15 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
                             ("--report", args.report, "report")):
         if name:
             sizes[f"{flag} {name}"] = (Path(name), poses[key] + (2 * track.length if key == "report" else 0))
-    scratch_bytes = poses["scratch"] * (2 if physics else 1) if poses else 0
-    check_budget(sizes, duration, (scratch, scratch_bytes) if poses else None)  # before any file is written
+    check_budget(sizes, duration, (scratch, poses["scratch"]) if poses else None)  # before any file is written
     stream = None
     if poses:
         from agentsim.animation import evaluate_poses
 
-        stream = evaluate_poses(recording, fps=args.fps, seed=args.seed, folder=scratch)
-        if physics:
-            stream = _physical(args, realizer, stream, scratch)
+        manager = _physics_manager(args, realizer)
+        stream = evaluate_poses(recording, fps=args.fps, seed=args.seed, folder=scratch, manager=manager)
+        if manager is not None:
+            _physics_said(args, realizer, manager.result)
     gestures = gesture_rows(recording, beat_times) if (args.csv or args.report or args.textgrid) else []
     if args.wav:
         write_wav(args.wav, track)
@@ -222,12 +222,20 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
                      gestures=gestures, title=title)
 
 
-def _physical(args, realizer, stream, scratch: Path):
-    """The stream the physical body shows (``--physics``), its CSV written; a fall said once as a warning."""
-    from agentsim.core import feedback as fb
-    from agentsim.physics.run import physical_stream, run_controllers, write_physics_csv
+def _physics_manager(args, realizer):
+    """The manager whose poses are the physical body's (``--physics``), or None."""
+    if not getattr(args, "physics", False):
+        return None
+    from agentsim.physics.run import PhysicalManager, run_controllers
 
-    stream, result = physical_stream(stream, run_controllers(realizer.recording()), physics_options(args), scratch)
+    return PhysicalManager(run_controllers(realizer.recording()), physics_options(args), fps=args.fps, seed=args.seed)
+
+
+def _physics_said(args, realizer, result) -> None:
+    """A fall said once as a warning, an unstable simulation on stderr, the CSV written."""
+    from agentsim.core import feedback as fb
+    from agentsim.physics.run import write_physics_csv
+
     if result.fell_at is not None:
         realizer.feedback.send(fb.warning("", "BODY_FELL", f"the physical body fell at {result.fell_at:.3f} s",
                                           result.fell_at, "agent"))
@@ -236,7 +244,6 @@ def _physical(args, realizer, stream, scratch: Path):
               f"again from its rest pose (MuJoCo: {result.unstable})", file=sys.stderr)
     if args.physics_csv:
         write_physics_csv(args.physics_csv, result)
-    return stream
 
 
 def check_outputs(args: argparse.Namespace) -> None:

@@ -1,27 +1,23 @@
 """A realized run played through the physical body: its controllers, its pushes, the poses and the CSV.
 
 :func:`run_controllers` reads the controllers a recording played (their actual start and end);
-:func:`physical_stream` simulates the body under a :class:`~agentsim.animation.output.PoseStream` evaluated
-from that recording and returns the stream the physical body shows (the root and the physical joints from
-the simulation, every other channel the animation's), with the :class:`PhysicsResult`;
-:func:`write_physics_csv` writes one row a frame. :func:`parse_push` reads ``--push TIME:FX,FY,FZ:DURATION``.
+:class:`PhysicalManager`, given to :func:`~agentsim.animation.evaluate_poses` as its manager, makes the poses
+the physical body's (the root and the physical joints from the simulation, every other channel the
+animation's); :func:`write_physics_csv` writes one row a frame. :func:`parse_push` reads ``--push TIME:FX,FY,FZ:DURATION``.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from pathlib import Path
 
 import numpy as np
 
-from agentsim.animation.output import FrameFile, PoseStream, records_of
+from agentsim.animation.manager import DriverManager
+from agentsim.animation.output import records_of
 from agentsim.physics.controllers import ControllerSpec, controller_spec, default_balance
-from agentsim.physics.simulation import CSV_COLUMNS, PhysicsResult, Push, simulate
+from agentsim.physics.simulation import CSV_COLUMNS, PhysicsResult, Push, Stepper
 from agentsim.written import written
-
-#: Frames handed on at a time.
-BLOCK = 256
 
 
 def parse_push(text: str) -> Push:
@@ -67,54 +63,49 @@ def run_controllers(source) -> list[ControllerSpec]:
     return specs
 
 
-def physical_stream(stream: PoseStream, controllers: list[ControllerSpec], pushes: list[Push] = (),
-                    folder: str | Path | None = None) -> tuple[PoseStream, PhysicsResult]:
-    """The stream the physical body shows under ``stream`` (into files in ``folder`` when given, as
-    :func:`~agentsim.animation.evaluate_poses` does), and what the simulation gave."""
-    body, n = stream.body, stream.n_frames
-    joints = list(stream.joints)
-    pending: list[np.ndarray] = []
-    if folder is not None:
-        folder = Path(folder)
-        files = {"values": FrameFile(folder / "physics_values.npy", (n, body.n_dofs), np.float64),
-                 "positions": FrameFile(folder / "physics_positions.npy", (n, len(joints), 3), np.float64)}
-    else:
-        files = None
-        values = np.empty((n, body.n_dofs))
+class PhysicalManager(DriverManager):
+    """A :class:`~agentsim.animation.manager.DriverManager` whose frames are the physical body's: the physics
+    runs inside the frame loop of :func:`~agentsim.animation.evaluate_poses` (give it as ``manager``). Each
+    window of frames the drivers evaluate goes to the simulation as it comes, and the physical body's frames
+    go on to the pose files (or the arrays) in order, two frames behind the drivers (a frame's velocities
+    need the next one). :attr:`result` is the :class:`PhysicsResult` once the frames are evaluated.
+    """
 
-    def flush() -> None:
-        block = np.array(pending)
-        pending.clear()
-        files["values"].append(block)
-        files["positions"].append(body.positions(block, joints))
+    def __init__(self, controllers: list[ControllerSpec], pushes: list[Push] = (), fps: float = 60.0, **kwargs):
+        super().__init__(**kwargs)
+        self.controllers, self.pushes, self.fps = list(controllers), list(pushes), float(fps)
+        self.result: PhysicsResult | None = None
 
-    def sink(k: int, pose: np.ndarray) -> None:
-        if files is None:
-            values[k] = pose
-            return
-        pending.append(pose)
-        if len(pending) == BLOCK:
-            flush()
+    def evaluate(self, times, sink=None, window: int = 16384):
+        times = np.asarray(times, dtype=float)
+        if sink is None:
+            values, writers = super().evaluate(times)
+            out = np.empty_like(values)
+            stepper = Stepper(self.body, self.fps, times, self.controllers, self.pushes, out.__setitem__)
+            stepper.feed(values)
+            self.result = stepper.finish()
+            return out, writers
+        made: list[np.ndarray] = []  # physical frames not yet handed on
+        state = {"sent": 0, "writers": np.empty((0, self.body.n_dofs), dtype=np.int32)}
 
-    try:
-        result = simulate(body, stream.fps, np.asarray(stream.times), lambda a, b: stream.rows("values", a, b),
-                          controllers, list(pushes), sink)
-        if files is not None and pending:
-            flush()
-    except BaseException:
-        for f in (files or {}).values():
-            f.close(check=False)
-        raise
-    if files is None:
-        out = dataclasses.replace(stream, values=values, positions=body.positions(values, joints))
-    else:
-        for f in files.values():
-            f.close()
-        merged = dict(stream.files or {})
-        merged.update(files)
-        out = dataclasses.replace(stream, values=files["values"].mapped(), positions=files["positions"].mapped(),
-                                  files=merged)
-    return out, result
+        def send() -> None:
+            if made:
+                n = len(made)
+                sink(state["sent"], np.array(made), state["writers"][:n])
+                state["writers"] = state["writers"][n:]
+                state["sent"] += n
+                made.clear()
+
+        def take(first: int, block: np.ndarray, writers: np.ndarray) -> None:
+            state["writers"] = np.concatenate([state["writers"], writers])
+            stepper.feed(block)
+            send()
+
+        stepper = Stepper(self.body, self.fps, times, self.controllers, self.pushes, lambda k, pose: made.append(pose))
+        super().evaluate(times, sink=take, window=window)
+        self.result = stepper.finish()
+        send()
+        return None
 
 
 def write_physics_csv(path: str | Path, result: PhysicsResult) -> Path:

@@ -8,8 +8,10 @@ the kinematic parts' motion through their common joints, as well as gravity, the
 pushes and its controllers' servos. Physics never changes a kinematic joint's angle nor any behaviour's
 timing: it only moves the root and the physical joints.
 
-The clock: the physics runs on the animation's frame times, ``substeps`` steps of ``1 / (fps * substeps)``
-s between two frames, with ``substeps`` the smallest number that makes a step 1 ms or shorter (17 steps of
+The clock: the physics runs on the animation's frame times, inside the loop that evaluates the poses
+(:class:`Stepper` takes the frames as the drivers make them, :class:`~agentsim.physics.run.PhysicalManager`
+puts it in :func:`~agentsim.animation.evaluate_poses`), ``substeps`` steps of ``1 / (fps * substeps)`` s
+between two frames, with ``substeps`` the smallest number that makes a step 1 ms or shorter (17 steps of
 0.98 ms at 60 frames per second). What this costs in accuracy: the kinematic motion is known at the frames
 only, so between two frames it is the cubic Hermite curve through them with the frames' central-difference
 velocities (its angles are exact at every frame, its velocities and accelerations those of that curve); the
@@ -355,6 +357,60 @@ def _wrapped_rad(angle):
     return (np.asarray(angle, dtype=float) + math.pi) % (2 * math.pi) - math.pi
 
 
+class Stepper:
+    """A :class:`Simulation` fed the animation's frames in order, a block at a time (:meth:`feed`), making
+    the physical body's frames as soon as the animation's frames they need have come (each needs the next
+    two, for the velocities): ``out(k, pose)`` takes frame ``k``. :meth:`finish` makes the last frames.
+    MuJoCo's warnings are kept in the result (when the simulation became unstable), not printed."""
+
+    def __init__(self, body: Body, fps: float, times: np.ndarray, controllers: list[ControllerSpec],
+                 pushes: list[Push], out) -> None:
+        self.sim = Simulation(body, fps, controllers, pushes)
+        self.times = np.asarray(times, dtype=float)
+        self.out = out
+        self.rows: dict[int, np.ndarray] = {}  # the animation's frames still needed, by index
+        self.received = 0  # frames fed so far
+        self.made = 0  # physical frames made so far
+        self.said: list[str] = []
+
+    def _row(self, k: int) -> np.ndarray:
+        return self.rows[min(max(k, 0), len(self.times) - 1)]
+
+    def _make(self, last: int) -> None:
+        """Make the physical frames up to ``last`` (exclusive) whose animation frames have all come."""
+        mj, sim = self.sim.mj, self.sim
+        previous = mj.get_mju_user_warning()
+        mj.set_mju_user_warning(self.said.append)
+        try:
+            while self.made < last:
+                k = self.made
+                if k == 0:
+                    pose = sim.start(float(self.times[0]), np.stack([self._row(0), self._row(1)]))
+                else:
+                    rows = np.stack([self._row(k - 2), self._row(k - 1), self._row(k), self._row(k + 1)])
+                    pose = sim.advance(float(self.times[k - 1]), rows)
+                    if self.said and sim.result.unstable_at is None:
+                        sim.result.unstable_at, sim.result.unstable = float(self.times[k]), self.said[0]
+                self.out(k, pose)
+                self.made += 1
+                for old in [i for i in self.rows if i < self.made - 2]:
+                    del self.rows[old]
+        finally:
+            mj.set_mju_user_warning(previous)
+
+    def feed(self, block: np.ndarray) -> None:
+        """The animation's next frames."""
+        for row in np.asarray(block, dtype=float):
+            self.rows[self.received] = row.copy()
+            self.received += 1
+        self._make(max(0, self.received - 1))  # frame k needs frame k + 1
+
+    def finish(self) -> PhysicsResult:
+        """Make the last frames (the run's last frame repeated where one after it is wanted)."""
+        self._make(len(self.times))
+        return self.sim.result
+
+
 def simulate(body: Body, fps: float, times: np.ndarray, frames, controllers: list[ControllerSpec],
              pushes: list[Push] = (), sink=None) -> PhysicsResult:
     """Run the physical body over the animation's frames.
@@ -362,28 +418,7 @@ def simulate(body: Body, fps: float, times: np.ndarray, frames, controllers: lis
     ``frames(first, last)`` gives the animation's poses of frames ``first .. last - 1``; ``sink(k, pose)``
     takes the physical body's pose of frame ``k`` as it is made.
     """
-    n = len(times)
-    sim = Simulation(body, fps, controllers, pushes)
-    cache_first, cache = 0, frames(0, min(n, 256))
-
-    def row(k: int) -> np.ndarray:
-        nonlocal cache_first, cache
-        k = min(max(k, 0), n - 1)
-        if not cache_first <= k < cache_first + len(cache):
-            cache_first = max(0, k - 2)
-            cache = frames(cache_first, min(n, cache_first + 256))
-        return cache[k - cache_first]
-
-    said: list[str] = []  # MuJoCo's warnings are kept here, not printed nor logged to a file
-    previous = sim.mj.get_mju_user_warning()
-    sim.mj.set_mju_user_warning(said.append)
-    try:
-        sink(0, sim.start(float(times[0]), np.stack([row(0), row(1)])))
-        for k in range(n - 1):
-            rows = np.stack([row(k - 1), row(k), row(k + 1), row(k + 2)])
-            sink(k + 1, sim.advance(float(times[k]), rows))
-            if said and sim.result.unstable_at is None:
-                sim.result.unstable_at, sim.result.unstable = float(times[k + 1]), said[0]
-    finally:
-        sim.mj.set_mju_user_warning(previous)
-    return sim.result
+    stepper = Stepper(body, fps, times, controllers, list(pushes), sink)
+    for first in range(0, len(times), 256):
+        stepper.feed(frames(first, min(len(times), first + 256)))
+    return stepper.finish()
