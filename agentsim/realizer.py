@@ -22,6 +22,7 @@ from agentsim.core.timed import BlockRun
 from agentsim.engines.animation import AnimationEngine
 from agentsim.engines.audio import AudioEngine
 from agentsim.engines.control import ControlEngine
+from agentsim.engines.physics import ControllerEngine
 from agentsim.engines.speech import SpeechConfig, SpeechEngine
 from agentsim.engines.wait import WaitEngine
 from speech_timing.backend import TTSBackend
@@ -88,7 +89,8 @@ class Realizer:
         self.wait = WaitEngine(context)
         self.control = ControlEngine(context)
         self.audio = AudioEngine(context)
-        self.engines = [self.speech, self.animation, self.wait, self.control, self.audio]
+        self.physics = ControllerEngine(context)
+        self.engines = [self.speech, self.animation, self.wait, self.control, self.audio, self.physics]
         for engine in self.engines:
             self.scheduler.add_engine(engine)
         self._submissions: list[simpy.Event] = []

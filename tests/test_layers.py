@@ -34,7 +34,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("root: errors and whole-or-nothing writing", ("agentsim", "agentsim.errors", "agentsim.written")),
     ("speech timing", ("speech_timing",)),
     ("realizer core", ("agentsim.core", "agentsim.examples", "agentsim.anticipators")),
-    ("realizer libraries", ("agentsim.bml", "agentsim.music", "agentsim.animation")),
+    ("realizer libraries", ("agentsim.bml", "agentsim.music", "agentsim.animation", "agentsim.physics")),
     ("realizer parts", ("agentsim.engines", "agentsim.media")),
     ("realizer", ("agentsim.realizer",)),
     ("beat tracking", ("anticipators.beats",)),

@@ -50,7 +50,7 @@ ALL_SYNC_NAMES = {s for t in BEHAVIOUR_TYPES.values() for s in t.syncs}
 CORE_BEHAVIOURS = set(BEHAVIOUR_TYPES) - set().union(*EXTENSION_BEHAVIOURS.values()) - DIALECT_BEHAVIOURS
 #: Attributes an extension behaviour cannot do without.
 REQUIRED_ATTRIBUTES = {"interrupt": ("target",), "activate": ("target",), "parametervaluechange": ("target", "paramId"),
-                       "audiofile": ("fileName",)}
+                       "audiofile": ("fileName",), "controller": ("class",)}
 _COMPOSITION_LIST = re.compile(r"^(APPEND-AFTER|CHUNK-AFTER)\s*\((?P<ids>[^()]*)\)$", re.I)
 
 

@@ -7,14 +7,15 @@ from __future__ import annotations
 from agentsim.animation.murml_form import MURML_NAMESPACE
 
 BML_NAMESPACE = "http://www.bml-initiative.org/bml/bml-1.0"
-#: AsapRealizer's extensions: BMLA (continuous interaction) and BMLT (sound files, transitions).
+#: AsapRealizer's extensions: BMLA (continuous interaction) and BMLT (sound files, transitions, physical
+#: controllers).
 BMLA_NAMESPACE = "http://www.asap-project.org/bmla"
 BMLT_NAMESPACE = "http://hmi.ewi.utwente.nl/bmlt"
 
 #: The behaviour elements of each extension namespace (their types are in the core's BEHAVIOUR_TYPES).
 EXTENSION_BEHAVIOURS = {
     BMLA_NAMESPACE: {"interrupt", "activate", "parametervaluechange"},
-    BMLT_NAMESPACE: {"audiofile", "transition"},
+    BMLT_NAMESPACE: {"audiofile", "transition", "controller"},
     MURML_NAMESPACE: {"murmlgesture", "murmlface"},
 }
 

@@ -41,6 +41,7 @@ def add_parsers(commands) -> None:
     options.add_fps(realize, "--bvh/--poses/--report")
     options.add_seed(realize, "the background motion (blinks, sway)")
     options.add_lexicon(realize)
+    add_physics(realize)
     realize.set_defaults(handler=realize_files)
 
     plot = commands.add_parser(
@@ -113,6 +114,41 @@ def add_outputs(parser: argparse.ArgumentParser) -> None:
                                                              "a folder OUT_files beside it)")
 
 
+def add_physics(parser: argparse.ArgumentParser) -> None:
+    """``--physics``, ``--push`` and ``--physics-csv`` (:mod:`agentsim.physics`)."""
+    group = parser.add_argument_group("physics (mixed dynamics: a physical body under the animation)")
+    group.add_argument("--physics", action="store_true",
+                       help="play the motion on a physically simulated body: the pelvis, legs and spine "
+                            "physical under a BalanceController, the neck, head, arms and hands as animated; "
+                            "<bmlt:controller> behaviours make parts physical while they are active")
+    group.add_argument("--push", action="append", default=[], metavar="TIME:FX,FY,FZ:DURATION",
+                       help="push the pelvis with a force (newtons; +Y up, +Z the way the body faces, +X its "
+                            "left) from TIME for DURATION seconds (repeatable; needs --physics)")
+    group.add_argument("--physics-csv", metavar="OUT.csv",
+                       help="write the centre of mass, support polygon, pelvis height and whether the body has "
+                            "fallen, one row a frame (needs --physics)")
+
+
+def physics_options(args: argparse.Namespace) -> list:
+    """The pushes of ``--push`` (a usage error naming --push for a malformed one, or for --push or
+    --physics-csv without --physics)."""
+    if not getattr(args, "physics", False):
+        for flag, given in (("--push", getattr(args, "push", None)), ("--physics-csv", getattr(args, "physics_csv",
+                                                                                              None))):
+            if given:
+                raise UsageError(f"{flag} needs --physics")
+        return []
+    from agentsim.physics.run import parse_push
+
+    pushes = []
+    for text in args.push:
+        try:
+            pushes.append(parse_push(text))
+        except ValueError as exc:
+            raise UsageError(f"--push: {exc}") from None
+    return pushes
+
+
 #: The prefix of the scratch folder (in the system's temporary folder) the poses are evaluated into.
 POSES_SCRATCH = "agentsim-scratch-poses-"
 
@@ -120,7 +156,8 @@ POSES_SCRATCH = "agentsim-scratch-poses-"
 def run_outputs(args: argparse.Namespace) -> list[str]:
     """The files (and the ``--csv`` folder, with a slash) that ``args`` asks :func:`write_run_outputs` for."""
     return [f"{name}/" if name == args.csv else name
-            for name in (args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report) if name]
+            for name in (args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report,
+                         getattr(args, "physics_csv", None) if getattr(args, "physics", False) else None) if name]
 
 
 def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sources=(), beat_times=None) -> None:
@@ -145,7 +182,9 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
     recording = realizer.recording()
     duration = run_duration(recording)
     track = run_track_stream(recording, extra_sources) if (args.wav or args.report) else None
-    poses = pose_bytes(frames_of(duration, args.fps)) if (args.bvh or args.poses or args.report) else {}
+    physics = getattr(args, "physics", False)
+    physics_csv = getattr(args, "physics_csv", None) if physics else None
+    poses = pose_bytes(frames_of(duration, args.fps)) if (args.bvh or args.poses or args.report or physics_csv) else {}
     sizes = {}
     if args.wav:
         sizes[f"--wav {args.wav}"] = (Path(args.wav), 44 + 2 * track.length)
@@ -158,7 +197,10 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
     if poses:
         from agentsim.animation import evaluate_poses
 
-        stream = evaluate_poses(recording, fps=args.fps, seed=args.seed, folder=scratch)
+        manager = _physics_manager(args, realizer)
+        stream = evaluate_poses(recording, fps=args.fps, seed=args.seed, folder=scratch, manager=manager)
+        if manager is not None:
+            _physics_said(args, realizer, manager.result)
     gestures = gesture_rows(recording, beat_times) if (args.csv or args.report or args.textgrid) else []
     if args.wav:
         write_wav(args.wav, track)
@@ -182,12 +224,37 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
                      gestures=gestures, title=title)
 
 
+def _physics_manager(args, realizer):
+    """The manager whose poses are the physical body's (``--physics``), or None."""
+    if not getattr(args, "physics", False):
+        return None
+    from agentsim.physics.run import PhysicalManager, run_controllers
+
+    return PhysicalManager(run_controllers(realizer.recording()), physics_options(args), fps=args.fps, seed=args.seed)
+
+
+def _physics_said(args, realizer, result) -> None:
+    """A fall said once as a warning, an unstable simulation on stderr, the CSV written."""
+    from agentsim.core import feedback as fb
+    from agentsim.physics.run import write_physics_csv
+
+    if result.fell_at is not None:
+        realizer.feedback.send(fb.warning("", "BODY_FELL", f"the physical body fell at {result.fell_at:.3f} s",
+                                          result.fell_at, "agent"))
+    if result.unstable_at is not None:
+        print(f"agentsim: the physical body's simulation became unstable at {result.unstable_at:.3f} s and started "
+              f"again from its rest pose (MuJoCo: {result.unstable})", file=sys.stderr)
+    if args.physics_csv:
+        write_physics_csv(args.physics_csv, result)
+
+
 def check_outputs(args: argparse.Namespace) -> None:
     """Say, before any work, which output cannot be written."""
     from agentsim.media.files import check_writable
 
     inputs = [resolve(f) for f in args.files]
-    check_writable([args.wav, args.bvh, args.poses, args.textgrid, args.report], [args.csv], inputs=inputs)
+    check_writable([args.wav, args.bvh, args.poses, args.textgrid, args.report,
+                    getattr(args, "physics_csv", None)], [args.csv], inputs=inputs)
     if args.report:  # its folder too: never one that holds someone else's files or the input
         from agentsim.media.report.page import OWN_FILES, report_paths
         from agentsim.written import check_folder
@@ -243,6 +310,7 @@ def realize_files(args: argparse.Namespace) -> int:
     if args.until is not None and not args.until >= 0:
         raise UsageError("--until must be a non-negative number of seconds")
     options.check_fps(args)
+    physics_options(args)
     check_outputs(args)
     tts = options.backend(args.tts, args.voice)
     if args.wav and tts.name == "builtin":

@@ -200,13 +200,14 @@ BEHAVIOUR_TYPES: dict[str, BehaviourType] = {
         BehaviourType("postureShift", SHIFT_SYNCS, resource="postureShift"),
         BehaviourType("locomotion", SHIFT_SYNCS, resource="locomotion"),
         BehaviourType("wait", SHIFT_SYNCS),
-        # BMLA and BMLT (AsapRealizer's extensions): control of other blocks and behaviours, sound files, and
-        # transitions between poses
+        # BMLA and BMLT (AsapRealizer's extensions): control of other blocks and behaviours, sound files,
+        # transitions between poses and physical controllers
         BehaviourType("interrupt", SHIFT_SYNCS),
         BehaviourType("activate", SHIFT_SYNCS),
         BehaviourType("parametervaluechange", SHIFT_SYNCS),
         BehaviourType("audiofile", SHIFT_SYNCS),
         BehaviourType("transition", SHIFT_SYNCS),
+        BehaviourType("controller", SHIFT_SYNCS),  # a physical controller (agentsim.physics)
         # MURML (AsapRealizer's form language of gestures): a gesture or face made from its form
         BehaviourType("murmlgesture", GESTURE_SYNCS),
         BehaviourType("murmlface", FACE_SYNCS),

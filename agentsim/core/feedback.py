@@ -22,6 +22,8 @@ WARNING_TYPES = (
     "INTERRUPTED",
     # not in BML 1.0: the block was written for another realizer, and read with these adaptations
     "NONSTANDARD_BML",
+    # not in BML 1.0: the physically simulated body (--physics) fell
+    "BODY_FELL",
 )
 
 

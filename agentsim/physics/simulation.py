@@ -1,0 +1,424 @@
+"""Mixed dynamics: the physical body stepped frame by frame under the procedural animation.
+
+At every physics step the kinematic joints (those no active controller holds: the neck, head, arms and
+hands by default) take exactly the animation's angles, angular velocities and accelerations; inverse
+dynamics (MuJoCo's ``mj_inverse``) gives the torques that motion needs at those joints, and they are applied
+there, so that the physical part (the root, and the joints of the active controllers) feels the reaction of
+the kinematic parts' motion through their common joints, as well as gravity, the floor's contacts, the
+pushes and its controllers' servos. Physics never changes a kinematic joint's angle nor any behaviour's
+timing: it only moves the root and the physical joints.
+
+The clock: the physics runs on the animation's frame times, inside the loop that evaluates the poses
+(:class:`Stepper` takes the frames as the drivers make them, :class:`~agentsim.physics.run.PhysicalManager`
+puts it in :func:`~agentsim.animation.evaluate_poses`), ``substeps`` steps of ``1 / (fps * substeps)`` s
+between two frames, with ``substeps`` the smallest number that makes a step 1 ms or shorter (17 steps of
+0.98 ms at 60 frames per second). What this costs in accuracy: the kinematic motion is known at the frames
+only, so between two frames it is the cubic Hermite curve through them with the frames' central-difference
+velocities (its angles are exact at every frame, its velocities and accelerations those of that curve); the
+controllers' targets and the balance's corrections are set once a frame (a 17 ms control period, shorter than
+a human's fastest postural reflexes); the inverse dynamics of a step takes the physical part's acceleration
+of the step before (a 1 ms lag, which :data:`KINEMATIC_ARMATURE` keeps stable). The servos themselves run
+inside MuJoCo at every step, with implicit damping. Per step Python only assigns the kinematic joints' rows
+(computed for the whole frame at once) and calls ``mj_inverse`` and ``mj_step``; a profile of a standing body
+gives about half of the time to ``mj_step``, a fifth to ``mj_inverse`` and the rest to Python's per-step and
+per-frame work, 0.2 to 0.35 ms a step on a busy two-core machine, two to four times faster than real time
+(``benchmarks/bench_physics.py``). Several steps a call (``mj_step``'s ``nstep``) were not chosen: the
+kinematic joints' torques would be held over those steps, for a saving the profile shows to be small.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agentsim.animation.body import Body, matrix_euler
+from agentsim.physics.controllers import LEGS, ControllerSpec
+from agentsim.physics.model import FOOT_HALF_WIDTH, FOOT_HEEL, FOOT_SOLE, FOOT_TOE, build_model
+
+#: The longest physics step (s).
+MAX_STEP = 0.001
+#: The armature (kg m^2) of a kinematic joint's hinges: the inverse dynamics' torque includes it, so a
+#: kinematic joint follows its prescribed acceleration even though the torque was computed with the physical
+#: part's acceleration of the step before (without it, that one-step lag makes the coupling unstable); the
+#: armature has no reaction on the parent body, so the physical part feels only the true joint torque.
+KINEMATIC_ARMATURE = 20.0
+#: The armature of a physical joint's hinges (that of the model).
+PHYSICAL_ARMATURE = 0.02
+#: How long a part given back to the animation takes to reach it, and a joint's servo target takes to go
+#: from where the joint is to where a controller that takes it over wants it (s).
+RELEASE = 0.3
+#: The body has fallen when the pelvis is below this fraction of its standing height.
+FALL_FRACTION = 0.6
+#: The columns of the physics CSV.
+CSV_COLUMNS = ("time", "com_x", "com_y", "com_z", "support_min_x", "support_max_x", "support_min_z",
+               "support_max_z", "com_inside", "pelvis_height", "fallen")
+
+
+@dataclass(frozen=True)
+class Push:
+    """A force (newtons, in the BVH's frame) on the pelvis from ``time`` for ``duration`` seconds."""
+
+    time: float
+    force: tuple[float, float, float]
+    duration: float
+
+
+@dataclass
+class PhysicsResult:
+    """What a simulation gave: the CSV rows (one a frame), when the body fell (None: it did not), and when
+    MuJoCo found the simulation unstable (it then starts the body again from the model's rest pose) with
+    what it said."""
+
+    rows: list[tuple] = field(default_factory=list)
+    fell_at: float | None = None
+    unstable_at: float | None = None
+    unstable: str = ""
+
+
+def _hermite(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cubic Hermite basis (value, first, second derivative in u) at u = s / n for the n steps of a frame."""
+    u = np.arange(n) / n
+    u2, u3 = u * u, u * u * u
+    value = np.stack([2 * u3 - 3 * u2 + 1, u3 - 2 * u2 + u, -2 * u3 + 3 * u2, u3 - u2], axis=1)
+    first = np.stack([6 * u2 - 6 * u, 3 * u2 - 4 * u + 1, -6 * u2 + 6 * u, 3 * u2 - 2 * u], axis=1)
+    second = np.stack([12 * u - 6, 6 * u - 4, -12 * u + 6, 6 * u - 2], axis=1)
+    return value, first, second
+
+
+def _quat_matrix(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _matrix_quat(m: np.ndarray) -> np.ndarray:
+    import mujoco
+
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(m, dtype=float).ravel())
+    return q
+
+
+class Simulation:
+    """The physical body of one run, advanced a frame at a time by :meth:`advance`.
+
+    ``controllers`` are the run's controllers with their times (the physical configuration at a moment is
+    the root and every joint of the controllers active then; of two controllers holding a joint, the one
+    that started later drives it); ``pushes`` the forces on the pelvis.
+    """
+
+    def __init__(self, body: Body, fps: float, controllers: list[ControllerSpec], pushes: list[Push] = ()):
+        import mujoco
+
+        self.mj = mujoco
+        self.body = body
+        self.frame_time = 1.0 / fps
+        self.substeps = max(1, math.ceil(self.frame_time / MAX_STEP - 1e-9))
+        self.step = self.frame_time / self.substeps
+        self.model, self.layout = build_model(body, self.step)
+        self.data = mujoco.MjData(self.model)
+        self.controllers = sorted(controllers, key=lambda c: c.start)
+        self.pushes = list(pushes)
+        self.joints = self.layout.joints[1:]
+        self.index = {j: i for i, j in enumerate(self.joints)}
+        self.columns = np.array([body.rotation_columns[j] for j in self.joints], dtype=np.intp)  # (J, 3)
+        self.qadr = np.array([self.layout.qpos[j] for j in self.joints], dtype=np.intp)
+        self.dadr = np.array([self.layout.dof[j] for j in self.joints], dtype=np.intp)
+        self.aadr = np.array([self.layout.actuator[j] for j in self.joints], dtype=np.intp)
+        self.root_translation = np.array(body.translation_columns, dtype=np.intp)
+        self.root_rotation = np.array(body.rotation_columns[body.joints[0].name], dtype=np.intp)
+        self.pelvis = self.layout.body_id["sacroiliac"]
+        self.basis = _hermite(self.substeps)
+        self.physical = np.zeros(len(self.joints), dtype=bool)
+        self.release: dict[int, tuple[float, np.ndarray]] = {}  # joint -> (time given back, angle offsets)
+        self.taken: dict[int, np.ndarray] = {}  # joint -> its angles (rad) when a JointController took it
+        self.handover: dict[int, tuple[float, np.ndarray]] = {}  # joint -> (time taken, its angles then)
+        self.owner: list[ControllerSpec | None] = [None] * len(self.joints)
+        self.model.dof_armature[self.dadr.ravel()] = KINEMATIC_ARMATURE
+        self.result = PhysicsResult()
+        self.standing: float | None = None
+        self.balance_target: np.ndarray | None = None
+        self._sole = np.array([[sx * FOOT_HALF_WIDTH, FOOT_SOLE, z] for sx in (-1, 1)
+                               for z in (FOOT_HEEL, FOOT_TOE)])
+        self._feet = [self.layout.body_id[f"{s}_ankle"] for s in ("l", "r")]
+        self._ids = {name: self.index[name] for name in LEGS}
+
+    # ------------------------------------------------------------------ state and configuration
+    def start(self, time: float, rows: np.ndarray) -> np.ndarray:
+        """Put the body in the animation's pose of the first frame (``rows``: that frame and the next) and
+        return the first frame's pose."""
+        d = self.data
+        pose = rows[0]
+        d.qpos[0:3] = pose[self.root_translation]
+        r = self.root_rotation
+        from agentsim.animation.body import euler_matrix
+
+        d.qpos[3:7] = _matrix_quat(euler_matrix(*(pose[[c]] for c in r))[0])
+        d.qpos[self.qadr] = np.radians(pose[self.columns])
+        if len(rows) > 1:
+            d.qvel[self.dadr] = np.radians(_wrapped(rows[1][self.columns] - pose[self.columns])) / self.frame_time
+        self.mj.mj_forward(self.model, d)
+        self.standing = float(d.xpos[self.pelvis][1])
+        self._configure(time)
+        return self._frame(time, pose)
+
+    def _active(self, time: float) -> list[ControllerSpec]:
+        return [c for c in self.controllers if c.start <= time + 1e-9 < c.end]
+
+    def _configure(self, time: float) -> None:
+        """The physical configuration at ``time``: who drives which joint, the servos' gains; a joint given
+        back to the animation starts its transition from where it is."""
+        owner: list[ControllerSpec | None] = [None] * len(self.joints)
+        for c in self._active(time):
+            for j in c.joints:
+                owner[self.index[j]] = c
+        d, m = self.data, self.model
+        for i, (old, new) in enumerate(zip(self.owner, owner)):
+            if old is new:
+                continue
+            if new is None:  # given back: reach the animation from where it is
+                self.release[i] = (time, d.qpos[self.qadr[i]].copy())
+            else:  # taken over: its servo's target goes from where it is to the controller's in a transition
+                self.release.pop(i, None)
+                self.handover[i] = (time, d.qpos[self.qadr[i]].copy())
+                if new.kind == "JointController":
+                    self.taken[i] = d.qpos[self.qadr[i]].copy()
+            if new is None:
+                kp = kd = 0.0
+            elif new.kind == "HangController":
+                kp, kd = 0.0, new.params["damping"]
+            else:
+                kp, kd = new.params["kp"], new.params["kd"]
+            m.dof_armature[self.dadr[i]] = KINEMATIC_ARMATURE if new is None else PHYSICAL_ARMATURE
+            a = self.aadr[i]
+            m.actuator_gainprm[a, 0] = kp
+            m.actuator_biasprm[a, 1] = -kp
+            m.actuator_biasprm[a, 2] = -kd
+        self.owner = owner
+        self.physical = np.array([o is not None for o in owner])
+
+    # ------------------------------------------------------------------ the frame loop
+    def advance(self, time: float, rows: np.ndarray) -> np.ndarray:
+        """Step from the frame at ``time`` to the next one and return the next frame's pose.
+
+        ``rows`` are the animation's poses of the frames before, at, after and two after ``time`` (clamped
+        at the ends of the run: the same row repeated).
+        """
+        m, d, mj = self.model, self.data, self.mj
+        self._configure(time)
+        kin = ~self.physical
+        targets = np.radians(np.stack([self._kinematic(time + (k - 1) * self.frame_time, rows[k])
+                                       for k in range(4)]))  # (4, J, 3)
+        targets = targets[1] + _wrapped_rad(targets - targets[1])  # no turn through +-180 degrees
+        h = self.frame_time
+        v1 = (targets[2] - targets[0]) / (2 * h)
+        v2 = (targets[3] - targets[1]) / (2 * h)
+        coeffs = np.stack([targets[1], h * v1, targets[2], h * v2])  # (4, J, 3)
+        kq, kd_ = self.qadr[kin].ravel(), self.dadr[kin].ravel()
+        c = coeffs[:, kin].reshape(4, -1)
+        value, first, second = self.basis
+        q_path, v_path, a_path = value @ c, (first @ c) / h, (second @ c) / (h * h)
+        self._servo_targets(time, rows[2])
+        d.qfrc_applied[:] = 0.0  # a physical joint feels no torque left from its kinematic time
+        pushes = [p for p in self.pushes if p.time < time + h and p.time + p.duration > time]
+        for s in range(self.substeps):
+            if pushes:
+                t = time + s * self.step
+                force = np.zeros(3)
+                for p in pushes:
+                    if p.time - 1e-12 <= t < p.time + p.duration - 1e-12:
+                        force += p.force
+                d.xfrc_applied[self.pelvis, :3] = force
+            d.qpos[kq] = q_path[s]
+            d.qvel[kd_] = v_path[s]
+            d.qacc[kd_] = a_path[s]
+            mj.mj_inverse(m, d)
+            d.qfrc_applied[kd_] = d.qfrc_inverse[kd_]
+            mj.mj_step(m, d)
+        if pushes:
+            d.xfrc_applied[self.pelvis, :3] = 0.0
+        d.qpos[kq] = coeffs[2][kin].ravel()
+        d.qvel[kd_] = v2[kin].ravel()
+        return self._frame(time + h, rows[2])
+
+    def _kinematic(self, time: float, row: np.ndarray) -> np.ndarray:
+        """The angles (degrees, (J, 3)) the kinematic joints take at ``time``: the animation's, plus what is
+        left of a returning part's offset."""
+        angles = row[self.columns].copy()
+        for i, (t0, start) in self.release.items():
+            u = min(max((time - t0) / RELEASE, 0.0), 1.0)
+            w = 1.0 - u * u * (3 - 2 * u)
+            angles[i] += w * _wrapped(np.degrees(start) - angles[i]) if w > 0 else 0.0
+        return angles
+
+    def _servo_targets(self, time: float, row: np.ndarray) -> None:
+        """Each physical joint's servo target for the next frame: the animation's angles (and the balance's
+        corrections) for the balance's joints, the targets for a JointController's."""
+        d = self.data
+        ctrl = np.radians(row[self.columns])  # (J, 3)
+        for i, owner in enumerate(self.owner):
+            if owner is not None and owner.kind == "JointController":
+                ctrl[i] = self.taken.get(i, ctrl[i])
+                for name, value in owner.targets.items():
+                    j, axis = name.split(".")
+                    if self.index[j] == i:
+                        ctrl[i, ("roll", "pitch", "yaw").index(axis)] = math.radians(value)
+        balance = next((o for o in self.owner if o is not None and o.kind == "BalanceController"), None)
+        if balance is not None:
+            self._balance(balance, ctrl)
+        for i, (t0, start) in list(self.handover.items()):
+            u = min(max((time + self.frame_time - t0) / RELEASE, 0.0), 1.0)
+            if u >= 1.0:
+                del self.handover[i]
+                continue
+            w = u * u * (3 - 2 * u)
+            ctrl[i] = start + w * _wrapped_rad(ctrl[i] - start)
+        d.ctrl[self.aadr.ravel()] = ctrl.ravel()
+
+    def _balance(self, spec: ControllerSpec, ctrl: np.ndarray) -> None:
+        """Ankle and hip corrections that bring the centre of mass over the middle of the feet."""
+        m, d, mj = self.model, self.data, self.mj
+        qacc = d.qacc.copy()
+        mj.mj_forward(m, d)
+        mj.mj_subtreeVel(m, d)
+        d.qacc[:] = qacc
+        com, vel = d.subtree_com[0], d.subtree_linvel[0]
+        corners = self._corners(self._feet)
+        centre = (corners.min(axis=0) + corners.max(axis=0)) / 2
+        err = (com - centre) * 100.0  # cm
+        speed = vel * 100.0
+        kp, kd = spec.params["com_kp"], spec.params["com_kd"]
+        lean_forward = -math.radians(kp * err[2] + kd * speed[2])
+        lean_left = -math.radians(kp * err[0] + kd * speed[0])
+        squat = 0.0
+        height = spec.params.get("pelvis_height")
+        if height is not None and self.standing is not None and height < self.standing:
+            leg = 0.81
+            squat = math.acos(max(0.2, min(1.0, (leg - (self.standing - height)) / leg)))
+        for side in ("l", "r"):
+            hip, knee, ankle = (self._ids[f"{side}_{j}"] for j in ("hip", "knee", "ankle"))
+            ctrl[ankle, 1] += -lean_forward - squat
+            ctrl[hip, 1] += -squat
+            ctrl[knee, 1] += 2 * squat
+            ctrl[ankle, 0] += lean_left
+            ctrl[hip, 0] -= lean_left
+
+    # ------------------------------------------------------------------ what a frame shows
+    def _corners(self, feet: list[int]) -> np.ndarray:
+        d = self.data
+        return np.concatenate([d.xpos[b] + self._sole @ d.xmat[b].reshape(3, 3).T for b in feet])
+
+    def _frame(self, time: float, row: np.ndarray) -> np.ndarray:
+        """The pose the frame at ``time`` shows (the animation's, with the root and the physical joints from
+        the simulation) and its CSV row."""
+        m, d, mj = self.model, self.data, self.mj
+        qacc = d.qacc.copy()
+        mj.mj_forward(m, d)
+        d.qacc[:] = qacc
+        pose = np.array(row, dtype=float)
+        pose[self.root_translation] = d.qpos[0:3]
+        roll, pitch, yaw = matrix_euler(_quat_matrix(d.qpos[3:7]))
+        pose[self.root_rotation] = (roll, pitch, yaw)
+        angles = self._kinematic(time, row)
+        angles[self.physical] = np.degrees(d.qpos[self.qadr[self.physical]])
+        pose[self.columns] = angles
+        touching, other = set(), False
+        for k in range(d.ncon):
+            contact = d.contact[k]
+            geoms = {int(contact.geom1), int(contact.geom2)}
+            if self.layout.floor_geom in geoms:
+                g = (geoms - {self.layout.floor_geom}).pop()
+                body = int(m.geom_bodyid[g])
+                if body in self._feet:
+                    touching.add(body)
+                else:
+                    other = True
+        com = d.subtree_com[0].copy()
+        feet = [b for b in self._feet if b in touching] or self._feet
+        corners = self._corners(feet)
+        lo, hi = corners.min(axis=0), corners.max(axis=0)
+        inside = int(lo[0] <= com[0] <= hi[0] and lo[2] <= com[2] <= hi[2])
+        pelvis = float(d.xpos[self.pelvis][1])
+        if self.result.fell_at is None and (other or pelvis < FALL_FRACTION * (self.standing or pelvis)):
+            self.result.fell_at = time
+        fallen = int(self.result.fell_at is not None)
+        self.result.rows.append((time, *com, lo[0], hi[0], lo[2], hi[2], inside, pelvis, fallen))
+        return pose
+
+
+def _wrapped(angle):
+    return (np.asarray(angle, dtype=float) + 180.0) % 360.0 - 180.0
+
+
+def _wrapped_rad(angle):
+    return (np.asarray(angle, dtype=float) + math.pi) % (2 * math.pi) - math.pi
+
+
+class Stepper:
+    """A :class:`Simulation` fed the animation's frames in order, a block at a time (:meth:`feed`), making
+    the physical body's frames as soon as the animation's frames they need have come (each needs the next
+    two, for the velocities): ``out(k, pose)`` takes frame ``k``. :meth:`finish` makes the last frames.
+    MuJoCo's warnings are kept in the result (when the simulation became unstable), not printed."""
+
+    def __init__(self, body: Body, fps: float, times: np.ndarray, controllers: list[ControllerSpec],
+                 pushes: list[Push], out) -> None:
+        self.sim = Simulation(body, fps, controllers, pushes)
+        self.times = np.asarray(times, dtype=float)
+        self.out = out
+        self.rows: dict[int, np.ndarray] = {}  # the animation's frames still needed, by index
+        self.received = 0  # frames fed so far
+        self.made = 0  # physical frames made so far
+        self.said: list[str] = []
+
+    def _row(self, k: int) -> np.ndarray:
+        return self.rows[min(max(k, 0), len(self.times) - 1)]
+
+    def _make(self, last: int) -> None:
+        """Make the physical frames up to ``last`` (exclusive) whose animation frames have all come."""
+        mj, sim = self.sim.mj, self.sim
+        previous = mj.get_mju_user_warning()
+        mj.set_mju_user_warning(self.said.append)
+        try:
+            while self.made < last:
+                k = self.made
+                if k == 0:
+                    pose = sim.start(float(self.times[0]), np.stack([self._row(0), self._row(1)]))
+                else:
+                    rows = np.stack([self._row(k - 2), self._row(k - 1), self._row(k), self._row(k + 1)])
+                    pose = sim.advance(float(self.times[k - 1]), rows)
+                    if self.said and sim.result.unstable_at is None:
+                        sim.result.unstable_at, sim.result.unstable = float(self.times[k]), self.said[0]
+                self.out(k, pose)
+                self.made += 1
+                for old in [i for i in self.rows if i < self.made - 2]:
+                    del self.rows[old]
+        finally:
+            mj.set_mju_user_warning(previous)
+
+    def feed(self, block: np.ndarray) -> None:
+        """The animation's next frames."""
+        for row in np.asarray(block, dtype=float):
+            self.rows[self.received] = row.copy()
+            self.received += 1
+        self._make(max(0, self.received - 1))  # frame k needs frame k + 1
+
+    def finish(self) -> PhysicsResult:
+        """Make the last frames (the run's last frame repeated where one after it is wanted)."""
+        self._make(len(self.times))
+        return self.sim.result
+
+
+def simulate(body: Body, fps: float, times: np.ndarray, frames, controllers: list[ControllerSpec],
+             pushes: list[Push] = (), sink=None) -> PhysicsResult:
+    """Run the physical body over the animation's frames.
+
+    ``frames(first, last)`` gives the animation's poses of frames ``first .. last - 1``; ``sink(k, pose)``
+    takes the physical body's pose of frame ``k`` as it is made.
+    """
+    stepper = Stepper(body, fps, times, controllers, list(pushes), sink)
+    for first in range(0, len(times), 256):
+        stepper.feed(frames(first, min(len(times), first + 256)))
+    return stepper.finish()
