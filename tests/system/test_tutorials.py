@@ -62,6 +62,7 @@ MADE = {
          "linear.json", "story.wav", "story.TextGrid"],
         [r"^ ?\d+\.\d{3} s  Welcome$", r'"id": "p:h1:stroke"']),
     "howto/gestures.md": (["mine.toml", "present.bvh"], [r"^PRESENT +gesture form \(MURML\) +mine\.toml$"]),
+    "howto/physics.md": (["talk.xml", "talk.bvh", "talk-physics.csv"], [r'"id": "talk:hang:end"']),
     "howto/praat-blender.md": (
         ["talk.wav", "talk.bvh", "talk.npz", "talk.TextGrid", "tables/gestures.csv", "story.wav",
          "story.TextGrid"],
