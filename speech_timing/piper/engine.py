@@ -32,9 +32,9 @@ _DURATION_NOISE, _SOUND_NOISE = "agentsim_duration_noise", "agentsim_sound_noise
 def _modules():
     """onnx, onnxruntime and piper, imported now (the ``piper`` extra)."""
     try:
+        import piper
         import onnx
         import onnxruntime
-        import piper
     except ImportError as exc:
         raise SpeechExtraMissing(f"Piper is not installed here (no module {exc.name}); install it with: "
                                  f"{INSTALL_HINT}") from None
@@ -53,6 +53,7 @@ def voice_files(voice: str) -> tuple[Path, Path]:
         For a path that is not a ``.onnx`` file, or a model or configuration that is not there.
     """
     if voice in SHIPPED_VOICES:
+        _modules()  # Piper itself first: without it, the voice is not what is missing
         module, distribution = SHIPPED_VOICES[voice]
         try:
             package = __import__(module)

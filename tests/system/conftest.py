@@ -106,3 +106,25 @@ def user_environment(tmp_path_factory) -> Path:
     subprocess.run([str(env / "bin" / "python"), "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
                     str(source)], check=True, timeout=600)
     return env
+
+
+@pytest.fixture(scope="session")
+def piper_stories(tmp_path_factory) -> dict[str, Path]:
+    """Both shipped stories told with ``--tts piper`` (best strategy, seed 0, no pictures), once per session:
+    ``{story: output folder, "cache": the cache of synthesised speech they share}``. The cache is the fresh
+    install's too, so that each story is synthesised once in a run of the system tests."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    where = tmp_path_factory.mktemp("piper-stories")
+    told: dict[str, Path] = {"cache": where / "cache"}
+    for story in ("the_lamp_on_heron_hill", "the_north_wind_and_the_sun"):
+        done = subprocess.run([sys.executable, "-m", "agentsim", "run", "storytelling", "--story", story, "--tts",
+                               "piper", "--cache", str(told["cache"]), "--out", str(where / story), "--no-pictures"],
+                              cwd=where, env={**os.environ, "PYTHONPATH": str(root)}, capture_output=True, text=True,
+                              timeout=1200)
+        assert done.returncode == 0, done.stderr
+        told[story] = where / story
+    return told
