@@ -55,8 +55,9 @@ def owners(groups: list[list[str]], words: list[str], transcribe: Callable[[str]
     the groups go to the words in order. Otherwise (espeak-ng says "of a" as one word, or a number or an
     abbreviation differently in its context) each symbol goes to the word of the transcription symbol it aligns
     with, stress marks aside; a symbol that aligns with none goes with the one before it in its group (the
-    first ones of a group: with its first that aligns), a group that aligns nowhere with the group before it,
-    and a word never comes before one written before it.
+    first ones of a group: with its first that aligns); a group that aligns nowhere goes to the next word if a
+    word is left between the group before it and the next group that aligns ("a" said ``ɐ``, alone ``ˈeɪ``),
+    else with the group before it; and a word never comes before one written before it.
     """
     if not groups:
         return []
@@ -79,10 +80,18 @@ def owners(groups: list[list[str]], words: list[str], transcribe: Callable[[str]
     for block in matcher.get_matching_blocks():
         for d in range(block.size):
             labels[spoken[block.a + d]] = flat[block.b + d][1]
+    firsts = [min((labels[(g, i)] for i in range(len(group)) if (g, i) in labels), default=None)
+              for g, group in enumerate(groups)]
     result, current = [], 0
     for g, group in enumerate(groups):
         found = [labels[(g, i)] for i in range(len(group)) if (g, i) in labels]
-        label = max(current, found[0]) if found else current
+        if not found:  # a group that aligns nowhere: the next word, if one is left before the next group's
+            following = next((f for f in firsts[g + 1:] if f is not None), len(words))
+            said_before = any(r for r in result)
+            candidate = current + 1 if said_before else current
+            label = candidate if candidate < following else current
+        else:
+            label = max(current, found[0])
         row = []
         for i in range(len(group)):
             if (g, i) in labels:

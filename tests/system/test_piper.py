@@ -34,6 +34,8 @@ MARK_WORDS = {"s1": "ladies", "s2": "gentlemen", "s3": "we", "s4": "story", "s5"
 STEP = 256 / 22050  # one alignment step of Piper's voice joe
 ONSET_TOLERANCE = 0.015
 FRAME = 0.002
+#: A gap this long (s) between two words is a pause (the space between two words of a phrase is 35-60 ms)
+PAUSE = 0.1
 
 
 def _agentsim(*args: str, cwd: Path) -> subprocess.CompletedProcess:
@@ -91,8 +93,8 @@ def _rises_out_of_silence(samples: np.ndarray, rate: int, t: float) -> float | N
     n = len(samples) // hop
     energy = np.mean(samples[:n * hop].astype(np.float64).reshape(n, hop) ** 2, axis=1) + 1e-15
     k = int(t * rate) // hop
-    threshold = 100.0 * float(np.median(energy[max(k - int(0.14 / FRAME), 0):k - int(0.04 / FRAME)]))
-    for j in range(k - int(0.04 / FRAME), k + int(0.12 / FRAME)):
+    threshold = 100.0 * float(np.median(energy[max(k - int(0.14 / FRAME), 0):max(k - int(0.04 / FRAME), 1)]))
+    for j in range(max(k - int(0.04 / FRAME), 0), k + int(0.12 / FRAME)):
         if energy[j:j + 3].min() > threshold:
             return j * hop / rate
     return None
@@ -104,18 +106,25 @@ def test_words_rise_out_of_silence_where_piper_aligned_them_and_marks_are_at_the
     assert [w for w, _, _ in words] == TEXT.replace(".", "").replace(",", "").replace(":", "").split()
     samples, rate = soundfile.read(folder / "s.wav", dtype="float64")
     assert rate == 22050
-    after_pause = [k for k, (_, start, _) in enumerate(words) if k == 0 or start - words[k - 1][2] >= 0.03]
+    after_pause = [k for k, (_, start, _) in enumerate(words) if k == 0 or start - words[k - 1][2] >= PAUSE]
     assert [words[k][0] for k in after_pause] == ["Welcome", "Tonight", "we", "Listen", "everyone", "the"]
+    leads = {}
     for k in after_pause:
         onset = _rises_out_of_silence(samples, rate, words[k][1])
-        assert onset is not None and abs(onset - words[k][1]) <= ONSET_TOLERANCE, (words[k], onset)
+        assert onset is not None
+        leads[words[k][0]] = words[k][1] - onset
+    # within 15 ms, but for "Tonight" after a full stop: Piper gives the aspiration of its /t/ to the sentence's
+    # start symbol, 35 ms before the /t/ it aligns (the word's time is Piper's, see the next assertion)
+    assert {w: abs(lead) <= ONSET_TOLERANCE for w, lead in leads.items() if w != "Tonight"} == {
+        w: True for w in ("Welcome", "we", "Listen", "everyone", "the")}
+    assert 0.025 <= leads["Tonight"] <= 0.045
     own = _piper_own_word_starts(TEXT)
     assert len(own) == len(words)
     assert max(abs(a - w[1]) for a, w in zip(own, words)) <= STEP
     feedback = [json.loads(line) for line in done.stdout.splitlines()]
     assert not [f for f in feedback if f["type"] == "warningFeedback"]
     marks = {f["id"].split(":")[-1]: f["time"] for f in feedback if f["type"] == "syncPointProgress"
-             and f["id"].startswith("b1:sp:s")}
+             and f["id"].split(":")[-1] in MARK_WORDS}
     starts = {w: start for w, start, _ in words}
     assert {name: round(t, 6) for name, t in marks.items()} == {
         name: round(starts[word], 6) for name, word in MARK_WORDS.items()}
