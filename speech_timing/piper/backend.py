@@ -19,6 +19,8 @@ BREAK_SECONDS = {"none": 0.0, "x-weak": 0.0, "weak": 0.0, "medium": 0.15, "stron
 RATE_LABELS = {"x-slow": 0.6, "slow": 0.8, "medium": 1.0, "default": 1.0, "fast": 1.25, "x-fast": 1.6}
 #: Rate factors the backend takes (the text's rate times a span's).
 RATE_RANGE = (0.25, 4.0)
+#: Version of how Piper's symbols are read into words and phonemes; a cache keyed by it is read again after a change.
+READING = 1
 #: Symbols that end a sentence in Piper's phonemes.
 _SENTENCE_ENDS = frozenset(".!?")
 assert set(BREAK_SECONDS) == set(BREAK_STRENGTHS)
@@ -84,7 +86,8 @@ class PiperBackend:
         self.noise_scale = float(self._voice.config.noise_scale if noise_scale is None else noise_scale)
         self.sentence_silence = float(sentence_silence)
         #: what decides the sound besides the text: the model's digest and the settings (for caches)
-        self.cache_identity = (f"{self._voice.digest}:noise_w={self.noise_w:g}:noise_scale={self.noise_scale:g}:"
+        self.cache_identity = (f"{self._voice.digest}:piper-tts={self._voice.piper_version}:reading={READING}:"
+                               f"noise_w={self.noise_w:g}:noise_scale={self.noise_scale:g}:"
                                f"sentence_silence={self.sentence_silence:g}")
         self._spoken = self._voice.spoken((self._voice.digest, self.rate, self.noise_w, self.noise_scale,
                                            self.sentence_silence))

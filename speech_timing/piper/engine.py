@@ -124,6 +124,12 @@ class _Voice:
         digest.update(config.read_bytes())
         #: what identifies the voice's sound: the model's and its configuration's SHA-256
         self.digest = digest.hexdigest()[:16]
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:  # its espeak-ng and its reading of the text come with it
+            self.piper_version = version("piper-tts")
+        except PackageNotFoundError:
+            self.piper_version = "unknown"
         self._spoken: dict[tuple, Spoken] = {}
         self._transcriptions: dict[str, list[list[str]]] = {}
 
