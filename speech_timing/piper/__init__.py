@@ -31,10 +31,13 @@ What of SSML Piper applies here, and how:
 * ``break``: the text is cut there into two phrases, each synthesised in a run of its own (so the first one ends as
   before a pause), with silence of the time given between them (strengths as espeak-ng makes them: none, x-weak,
   weak nothing; medium or a break without attributes 0.15 s, strong 0.3 s, x-strong 0.6 s).
-* The text's ``rate``: the model's length scale, for the whole utterance.
-* ``prosody rate`` spans: each phoneme's length inside the span, through a factor the patched model multiplies the
-  phoneme's length by before rounding it to whole frames (labels as espeak-ng reads them: x-slow 60 %, slow 80 %,
-  fast 125 %, x-fast 160 %; percentages and factors). The words around keep their lengths.
+* The text's ``rate``: the model's length scale, for the whole utterance (each symbol's length is still rounded
+  up to whole frames of 256 samples, so rate 2 makes the speech about 0.63 times as long).
+* ``prosody rate`` spans: the frames of the phonemes inside the span, the factor times the model's own (labels as
+  espeak-ng reads them: x-slow 60 %, slow 80 %, fast 125 %, x-fast 160 %; percentages and factors). The patched
+  model multiplies each phoneme's length by a factor before rounding it up to whole frames; the factors are set
+  from the lengths before rounding (a run of the duration predictor alone) so that the rounded frames add up to
+  the span's factor. The words around keep their lengths.
 * Not applied, said in a :class:`UserWarning` (every word still spoken): ``emphasis``, ``prosody`` ``pitch``,
   ``range`` and ``volume``, and ``say-as``. Piper's model has no input for any of them.
 * Silence after each sentence (``sentence_silence``, as Piper's own ``--sentence-silence``): 0 by default.

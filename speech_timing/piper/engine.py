@@ -27,6 +27,7 @@ REMEMBERED, REMEMBERED_BYTES = 64, 64 * 2 ** 20
 
 _LENGTHS = "agentsim_lengths"  # the inputs the patch adds: per-phoneme length factors, and the two noises
 _DURATION_NOISE, _SOUND_NOISE = "agentsim_duration_noise", "agentsim_sound_noise"
+_WIDTHS = "agentsim_widths"  # the output the patch adds: each phoneme id's length in frames, before rounding
 
 
 def _modules():
@@ -106,7 +107,8 @@ class _Voice:
         with open(config, encoding="utf-8") as file:
             self.config = piper.PiperConfig.from_dict(json.load(file))
         graph = onnx.load(str(model))
-        add_alignment_output(graph)
+        #: the output of the samples of each phoneme id (the rounded lengths piper's patch exposes)
+        self.counts_output = add_alignment_output(graph)
         _patch(onnx, graph)
         options = onnxruntime.SessionOptions()
         options.log_severity_level = 3  # no warnings on stderr about the patched graph
@@ -176,7 +178,9 @@ class _Voice:
         if self.config.num_speakers > 1:
             inputs["sid"] = np.array([self.config.default_speaker_id], dtype=np.int64)
         with self.lock:
-            audio, counts = self.session.run(None, inputs)[:2]
+            if any(f != 1.0 for f in factors):
+                inputs[_LENGTHS] = self._exact(inputs, np.array(factors, dtype=np.float64))
+            audio, counts = self.session.run(["output", self.counts_output], inputs)
         audio = audio.squeeze().astype(np.float32)
         if len(audio) > NOISE_FRAMES * self.config.hop_length:
             raise ValueError(f"a phrase of {len(audio) / self.sample_rate:.0f} s is too long for Piper here; "
@@ -191,10 +195,24 @@ class _Voice:
         pcm = np.clip(np.clip(audio, -1.0, 1.0).astype(np.float32) * 32767.0, -32767.0, 32767.0).astype(np.int16)
         return PhraseAudio(pcm, samples)
 
+    def _exact(self, inputs: dict, factors):
+        """Length factors that make the phoneme ids' whole frames ``factors`` times the model's own, summed over
+        every stretch of ids with a factor (each id's length is rounded up to whole frames, so scaling the
+        lengths alone would make the short ones too long): the model's lengths before they are rounded, read
+        from a run of the duration predictor alone, then the frames wanted by accumulated rounding."""
+        import numpy as np
+
+        inputs = {**inputs, _LENGTHS: np.ones((1, 1, len(factors)), dtype=np.float32)}
+        widths = self.session.run([_WIDTHS], inputs)[0].reshape(-1).astype(np.float64)
+        wanted = np.diff(np.round(np.cumsum(np.ceil(widths) * factors)), prepend=0.0)
+        exact = np.where((widths > 0) & (wanted > 0), (wanted - 0.5) / np.maximum(widths, 1e-12), 0.0)
+        return exact.astype(np.float32).reshape(1, 1, -1)
+
 
 def _patch(onnx, graph) -> None:
     """Read the model's normal draws from inputs (:data:`_DURATION_NOISE`, :data:`_SOUND_NOISE`) and multiply each
-    phoneme id's length by :data:`_LENGTHS` before it is rounded up (see :class:`_Voice`)."""
+    phoneme id's length by :data:`_LENGTHS` before it is rounded up, that length an output too (:data:`_WIDTHS`;
+    see :class:`_Voice`)."""
     helper, TensorProto = onnx.helper, onnx.TensorProto
     draws = [node for node in graph.graph.node if node.op_type == "RandomNormalLike"]
     ceil = [node for node in graph.graph.node if node.op_type == "Ceil"]
@@ -215,7 +233,8 @@ def _patch(onnx, graph) -> None:
     node = ceil[0]
     scaled = f"{node.input[0]}_agentsim_scaled"
     index = nodes.index(node)
-    nodes[index:index] = [helper.make_node("Mul", [node.input[0], _LENGTHS], [scaled])]
+    nodes[index:index] = [helper.make_node("Mul", [node.input[0], _LENGTHS], [scaled]),
+                          helper.make_node("Identity", [node.input[0]], [_WIDTHS])]
     node.input[0] = scaled
     del graph.graph.node[:]
     graph.graph.node.extend(nodes)
@@ -223,6 +242,7 @@ def _patch(onnx, graph) -> None:
         helper.make_tensor_value_info(_DURATION_NOISE, TensorProto.FLOAT, [1, NOISE_CHANNELS, NOISE_FRAMES]),
         helper.make_tensor_value_info(_SOUND_NOISE, TensorProto.FLOAT, [1, NOISE_CHANNELS, NOISE_FRAMES]),
         helper.make_tensor_value_info(_LENGTHS, TensorProto.FLOAT, [1, 1, None])])
+    graph.graph.output.append(helper.make_tensor_value_info(_WIDTHS, TensorProto.FLOAT, None))
 
 
 _VOICES: dict[tuple[str, str], _Voice] = {}

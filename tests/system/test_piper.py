@@ -189,17 +189,18 @@ def test_breaks_and_rate_spans_are_applied_and_what_piper_cannot_do_is_said():
     paused = backend.synthesize(SpeechText(text, prosody=(Prosody("break", at, at, (("time", "500ms"),)),)))
     gap = lambda u, k: u.words[k].start - u.words[k - 1].end  # noqa: E731
     k = [w.text for w in plain.words].index("and")
-    # the break's silence between the two phrases, and the first phrase ends as before a pause
+    # the break's silence between the two phrases (the first one ends as before a pause)
     assert 0.5 <= gap(paused, k) - gap(plain, k) <= 0.75
-    assert [w.start for w in paused.words[:k - 1]] == [w.start for w in plain.words[:k - 1]]
+    assert [w.text for w in paused.words] == [w.text for w in plain.words]
     span = (text.index("climbed"), text.index("stairs") + len("stairs"))
     slow = backend.synthesize(SpeechText(text, prosody=(Prosody("prosody", *span, (("rate", "slow"),)),)))
     inside = [i for i, w in enumerate(plain.words) if span[0] <= w.char_start < span[1]]
     lasting = lambda u: u.words[inside[-1]].end - u.words[inside[0]].start  # noqa: E731
-    assert 1.15 <= lasting(slow) / lasting(plain) <= 1.35  # slow: 80 % of the rate
-    assert slow.words[0].start == plain.words[0].start
+    assert 1.2 <= lasting(slow) / lasting(plain) <= 1.3  # slow: 80 % of the rate, 1.25 times as long
+    assert slow.words[0].start == plain.words[0].start  # the lengths outside the span are the model's own
     with pytest.warns(UserWarning, match="Piper leaves out emphasis; prosody pitch"):
         loud = backend.synthesize(SpeechText(text, prosody=(Prosody("emphasis", 0, 3),
                                                             Prosody("prosody", 4, 10, (("pitch", "high"),)))))
     assert [w.text for w in loud.words] == [w.text for w in plain.words]
-    assert backend.synthesize(SpeechText(text, rate=2.0)).duration < 0.6 * plain.duration
+    # the text's rate is the model's length scale: each symbol's length still rounded up to whole frames
+    assert 0.55 * plain.duration < backend.synthesize(SpeechText(text, rate=2.0)).duration < 0.7 * plain.duration
