@@ -112,6 +112,9 @@ class _Voice:
         _patch(onnx, graph)
         options = onnxruntime.SessionOptions()
         options.log_severity_level = 3  # no warnings on stderr about the patched graph
+        # one thread: the same samples whatever the machine's cores, and no threads spinning against the other
+        # work of a busy machine (measured: 0.085 s of CPU a second of speech, against 0.10-0.13 with two)
+        options.intra_op_num_threads = options.inter_op_num_threads = 1
         self.session = onnxruntime.InferenceSession(graph.SerializeToString(), sess_options=options,
                                                     providers=["CPUExecutionProvider"])
         self.voice = piper.PiperVoice(session=self.session, config=self.config)
