@@ -6,7 +6,7 @@ import bisect
 import warnings
 from dataclasses import dataclass, field
 
-from speech_timing.backend import (BREAK_STRENGTHS, Mark, Phoneme, Prosody, SpeechText, Utterance, Word,
+from speech_timing.backend import (BREAK_STRENGTHS, Phoneme, Prosody, SpeechText, Utterance, Word,
                                      check_prosody, mark_times_from_words, parse_time)
 from speech_timing.builtin import rate_factor
 from speech_timing.espeak.ssml import written_tokens
@@ -172,7 +172,7 @@ class PiperBackend:
 
         words, phonemes, sentence_words = _words(text, tokens, timeline, rate, sentences)
         duration = len(pcm) / rate
-        marks = [Mark(m.name, m.time) for m in mark_times_from_words(speech, words, duration)]
+        marks = mark_times_from_words(speech, words, duration)
         from speech_timing.samples import Pcm
 
         return Utterance(text=speech.text, duration=duration, words=words, phonemes=phonemes, marks=marks,
