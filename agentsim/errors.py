@@ -57,6 +57,13 @@ class SpeechBackendUnavailable(Unavailable):
     """A text-to-speech backend cannot run here, for instance because its system library is not installed."""
 
 
+class SpeechExtraMissing(SpeechBackendUnavailable):
+    """A speech backend whose Python packages, an extra of agentsim, are not installed here: the message names
+    the extra. A usage error's status: what was asked for is not part of this installation."""
+
+    exit_status = 2
+
+
 class AnticipatorError(AgentsimError):
     """An anticipator cannot do its work because of its environment or its input.
 

@@ -1,14 +1,17 @@
-"""Benchmark of animator-time strategies: beat gestures on content words of espeak-ng and Festival speech; prints JSON.
+"""Benchmark of animator-time strategies: beat gestures on content words of espeak-ng, Festival and Piper speech;
+prints JSON.
 
-Each backend (``--tts``, default both: espeak-ng and Festival with its default voice, us-slt-hts) speaks
-the same texts, and every strategy of :data:`speech_timing.animator_time.STRATEGIES` is run on the bundled texts
+Each backend (``--tts``, default espeak-ng and Festival with its default voice, us-slt-hts; ``piper``, Piper's
+voice joe, with the ``piper`` extra) speaks the same texts, and every strategy of :data:`speech_timing.animator_time.STRATEGIES` is run on the bundled texts
 (``speech_timing/texts/*.txt`` except ``calibration.txt``, about 420 words and two minutes each),
 under the delivery conditions A, B and C of :data:`speech_timing.delivery.CONDITIONS`, with the plan from the backend's own timeline (``tts``) and from Chang's
 linear characters-to-time model calibrated on ``calibration.txt`` with that backend (``linear``). Each
 text is synthesised once per backend; all strategies see the same delivered events (same seed per
 text). ``side_by_side`` puts the backends' figures next to each other, row by row, and ``speech`` gives
-each backend's speaking rate (words per minute of speech) and synthesis real-time factor (wall seconds
-of synthesis per second of speech, each text synthesised once in a process that had not spoken it);
+each backend's speaking rate (words per minute of speech), synthesis real-time factor (wall seconds
+of synthesis per second of speech, each text synthesised once in a process that had not spoken it) and
+first-synthesis latency (wall seconds from the import of the backend to the end of its first sentence, in a new
+process: what a user waits for before the first word);
 ``--storyteller`` adds each backend's storyteller run (the longest shipped story, ``best``). Errors of all
 texts are pooled before the percentiles are taken; snaps and stall time are summed over the texts.
 
@@ -17,7 +20,7 @@ drift of +500 ppm; strategies know the nominal latency and the base delay only.
 
 Usage::
 
-    PYTHONPATH=. python benchmarks/bench_speech_sync.py [--quick] [--seeds 1] [--tts espeak,festival]
+    PYTHONPATH=. python benchmarks/bench_speech_sync.py [--quick] [--seeds 1] [--tts espeak,festival,piper]
         [--jitter-distribution exponential] [--table] [--storyteller]
 """
 
@@ -27,6 +30,7 @@ import argparse
 import json
 import os
 import platform
+import subprocess
 import sys
 import time
 from collections import OrderedDict
@@ -60,7 +64,9 @@ def bench_texts(quick: bool) -> OrderedDict:
 
 
 #: Backends compared, by ``--tts`` name, with what the JSON calls them.
-BACKENDS = {"espeak": "espeak-ng", "festival": "festival"}
+BACKENDS = {"espeak": "espeak-ng", "festival": "festival", "piper": "piper"}
+#: The sentence whose first synthesis in a new process is timed.
+FIRST_SENTENCE = "The lamp on the hill was lit before the boats came home."
 #: The figures of a strategy row put side by side.
 SIDE_BY_SIDE = ("p50_ms", "p95_ms", "max_ms", "snaps", "stall_s")
 
@@ -118,6 +124,19 @@ def speech_figures(backend, texts: OrderedDict) -> OrderedDict:
                        sample_rate=sample_rate)
 
 
+def first_synthesis(name: str) -> float:
+    """Wall seconds from importing backend ``name`` to the end of its first synthesis of :data:`FIRST_SENTENCE`,
+    in a new Python process (the import of the backend's packages and the loading of its voice included)."""
+    code = ("import time; started = time.perf_counter()\n"
+            "from speech_timing.choice import named\nfrom speech_timing.backend import SpeechText\n"
+            f"named({name!r}).synthesize(SpeechText({FIRST_SENTENCE!r}))\n"
+            "print(time.perf_counter() - started)")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, check=True,
+                          env={**os.environ, "PYTHONPATH": root})
+    return float(done.stdout.split()[-1])
+
+
 def storyteller(name: str) -> OrderedDict:
     """The storyteller with backend ``name``: the longest shipped story told with ``best`` (condition A, seed
     0, strokes on the stressed syllables, as ``agentsim run storytelling``), its sync error and snaps."""
@@ -160,11 +179,11 @@ def markdown(result: dict) -> str:
             c = row[b]
             cells += [f"{c['p50_ms']:g} / {c['p95_ms']:g} / {c['max_ms']:g}", str(c["snaps"]), f"{c['stall_s']:g}"]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "| backend | voice | words | speech s | words per minute | synthesis s | real-time factor |",
-              "|---|---|---|---|---|---|---|"]
+    lines += ["", "| backend | voice | words | speech s | words per minute | synthesis s | real-time factor | "
+                  "first synthesis s |", "|---|---|---|---|---|---|---|---|"]
     for b, sp in result["speech"].items():
         lines.append(f"| {b} | {result['voices'][b]} | {sp['words']} | {sp['speech_s']:g} | {sp['words_per_minute']:g} | "
-                     f"{sp['synthesis_s']:g} | {sp['real_time_factor']:g} |")
+                     f"{sp['synthesis_s']:g} | {sp['real_time_factor']:g} | {sp['first_synthesis_s']:g} |")
     if result.get("storyteller"):
         lines += ["", "| backend | story | gestures | speech s | p50 ms | p95 ms | max ms | snaps |",
                   "|---|---|---|---|---|---|---|---|"]
@@ -178,7 +197,8 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="one text instead of all")
     ap.add_argument("--seeds", type=int, default=1, help="delivery seeds per text (default 1)")
-    ap.add_argument("--tts", default="espeak,festival", help="backends, comma-separated (espeak,festival)")
+    ap.add_argument("--tts", default="espeak,festival",
+                    help="backends, comma-separated: espeak, festival, piper (espeak,festival)")
     ap.add_argument("--jitter-distribution", default="exponential",
                     choices=["exponential", "gamma", "half-normal"])
     ap.add_argument("--stress", action="store_true", help="aim strokes at stressed vowels")
@@ -203,6 +223,7 @@ def main(argv=None) -> dict:
         label = BACKENDS[name]
         voices[label] = str(getattr(backend, "voice", ""))
         speech[label] = speech_figures(backend, texts)
+        speech[label]["first_synthesis_s"] = round(first_synthesis(name), 3)
         model = default_linear_model(backend)
         models[label] = OrderedDict(multiplier=model.multiplier, offset=model.offset,
                                     phonemes_per_unit=model.phonemes_per_unit, rms=model.rms)

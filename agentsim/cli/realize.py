@@ -103,7 +103,7 @@ def add_parsers(commands) -> None:
 def add_outputs(parser: argparse.ArgumentParser) -> None:
     """The files a run can write, all on its time axis (simulated time 0 = WAV sample 0 = frame 0)."""
     parser.add_argument("--wav", metavar="OUT.wav", help="write what a listener of the run heard (needs a backend "
-                                                         "that makes sound: --tts espeak or festival)")
+                                                         "that makes sound: --tts espeak, festival or piper)")
     parser.add_argument("--bvh", metavar="OUT.bvh", help="write the motion as BVH")
     parser.add_argument("--poses", metavar="OUT.npz", help="write joint angles per frame (numpy .npz)")
     parser.add_argument("--textgrid", metavar="OUT.TextGrid", help="write words, phones, marks and strokes as a "

@@ -64,7 +64,8 @@ def add_parsers(commands) -> None:
     export_parser.add_argument("text", metavar="FILE", help="a plain UTF-8 text file (examples/story.txt is one)")
     options.add_tts(export_parser)
     export_parser.add_argument("--wav", metavar="FILE.wav",
-                               help="the audio, 16-bit PCM at the backend's sample rate (needs --tts espeak or --tts festival)")
+                               help="the audio, 16-bit PCM at the backend's sample rate (needs --tts espeak, "
+                                    "festival or piper)")
     export_parser.add_argument("--textgrid", metavar="FILE.TextGrid",
                                help="the words and phonemes as Praat interval tiers, from the speech's start")
     export_parser.set_defaults(handler=export)

@@ -44,7 +44,7 @@ BLOCK_ID = "story"
 
 def make_voice(tts: str | None = None, cache_dir=None, cache: bool = True, voice: str | None = None,
                rate: int = 175):
-    """The storyteller's backend: ``tts`` ("espeak", "festival" or "builtin"; by default espeak-ng when it
+    """The storyteller's backend: ``tts`` ("espeak", "festival", "piper" or "builtin"; by default espeak-ng when it
     is installed, as everywhere) speaking with ``voice`` (None: the backend's default; espeak-ng at ``rate``
     words per minute) behind the disk cache, with phoneme-level marks
     (:class:`~scenarios.storytelling.voice.PhonemeMarks`)."""
@@ -63,15 +63,19 @@ def make_voice(tts: str | None = None, cache_dir=None, cache: bool = True, voice
             backend = FestivalBackend(voice=voice)
         except ValueError as exc:
             raise AgentsimError(str(exc)) from None
+    elif tts == "piper":
+        from speech_timing.piper import PiperBackend
+
+        backend = PiperBackend() if voice is None else PiperBackend(voice=voice)
     elif tts == "builtin":
         from speech_timing.builtin import BuiltinBackend
 
         if voice is not None:
-            raise AgentsimError("the built-in backend has no voices: --voice needs --tts espeak or --tts festival")
+            raise AgentsimError("the built-in backend has no voices: --voice needs --tts espeak, festival or piper")
 
         backend = BuiltinBackend()
     else:
-        raise AgentsimError(f"unknown speech backend {tts!r}: use espeak, festival or builtin")
+        raise AgentsimError(f"unknown speech backend {tts!r}: use espeak, festival, piper or builtin")
     return PhonemeMarks(CachedBackend(backend, cache_dir=cache_dir, enabled=cache))
 
 

@@ -158,10 +158,14 @@ class PhonemeMarks:
 
 
 def _identity(backend) -> dict:
-    """What, besides the text, decides what a backend says: its class, name, voice and rate."""
-    return {"class": f"{type(backend).__module__}.{type(backend).__qualname__}",
-            "name": getattr(backend, "name", ""), "voice": getattr(backend, "voice", None),
-            "rate": getattr(backend, "rate", None), "format": CACHE_FORMAT}
+    """What, besides the text, decides what a backend says: its class, name, voice and rate, and what else it
+    names in its ``cache_identity`` (Piper: its model's digest and its noise and silence settings)."""
+    identity = {"class": f"{type(backend).__module__}.{type(backend).__qualname__}",
+                "name": getattr(backend, "name", ""), "voice": getattr(backend, "voice", None),
+                "rate": getattr(backend, "rate", None), "format": CACHE_FORMAT}
+    if getattr(backend, "cache_identity", None) is not None:
+        identity["settings"] = backend.cache_identity
+    return identity
 
 
 class CachedBackend:

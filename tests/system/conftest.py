@@ -116,3 +116,24 @@ def user_env(user_environment) -> dict:
     env.update(PATH=f"{user_environment / 'bin'}:/usr/bin:/bin", VIRTUAL_ENV=str(user_environment))
     return env
 
+
+@pytest.fixture(scope="session")
+def piper_stories(tmp_path_factory) -> dict[str, Path]:
+    """Both shipped stories told with ``--tts piper`` (best strategy, seed 0, no pictures), once per session:
+    ``{story: output folder, "cache": the cache of synthesised speech they share}``. The cache is the fresh
+    install's too, so that each story is synthesised once in a run of the system tests."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    where = tmp_path_factory.mktemp("piper-stories")
+    told: dict[str, Path] = {"cache": where / "cache"}
+    for story in ("the_lamp_on_heron_hill", "the_north_wind_and_the_sun"):
+        done = subprocess.run([sys.executable, "-m", "agentsim", "run", "storytelling", "--story", story, "--tts",
+                               "piper", "--cache", str(told["cache"]), "--out", str(where / story), "--no-pictures"],
+                              cwd=where, env={**os.environ, "PYTHONPATH": str(root)}, capture_output=True, text=True,
+                              timeout=1200)
+        assert done.returncode == 0, done.stderr
+        told[story] = where / story
+    return told

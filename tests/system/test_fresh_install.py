@@ -1,5 +1,6 @@
 """A fresh virtual environment (no system site packages) takes a copy of the checkout and its declared
-dependencies alone, and runs ``agentsim --version``, a ``realize`` and a two-point sweep on a local cluster.
+dependencies alone, and runs ``agentsim --version``, a ``realize`` and a two-point sweep on a local cluster;
+then the ``piper`` extra, and the storyteller speaks with Piper.
 
 The wheels come from a cache outside the checkout (``~/.cache/agentsim/wheels``), filled from the package
 index the first time; every install after that is offline (``--no-index``). A package the project imports
@@ -14,6 +15,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -87,3 +89,29 @@ def test_version_realize_and_a_local_sweep_in_a_fresh_environment(fresh, tmp_pat
         rows = list(csv.DictReader(f))
     assert [row["strategy"] for row in rows] == ["best", "chang-naive"]
     assert all(not row.get("error") for row in rows)
+
+
+def test_the_piper_extra_installs_and_the_storyteller_speaks_with_it(fresh, piper_stories, tmp_path):
+    """Without the extra, ``--tts piper`` is a usage error naming it; with the extra's packages installed from the
+    wheel cache alone, the storyteller speaks with Piper: its speech read from the cache the session's
+    storyteller runs filled (keyed by the voice's digest, not by where it is installed), its feedback theirs."""
+    (tmp_path / "s.xml").write_text('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="b"><speech id="s">'
+                                    '<text>Hello there.</text></speech></bml>')
+    missing = _agentsim(fresh, "realize", "s.xml", "--tts", "piper", cwd=tmp_path)
+    assert (missing.returncode, missing.stderr.strip().splitlines(), missing.stdout) == (2, [
+        "agentsim: Piper is not installed here (no module piper); install it with: pip install 'agentsim[piper]'"], "")
+    extra = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]["piper"]
+    installed = _pip(fresh, "install", *extra, offline=True)
+    if installed.returncode != 0:  # the first time: the extra's wheels into the cache, then offline
+        filled = _pip(fresh, "download", "-d", str(WHEELS), *extra, offline=False)
+        assert filled.returncode == 0, filled.stderr
+        installed = _pip(fresh, "install", *extra, offline=True)
+    assert installed.returncode == 0, installed.stderr
+    story = "the_north_wind_and_the_sun"
+    told = _agentsim(fresh, "run", "storytelling", "--story", story, "--tts", "piper", "--cache",
+                     str(piper_stories["cache"]), "--out", "told", "--no-pictures", cwd=tmp_path)
+    assert told.returncode == 0, told.stderr
+    metrics = json.loads((tmp_path / "told" / "metrics.json").read_text())
+    assert metrics["speech_backend"]["tts"] == "piper"
+    assert (metrics["cached"], metrics["synthesis_seconds"]) == (True, 0.0)
+    assert (tmp_path / "told" / "feedback.jsonl").read_bytes() == (piper_stories[story] / "feedback.jsonl").read_bytes()

@@ -63,6 +63,8 @@ MADE = {
         [r"^ ?\d+\.\d{3} s  Welcome$", r'"id": "p:h1:stroke"']),
     "howto/gestures.md": (["mine.toml", "present.bvh"], [r"^PRESENT +gesture form \(MURML\) +mine\.toml$"]),
     "howto/physics.md": (["talk.xml", "talk.bvh", "talk-physics.csv"], [r'"id": "talk:hang:end"']),
+    "howto/piper.md": (["hello.xml", "hello.wav", "hello.TextGrid"],
+                       [r'"id": "hello:g1:stroke"', r"^\['hello:g1:stroke'\]$"]),
     "howto/praat-blender.md": (
         ["talk.wav", "talk.bvh", "talk.npz", "talk.TextGrid", "tables/gestures.csv", "story.wav",
          "story.TextGrid"],
