@@ -6,6 +6,8 @@ Every test module in this folder marks its tests ``system``; the default run lea
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 
@@ -83,7 +85,6 @@ def user_environment(tmp_path_factory):
     import site
     import subprocess
     import sys
-    from pathlib import Path
 
     root = Path(__file__).resolve().parents[2]
     home = tmp_path_factory.mktemp("user")
