@@ -82,7 +82,7 @@ class Realizer:
         if tts is None:
             from speech_timing.choice import default_backend
             tts = default_backend()
-        self.scheduler = Scheduler(self.env, self.board, self.feedback, prediction_tolerance, keep=keep)
+        self.scheduler = Scheduler.build(self.env, self.board, self.feedback, prediction_tolerance, keep=keep)
         context = self.scheduler.context
         self.speech = SpeechEngine(context, tts, speech)
         self.animation = AnimationEngine(context, self.lexicon)
@@ -120,8 +120,8 @@ class Realizer:
                 if isinstance(block, Refused):
                     where = f" in {source}" if source else ""
                     error = block.error
-                    self.scheduler.warn(block.block_id, "PARSING_FAILURE", f"block refused{where}: {error}",
-                                        "agent", line=error.line, column=error.column)
+                    self.scheduler.reporter.warn(block.block_id, "PARSING_FAILURE", f"block refused{where}: {error}",
+                                                 "agent", line=error.line, column=error.column)
                     runs.append(None)
                 else:
                     runs.append(self._submit_block(block, source))
@@ -139,7 +139,7 @@ class Realizer:
 
     def name_block(self) -> str:
         """The next free ``bml<n>`` for a block without id."""
-        used = {run.id for run in self.scheduler.all_runs}
+        used = {run.id for run in self.scheduler.book.all_runs}
         while True:
             self._unnamed += 1
             name = f"bml{self._unnamed}"
@@ -191,8 +191,7 @@ class Realizer:
     def _all_done(self):
         yield simpy.AllOf(self.env, self._submissions)
         while True:
-            pending = [r.ended for r in self.scheduler.all_runs
-                       if not r.ended.triggered and not self.scheduler.dormant(r)]
+            pending = [r.ended for r in self.scheduler.book.all_runs if not r.ended.triggered and not r.dormant]
             if not pending:
                 return
             yield simpy.AllOf(self.env, pending)
@@ -209,6 +208,7 @@ class Realizer:
         except RuntimeError as exc:
             if "No scheduled events left" not in str(exc):
                 raise
-            for run in self.scheduler.runs:  # nothing can happen any more: say what is stuck
-                self.scheduler.warn(run.id, "IMPOSSIBLE_TO_SCHEDULE", f"block {run.id} is still {run.state} "
-                                    "and nothing left in the run can move it on", run.block.character_id)
+            for run in self.scheduler.book.runs:  # nothing can happen any more: say what is stuck
+                self.scheduler.reporter.warn(run.id, "IMPOSSIBLE_TO_SCHEDULE", f"block {run.id} is still "
+                                             f"{run.state} and nothing left in the run can move it on",
+                                             run.block.character_id)

@@ -112,7 +112,7 @@ def main() -> None:
         row = {"hour": hour, "rss_mb": round(rss_mb(), 1), "wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
                "blocks": soak.blocks,
                "worst_error_s": soak.worst, "feedback_kept": len(soak.realizer.feedback.items),
-               "runs_kept": len(soak.realizer.scheduler.all_runs),
+               "runs_kept": len(soak.realizer.scheduler.book.all_runs),
                "metronome_pegs": len(soak.metronome.pegs)}
         rows.append(row)
         print(json.dumps(row), flush=True)

@@ -155,7 +155,7 @@ def losses(realizer, cut_short: bool) -> list[str]:
             found.append(f"{f['id']} outside its block's start and end")
             break
     if not cut_short:
-        for run in realizer.scheduler.all_runs:
+        for run in realizer.scheduler.book.all_runs:
             for timed in run.timed:
                 name = f"{run.id}:{timed.id}"
                 if timed.passed[0] is not None and f"{name}:{timed.sync_ids[-1]}" not in seen and name not in warned:

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from agentsim.core.anticipator import Anticipator
-from agentsim.core.scheduler import Scheduler
+from agentsim.core.reporter import Reporter
 
 from helpers import realize
 
@@ -109,7 +109,7 @@ def test_a_move_of_a_peg_still_to_come_into_the_past_is_refused():
 def test_a_storm_of_faults_is_reported_a_bounded_number_of_times():
     r = run("storm")
     faults = [w for w in r.warnings if w["id"] == "anticipators:faulty:beat2"]
-    assert len(faults) == Scheduler.MAX_FAULT_WARNINGS
+    assert len(faults) == Reporter.MAX_FAULT_WARNINGS
     assert faults[-1]["description"].endswith("(further faults of anticipator 'faulty' are not reported)")
     assert [r.glob[f"b:g{n}:stroke"] for n in (1, 2, 3)] == [1.0, 2.0, 3.0]
 

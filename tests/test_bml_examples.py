@@ -191,7 +191,7 @@ def test_example_feedback_is_well_formed(examples, name, strict):
     for f in result.syncs:
         _, beh, sync = f["id"].split(":")
         by_behaviour.setdefault(beh, []).append(sync)
-    block = result.realizer.scheduler.all_runs[0].block
+    block = result.realizer.scheduler.book.all_runs[0].block
     for beh, syncs in by_behaviour.items():
         declared = block.behaviour(beh).sync_ids
         assert syncs == declared, f"{beh}: {syncs} != {declared}"

@@ -102,7 +102,7 @@ def test_the_player_passes_sync_points_at_their_exact_times_in_order_and_follows
     b = gesture(run, [KeyRef(TimePeg(1.0))] + [None] * 5 + [KeyRef(late)], "b")
     for timed in (a, b):
         plan.behaviours[timed] = None
-        timed.state = "active"
+        timed.activate()
     plan.kick()
 
     def move():
@@ -122,7 +122,7 @@ def test_the_player_passes_sync_points_at_their_exact_times_in_order_and_follows
     # a key moved into the past is passed at once, when the player learns of it
     c = gesture(run, [KeyRef(TimePeg(5.5))] + [None] * 5 + [KeyRef(TimePeg(6.0))], "c")
     plan.behaviours[c] = None
-    c.state = "active"
+    c.activate()
     plan.kick([c])
     env.run(until=5.2)
     c.keys[0] = KeyRef(TimePeg(4.0))

@@ -40,7 +40,7 @@ def world():
     env = simpy.Environment()
     board = PegBoard()
     log = FeedbackLog()
-    scheduler = Scheduler(env, board, log)
+    scheduler = Scheduler.build(env, board, log)
     for engine in (AnimationEngine(scheduler.context), WaitEngine(scheduler.context)):
         scheduler.add_engine(engine)
     beats = Beats("m")
@@ -140,7 +140,7 @@ def test_pegs_that_move_often_re_time_only_what_is_within_the_horizon(world):
         peg = OffsetPeg(timeline, 0.0)
         timed.keys = [None if k is None else KeyRef(peg, k.offset) for k in timed.keys]
     scheduler.board.invalidate_times()
-    dependants = scheduler.dependants_of([timeline])
+    dependants = scheduler.retimer.dependants_of([timeline])
     assert dependants.all() == [near, far]
 
     def drift():

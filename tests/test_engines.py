@@ -34,7 +34,7 @@ def test_nod_repetitions_lengthen_the_stroke_phase():
 
 def test_motion_state_gives_phase_and_canonical_time():
     r = realize(f'<bml {NS} id="b"><gesture id="g" lexeme="BEAT" start="1" end="2.9"/></bml>')
-    timed = r.realizer.scheduler.all_runs[0].timed[0]
+    timed = r.realizer.scheduler.book.all_runs[0].timed[0]
     alphas = BEAT.canonical()
     assert motion_state(timed, 0.5) is None and motion_state(timed, 3.0) is None
     phase, alpha = motion_state(timed, r.t("g:stroke"))

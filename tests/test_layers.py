@@ -239,3 +239,130 @@ def test_no_module_touches_another_modules_private_names():
                   and node.attr in OURS and node.attr not in own):
                 found.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
     assert found == []
+
+
+#: The scheduler's parts, and the life cycle of the runs and behaviours they share: each attribute a part owns
+#: is written (assigned, deleted, an item set, or changed in place by ``append``, ``update`` and the like)
+#: only by that class, through ``self``, and set up in its ``__init__`` (no part writes what another part or
+#: a mixin base set up). ``(module, class)`` -> the attributes it owns (None: what its ``__init__`` sets on
+#: ``self``, but for the collaborators it is handed, bound from a parameter of the same name).
+OWNERS: dict[tuple[str, str], tuple[str, ...] | None] = {
+    ("agentsim.core.book", "BlockBook"): None,
+    ("agentsim.core.reporter", "Reporter"): None,
+    ("agentsim.core.composition", "Composer"): None,
+    ("agentsim.core.retiming", "Retimer"): None,
+    ("agentsim.core.retiming", "Dependants"): None,
+    ("agentsim.core.interruption", "Interrupter"): None,
+    ("agentsim.core.scheduler", "Scheduler"): None,
+    ("agentsim.core.scheduler", "BlockControl"): None,
+    ("agentsim.core.timed", "BlockRun"): ("state", "ended_at"),
+    ("agentsim.core.timed", "TimedBehaviour"): ("state", "_state"),
+}
+
+#: Methods that change a list, dict or set in place.
+MUTATORS = frozenset({"append", "extend", "insert", "remove", "pop", "clear", "update", "add", "discard",
+                      "setdefault", "popitem", "sort", "reverse"})
+
+
+def _classes(tree: ast.AST) -> dict[str, ast.ClassDef]:
+    return {node.name: node for node in ast.walk(tree) if isinstance(node, ast.ClassDef)}
+
+
+def _set_up(cls: ast.ClassDef, handed: bool = True) -> set[str]:
+    """What a class sets up: the attributes its ``__init__`` assigns on ``self``, and its annotated fields;
+    ``handed=False``: not those bound from a parameter of the same name (``self.env = env``)."""
+    names = {node.target.id for node in cls.body if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)}
+    for method in cls.body:
+        if isinstance(method, ast.FunctionDef) and method.name == "__init__":
+            for node in ast.walk(method):
+                if not isinstance(node, ast.Assign):
+                    continue
+                for target in node.targets:
+                    if isinstance(target, ast.Attribute) and isinstance(target.value, ast.Name) and target.value.id == "self":
+                        bound = isinstance(node.value, ast.Name) and node.value.id == target.attr
+                        if handed or not bound:
+                            names.add(target.attr)
+            names |= {node.target.attr for node in ast.walk(method) if isinstance(node, (ast.AugAssign, ast.AnnAssign))
+                      and isinstance(node.target, ast.Attribute) and isinstance(node.target.value, ast.Name)
+                      and node.target.value.id == "self"}
+    return names
+
+
+def _writes(tree: ast.AST):
+    """``(class, receiver, attribute, line)`` of every attribute written in a module (class None: outside any)."""
+    def visit(node: ast.AST, cls: str | None):
+        for child in ast.iter_child_nodes(node):
+            inner = child.name if isinstance(child, ast.ClassDef) else cls
+            target = None
+            if isinstance(child, ast.Attribute) and isinstance(child.ctx, (ast.Store, ast.Del)):
+                target = child
+            elif (isinstance(child, ast.Subscript) and isinstance(child.ctx, (ast.Store, ast.Del))
+                  and isinstance(child.value, ast.Attribute)):
+                target = child.value
+            elif (isinstance(child, ast.Call) and isinstance(child.func, ast.Attribute) and child.func.attr in MUTATORS
+                  and isinstance(child.func.value, ast.Attribute)):
+                target = child.func.value
+            if target is not None:
+                yield cls, target.value, target.attr, child.lineno
+            yield from visit(child, inner)
+    yield from visit(tree, None)
+
+
+def writes_outside_owners(trees: dict[str, ast.AST], owners: dict[tuple[str, str], tuple[str, ...] | None],
+                          graph: dict[str, set[str]]) -> list[str]:
+    """Every write of an attribute that ``owners`` gives a class, made anywhere but in that class through
+    ``self``; and every write through ``self`` by an owner (of all it has) of what its ``__init__`` does not set
+    up, or by any other class of an owned name that it does not set up itself (a mixin's).
+
+    Writes through other objects are looked for in the owners' package and the modules that import an
+    owner's module (``graph``: the imports of each module), the modules that can know the parts: elsewhere an
+    attribute of the same name is another class's.
+    """
+    owned: dict[tuple[str, str], set[str]] = {}
+    for (module, name), attributes in owners.items():
+        cls = _classes(trees[module]).get(name)
+        assert cls is not None, f"{module} has no class {name}"
+        owned[(module, name)] = _set_up(cls, handed=False) if attributes is None else set(attributes)
+    anyone = set().union(*owned.values())
+    homes = {module for module, _ in owners}
+    packages = {module.rpartition(".")[0] for module in homes}
+    found = []
+    for module, tree in trees.items():
+        classes = _classes(tree)
+        knows = module.rpartition(".")[0] in packages or bool(graph.get(module, set()) & homes) or module in homes
+        for cls, receiver, attribute, line in _writes(tree):
+            if isinstance(receiver, ast.Name) and receiver.id == "self" and cls is not None:
+                if (module, cls) in owned:
+                    if attribute in _set_up(classes[cls]) or owners[(module, cls)] is not None:
+                        continue  # its own (a class that owns only some of its attributes: the rest are not checked)
+                elif attribute not in anyone or attribute in _set_up(classes[cls]):
+                    continue  # another class's attribute, or one of its own that is named as an owned one is
+            elif attribute not in anyone or not knows:
+                continue
+            found.append(f"{module}:{line}: {ast.unparse(receiver)}.{attribute} (in {cls or 'the module'})")
+    return found
+
+
+def test_no_attribute_of_the_schedulers_parts_is_written_outside_its_owner():
+    assert writes_outside_owners(TREES, OWNERS, GRAPH) == []
+
+
+def test_the_ownership_check_catches_what_it_is_meant_to():
+    trees = {
+        "core.book": ast.parse("class Book:\n    def __init__(self):\n        self.drops = []\n        self.version = 0\n"
+                          "    def bump(self):\n        self.version += 1\n"),
+        "core.parts": ast.parse("class Part:\n    def __init__(self, book):\n        self.book = book\n"
+                           "    def cut(self):\n        self.book.drops.append(1)\n        self.book.version += 1\n"
+                           "        self.book.drops[0] = 2\n        self.later = 1\n"
+                           "class Mixin:\n    def bump(self):\n        self.version += 1\n"),
+        # another class's attribute of the same name, through self or not, in a module that knows no part
+        "media.plan": ast.parse("class Plan:\n    def __init__(self):\n        self.drops = []\n"
+                                "    def f(self, other):\n        self.drops.append(1)\n        other.drops = []\n"),
+        # ... and in a module that imports a part's module
+        "media.user": ast.parse("def f(book):\n    book.version = 3\n"),
+    }
+    graph = {"media.user": {"core.book"}}
+    found = writes_outside_owners(trees, {("core.book", "Book"): None, ("core.parts", "Part"): None}, graph)
+    assert found == ["core.parts:5: self.book.drops (in Part)", "core.parts:6: self.book.version (in Part)",
+                     "core.parts:7: self.book.drops (in Part)", "core.parts:8: self.later (in Part)",
+                     "core.parts:11: self.version (in Mixin)", "media.user:2: book.version (in the module)"]

@@ -310,9 +310,9 @@ def test_a_realizer_that_keeps_a_few_blocks_releases_older_ones_with_their_pegs(
                                         f'{4 * i + 3}"/><speech id="s"><text>one two</text></speech>', f"b{i}"))
     realizer.run()
     scheduler = realizer.scheduler
-    assert len(scheduler.all_runs) <= 2 * 4 + 16 and scheduler.all_runs[-1].id == "b99"
-    assert len(realizer.board.block_pegs) == len(scheduler.all_runs)
-    assert len(realizer.speech.heard()) <= len(scheduler.all_runs)
+    assert len(scheduler.book.all_runs) <= 2 * 4 + 16 and scheduler.book.all_runs[-1].id == "b99"
+    assert len(realizer.board.block_pegs) == len(scheduler.book.all_runs)
+    assert len(realizer.speech.heard()) <= len(scheduler.book.all_runs)
     assert len(realizer.scheduler.anticipators["metronome"].pegs) < 60  # of 100: the last minute, and a batch
     # every block ran whole: the feedback listeners got everything, the log keeps the latest
     ends = [f for f in realizer.feedback.items if f["type"] == "blockProgress" and f["id"].endswith(":end")]
@@ -494,7 +494,7 @@ def test_a_dtd_attribute_default_is_ignored_with_one_warning(strict):
     # no stroke at 5 s: its own start and its preferred timing
     (prediction,) = r.realizer.feedback.of_type("predictionFeedback")
     g = next(b for b in prediction["behaviours"] if b["id"] == "g")
-    assert "lexeme" not in g and r.realizer.scheduler.find_run("b").block.behaviour("g").attributes.get("lexeme") is None
+    assert "lexeme" not in g and r.realizer.scheduler.book.find("b").block.behaviour("g").attributes.get("lexeme") is None
     assert (r.glob["b:g:start"], r.glob["b:g:stroke"], r.glob["b:g:end"]) == pytest.approx((1.0, 1.45, 1.95),
                                                                                           abs=1e-12)
     assert r.glob["b:w:stroke"] == 0.45

@@ -276,7 +276,7 @@ def test_strokes_are_planned_on_the_stressed_vowels_espeak_says(voice):
     realizer = Realizer(tts=voice)
     realizer.submit(compile_bml(story, utterance, block_id="story"))
     realizer.run()
-    speech = realizer.scheduler.all_runs[0].timed[0]
+    speech = realizer.scheduler.book.all_runs[0].timed[0]
     strokes = realizer.feedback.sync_times()
     for n, g in enumerate(story.gestures):
         planned = speech.preferred[speech.sync_ids.index(f"w{g.word}.stress")]

@@ -1,48 +1,70 @@
 """How blocks meet: what a pending block waits for (APPEND, APPEND-AFTER, CHUNK-AFTER, preplanning, the blocks
 it interrupts), when it would start, when a block subsides, and how chunks coarticulate.
 
-:class:`Composition` is that part of the :class:`~agentsim.core.scheduler.Scheduler`.
+:class:`Composer` owns nothing but its collaborators. It writes what a run waits for (its ``after`` and
+``chunk_after``, those of the blocks a new one is prepended or chunked before), its wake event (what its
+waiting process looks at again) and, when chunks coarticulate, the keys of the earlier chunk's gestures; it
+asks the :class:`~agentsim.core.book.BlockBook` for runs (and tells it when ties changed) and the
+:class:`~agentsim.core.reporter.Reporter` to warn. Interrupting the blocks a block names (``bmla:interrupt``)
+is the scheduler's, once the composer says that block may start.
 """
 
 from __future__ import annotations
 
 import simpy
 
+from agentsim.core.book import BlockBook
 from agentsim.core.interruption import hands
-from agentsim.core.timed import EPSILON, BlockRun, KeyRef, SyncPeg, TimedBehaviour
+from agentsim.core.reporter import Reporter
+from agentsim.core.timed import ENDED, EPSILON, OPEN, PENDING, BlockRun, KeyRef, SyncPeg, TimedBehaviour
 
 
-class Composition:
-    """Block composition for the scheduler (it provides ``env``, ``runs``, ``warn``, ``find_run``,
-    ``interrupt`` and ``structure_version``)."""
+class Composer:
+    """Block composition for the scheduler.
+
+    Parameters
+    ----------
+    env : simpy.Environment
+        The clock (a block that may start starts now at the earliest).
+    book : BlockBook
+        The runs: which are open, which a block names.
+    reporter : Reporter
+        Where warnings about blocks named that cannot be waited for go.
+    """
+
+    def __init__(self, env: simpy.Environment, book: BlockBook, reporter: Reporter):
+        self.env = env
+        self.book = book
+        self.reporter = reporter
 
     def link(self, run: BlockRun) -> None:
         """Find what a new block waits for (APPEND, APPEND-AFTER, CHUNK-AFTER and their BMLA forms), and make
         the blocks its prependBefore and chunkBefore name wait for it. Unknown blocks and circles are
         reported and left out. The blocks it interrupts and activates are looked up when it starts."""
         block = run.block
+        warn = self.reporter.warn
         if block.composition == "APPEND":
-            run.after.extend(r for r in self.runs if not self.dormant(r))
+            run.after.extend(r for r in self.book.runs if not r.dormant)
         for ids, found, what in ((block.append_after, run.after, "appendAfter"),
                                  (block.chunk_after, run.chunk_after, "chunkAfter")):
             for block_id in ids:
-                other = self.find_run(block_id)
+                other = self.book.find(block_id)
                 if other is None:
-                    self.warn(block.id, "NO_SUCH_TARGET", f"{what}: there is no block {block_id!r}; ignored",
-                              block.character_id)
-                elif other not in found and other.state in ("pending", "running"):
+                    warn(block.id, "NO_SUCH_TARGET", f"{what}: there is no block {block_id!r}; ignored",
+                         block.character_id)
+                elif other not in found and other.state in OPEN:
                     found.append(other)
         for ids, what in ((block.prepend_before, "prependBefore"), (block.chunk_before, "chunkBefore")):
             for block_id in ids:
-                other = self.find_run(block_id)
-                if other is None or other.state != "pending":
+                other = self.book.find(block_id)
+                if other is None or other.state is not PENDING:
                     state = "there is no such block" if other is None else f"it is {other.state}"
-                    self.warn(block.id, "NO_SUCH_TARGET", f"{what}: block {block_id!r} cannot wait for this one "
-                              f"({state}); ignored", block.character_id)
+                    warn(block.id, "NO_SUCH_TARGET", f"{what}: block {block_id!r} cannot wait for this one "
+                         f"({state}); ignored", block.character_id)
                     continue
                 if self.waits_for(run, other):
-                    self.warn(block.id, "IMPOSSIBLE_TO_SCHEDULE", f"{what}: block {block_id!r} waits for this "
-                              "one already, directly or not; ignored", block.character_id)
+                    warn(block.id, "IMPOSSIBLE_TO_SCHEDULE", f"{what}: block {block_id!r} waits for this "
+                         "one already, directly or not; ignored", block.character_id)
                     continue
                 (other.after if what == "prependBefore" else other.chunk_after).append(run)
                 self.wake(other)
@@ -60,20 +82,15 @@ class Composition:
                 todo.extend(current.after + current.chunk_after)
         return False
 
-    @staticmethod
-    def dormant(run: BlockRun) -> bool:
-        """A preplanned block that nothing has activated yet: nobody waits for it."""
-        return run.block.preplan and not run.activated and run.state == "pending"
-
     def predicted_end(self, run: BlockRun) -> float:
-        if run.state == "ended":
+        if run.state is ENDED:
             return run.ended_at
         ends = [t.end for t in run.live()]
         return max([run.block_peg.time] + [e for e in ends if e is not None and e < float("inf")])
 
     def subsiding_time(self, run: BlockRun) -> float:
         """When a block subsides: every behaviour past its relax (the start of its retraction), or ended."""
-        if run.state == "ended":
+        if run.state is ENDED:
             return run.ended_at
         times = [run.block_peg.time]
         for timed in run.live():
@@ -84,14 +101,19 @@ class Composition:
 
     def awaited(self, run: BlockRun) -> float | None:
         """When what a pending block waits for ends or subsides, as things stand (None: it waits for none)."""
-        times = [self.predicted_end(r) for r in run.after if not self.dormant(r)]
-        times += [self.subsiding_time(r) for r in run.chunk_after if not self.dormant(r)]
+        times = [self.predicted_end(r) for r in run.after if not r.dormant]
+        times += [self.subsiding_time(r) for r in run.chunk_after if not r.dormant]
         return max(times) if times else None
 
     def predicted_start(self, run: BlockRun) -> float:
         """When a pending block would start as things stand: now, or when what it waits for ends or subsides."""
         awaited = self.awaited(run)
         return self.env.now if awaited is None else max(self.env.now, awaited)
+
+    @staticmethod
+    def appended(run: BlockRun) -> bool:
+        """Whether a run is pending and waits for others to end or subside (its start moves with theirs)."""
+        return run.state is PENDING and not run.dormant and bool(run.after or run.chunk_after)
 
     def coarticulate(self, run: BlockRun) -> None:
         """A chunk follows the gestures of the chunks before it without a gap: a gesture of an earlier chunk
@@ -111,7 +133,7 @@ class Composition:
                     old.keys[-1] = KeyRef(SyncPeg(follower, 0))
                     old.tied[-1] = old.fixed[-1] = True
                     old.owns[-1] = False
-                    self.structure_version += 1
+                    self.book.changed()
 
     @staticmethod
     def hold_relax(timed: TimedBehaviour) -> None:
@@ -125,39 +147,29 @@ class Composition:
         timed.keys[relax] = KeyRef(key.peg, key.offset + timed.time(relax) - timed.time(before))
 
     def waits(self, run: BlockRun) -> list[simpy.Event] | None:
-        """What a pending block still waits for (events to wait on), or None if it may start now.
-
-        A block that names blocks to interrupt interrupts them the first time it may start, and then waits
-        for them to end.
-        """
+        """What a pending block still waits for (events to wait on), or None if it may start now as far as
+        the blocks it follows go (the blocks it names to interrupt are interrupted then: see
+        :meth:`~agentsim.core.scheduler.Scheduler.waits`)."""
         now = self.env.now
         if run.block.preplan and not run.activated:
             return [self.wake_event(run)]
-        ending = [r.ended for r in run.after if not r.ended.triggered and not self.dormant(r)]
+        ending = [r.ended for r in run.after if not r.ended.triggered and not r.dormant]
         if ending:
             return ending + [self.wake_event(run)]
-        subsides = max([now] + [self.subsiding_time(r) for r in run.chunk_after if not self.dormant(r)])
+        subsides = max([now] + [self.subsiding_time(r) for r in run.chunk_after if not r.dormant])
         if subsides > now + EPSILON:
             return [self.env.timeout(subsides - now), self.wake_event(run)]
-        if run.block.interrupt and not run.interrupting:
-            run.interrupting = True
-            for block_id in run.block.interrupt:
-                target = self.find_run(block_id)
-                if target is None:
-                    self.warn(run.id, "NO_SUCH_TARGET", f"interrupt: there is no block {block_id!r}; ignored",
-                              run.block.character_id)
-                elif target.state in ("pending", "running"):
-                    self.interrupt(target, by=run.id)
-                    run.after.append(target)
-            return self.waits(run)
         return None
 
     def wake_event(self, run: BlockRun) -> simpy.Event:
+        """The event a pending run's process waits on besides what it waits for: it succeeds at :meth:`wake`
+        (a new one once it has)."""
         if run.wake is None or run.wake.triggered:
             run.wake = self.env.event()
         return run.wake
 
-    def wake(self, run: BlockRun) -> None:
-        """What a pending block waits for changed: look again."""
+    @staticmethod
+    def wake(run: BlockRun) -> None:
+        """What a pending block waits for changed (or it was started otherwise): its process looks again."""
         if run.wake is not None and not run.wake.triggered:
             run.wake.succeed()

@@ -19,7 +19,7 @@ from agentsim.core.block import Behaviour
 from agentsim.errors import ScheduleError
 from agentsim.core.interruption import due_by, skip_until
 from agentsim.core.pegboard import PegBoard
-from agentsim.core.timed import EPSILON, TimedBehaviour
+from agentsim.core.timed import ACTIVE, EPSILON, FINISHED, TimedBehaviour
 
 
 def stretch_times(preferred: Sequence[float], known: dict[int, float], start: float = 0.0) -> list[float]:
@@ -113,7 +113,7 @@ class Planner:
     def judges(self, timed: TimedBehaviour) -> bool:
         """Whether ``timed``'s timing is judged at all (False: it is valid whatever its times are: it has
         finished, or it was interrupted and plays out what is left of it)."""
-        return timed.state != "finished" and not timed.interrupted
+        return timed.state is not FINISHED and not timed.interrupted
 
     def invalid(self, timed: TimedBehaviour, times: list[float | None] | None = None) -> str | None:
         """Why ``timed``'s current timing (after pegs moved) is no longer valid, or None if it is.
@@ -206,7 +206,7 @@ class Player:
         heap = self._heap
         while heap:
             t, order, version, timed = heap[0]
-            if timed.state != "active" or timed.heap_version != version:
+            if timed.state is not ACTIVE or timed.heap_version != version:
                 heapq.heappop(heap)
                 continue
             current = timed.next_time()
@@ -309,7 +309,7 @@ class Engine:
         self.context.sync_passed(timed, index, time)
 
     def activate(self, timed: TimedBehaviour) -> None:
-        timed.state = "active"
+        timed.activate()
         self.plan.kick([timed])
 
     def interruption(self, timed: TimedBehaviour, now: float) -> tuple[set[int], dict[int, float]] | None:

@@ -2,18 +2,28 @@
 skipped ones leave for others to hang from, and the scheduler's part that interrupts blocks and behaviours.
 
 An engine says what an interruption leaves of a behaviour (:meth:`~agentsim.core.engine.Engine.interruption`:
-speech ends at once, a gesture goes into its retraction); :class:`Interruption` applies it and removes what
+speech ends at once, a gesture goes into its retraction); :class:`Interrupter` applies it and removes what
 hung from what will never come.
+
+:class:`Interrupter` owns nothing but its collaborators. It writes the behaviours it cuts (their keys, skipped
+sync points, when they stopped; a behaviour removed drops itself) and their runs' ``interrupted`` and
+``gone``; it starts a pending run it takes whole (the run changes its own state); its drops go to the
+:class:`~agentsim.core.book.BlockBook`, its warnings and the start it says to the
+:class:`~agentsim.core.reporter.Reporter`. Re-timing what its cuts moved is the caller's
+(:meth:`Interrupter.interrupt` says whether it did anything).
 """
 
 from __future__ import annotations
 
-from typing import Iterable
+from typing import Callable, Iterable
 
-from agentsim.core import feedback as fb
+import simpy
+
+from agentsim.core.book import BlockBook
 from agentsim.core.pegboard import ComputedPeg, OffsetPeg, PegBoard, TimePeg
 from agentsim.core.recording import DropRecord
-from agentsim.core.timed import EPSILON, BlockRun, KeyRef, TimedBehaviour
+from agentsim.core.reporter import Reporter
+from agentsim.core.timed import ACTIVE, EPSILON, OPEN, PENDING, BlockRun, KeyRef, TimedBehaviour
 
 
 def due_by(timed: TimedBehaviour, i: int, now: float) -> bool:
@@ -73,9 +83,8 @@ def hands(timed: TimedBehaviour) -> set[str]:
     return {"r"}
 
 
-class Interruption:
-    """Graceful interruption for the scheduler (it provides ``env``, ``board``, ``log``, ``drops``, ``warn``,
-    ``wake``, ``live_behaviours`` and ``pegs_moved``).
+class Interrupter:
+    """Graceful interruption for the scheduler.
 
     An interruption that was asked for (a block's ``bmla:interrupt``, a ``<bmla:interrupt>``,
     :meth:`~agentsim.realizer.Realizer.interrupt`) is feedback, not a fault: the last syncPointProgress of
@@ -83,29 +92,50 @@ class Interruption:
     behaviour it removed before it started is ``{"status": "removed"}`` in the next prediction. A warning
     (``INTERRUPTED``) is left for what nobody asked for: a ``required`` behaviour lost, and a behaviour of
     another block that hung from a sync point that will now never come.
+
+    Parameters
+    ----------
+    env : simpy.Environment
+        The clock (an interruption happens now).
+    board : PegBoard
+        Which pegs of a behaviour other blocks were handed (what hangs from it).
+    book : BlockBook
+        The live behaviours (what may hang from a cut one) and where drops are recorded.
+    reporter : Reporter
+        Where warnings and the start of a pending block taken whole go.
+    wake : callable
+        ``wake(run)``: a pending run was started here; its waiting process looks again (the composer's).
     """
 
+    def __init__(self, env: simpy.Environment, board: PegBoard, book: BlockBook, reporter: Reporter,
+                 wake: Callable[[BlockRun], None]):
+        self.env = env
+        self.board = board
+        self.book = book
+        self.reporter = reporter
+        self.wake = wake
+
     def interrupt(self, run: BlockRun, include: Iterable[str] = (), exclude: Iterable[str] = (),
-                  by: str = "") -> None:
+                  by: str = "") -> bool:
         """Interrupt a block now, gracefully, as asked: speech stops, gestures retract, what hung from what
         will never come is removed. ``include``: only these behaviours; ``exclude``: all but these. A block
         that has not started is not started at all (it still gets its start and end, now); every behaviour
-        of it goes."""
+        of it goes. False if the block had ended (nothing was done); else pegs may have moved."""
         include, exclude = set(include), set(exclude)
-        if run.state not in ("pending", "running"):
-            return
+        if run.state not in OPEN:
+            return False
         cause = f"interrupted by {by}" if by else "interrupted"
         scope = [t for t in run.live() if (not include or t.id in include) and t.id not in exclude]
         whole = len(scope) == len(run.live())
         for timed in scope:
             self.interrupt_behaviour(timed, cause, asked=True)
-        if run.state == "pending" and whole:
+        if run.state is PENDING and whole:
             now = self.env.now
             run.interrupted = True
-            self.log.send(fb.block_progress(run.id, "start", now, run.block.character_id))
-            run.state = "running"
+            self.reporter.block_progress(run, "start", now)
+            run.start()
             self.wake(run)
-        self.pegs_moved()
+        return True
 
     def interrupt_behaviour(self, timed: TimedBehaviour, cause: str, asked: bool = False) -> None:
         """Interrupt one behaviour now: a started one does what its engine says an interruption leaves of it,
@@ -114,7 +144,7 @@ class Interruption:
         if not timed.live or timed.interrupted:
             return
         now = self.env.now
-        if timed.state != "active" or timed.passed[0] is None:
+        if timed.state is not ACTIVE or timed.passed[0] is None:
             self.remove(timed, cause, asked)
             return
         plan = timed.engine.interruption(timed, now)
@@ -131,11 +161,11 @@ class Interruption:
         while timed.next_index in timed.skipped:
             timed.next_index += 1
         timed.engine.stopped(timed, now)
-        self.drops.append(DropRecord(timed.block_id, timed.id, now, "INTERRUPTED", cause))
+        self.book.add_drop(DropRecord(timed.block_id, timed.id, now, "INTERRUPTED", cause))
         if not asked or timed.behaviour.required:
             required = "required, but " if timed.behaviour.required else ""
-            self.warn(f"{timed.block_id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {required}{cause}; what is "
-                      "left of it ends now", timed.run.block.character_id, [timed.id])
+            self.reporter.warn(f"{timed.block_id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {required}{cause}; "
+                               "what is left of it ends now", timed.run.block.character_id, [timed.id])
         self.remove_dependants(left, timed, cause)
         timed.engine.plan.kick([timed])
 
@@ -145,17 +175,16 @@ class Interruption:
             return
         run = timed.run
         left = pegs_left_behind(timed, range(len(timed.sync_ids)), self.board)
-        timed.state = "dropped"
-        timed.stopped = self.env.now
+        timed.drop(self.env.now)
         run.interrupted = True
         timed.engine.remove(timed)
         self.board.forget_behaviour(run.id, timed.id)
         run.gone.append(timed)
-        self.drops.append(DropRecord(run.id, timed.id, self.env.now, "INTERRUPTED", cause))
+        self.book.add_drop(DropRecord(run.id, timed.id, self.env.now, "INTERRUPTED", cause))
         if not asked or timed.behaviour.required:
             required = "required, but " if timed.behaviour.required else ""
-            self.warn(f"{run.id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {required}{cause}; behaviour removed "
-                      "before it started", run.block.character_id, [timed.id])
+            self.reporter.warn(f"{run.id}:{timed.id}", "INTERRUPTED", f"{timed.id}: {required}{cause}; behaviour "
+                               "removed before it started", run.block.character_id, [timed.id])
         self.remove_dependants(left, timed, cause)
 
     def remove_dependants(self, peg_ids: set[int], origin: TimedBehaviour, cause: str) -> None:
@@ -165,6 +194,6 @@ class Interruption:
         if not peg_ids:
             return
         why = f"{cause}: it was tied to {origin.block_id}:{origin.id}"
-        for timed in self.live_behaviours():
+        for timed in self.book.live_behaviours():
             if timed is not origin and timed.live and timed.hangs_from(peg_ids):
                 self.interrupt_behaviour(timed, why, asked=timed.run is origin.run)

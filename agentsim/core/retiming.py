@@ -1,19 +1,27 @@
 """The one re-timing path: every peg move, whatever moved it, re-times what hangs from it, checks the planners'
 validity, drops what became invalid, sends predictions of what moved and wakes the players.
 
-:class:`Retiming` is the part of the :class:`~agentsim.core.scheduler.Scheduler` that does it;
-:class:`Dependants` keeps, for pegs that move often (a speech's animator time), the behaviours that hang
-from them by planned start, so that each move re-times only what is near.
+:class:`Retimer` owns what is to be re-timed at this instant (``_pending``, up to ``_pending_until``), whether
+a pass is due (``_retime_due``) and the prediction tolerance. It judges the behaviours a pass looks at
+(:meth:`Retimer.retime` returns those that became invalid: the scheduler drops them and ends what is done)
+and predicts (it writes a run's ``predicted``, ``predicted_start``, ``gone`` and noted ends, and sends
+predictionFeedback through the :class:`~agentsim.core.reporter.Reporter`). :class:`Dependants` keeps, for pegs
+that move often (a speech's animator time), the behaviours that hang from them by planned start, so that each
+move re-times only what is near.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from dataclasses import dataclass
+from typing import Callable, Iterable
 
-from agentsim.core import feedback as fb
+import simpy
+
+from agentsim.core.book import BlockBook
 from agentsim.core.pegboard import TimePeg
-from agentsim.core.timed import BlockRun, TimedBehaviour
+from agentsim.core.reporter import Reporter
+from agentsim.core.timed import ACTIVE, BlockRun, TimedBehaviour
 
 #: Predictions are sent again for a behaviour when one of its sync points moved by more than this
 #: (seconds): one frame at 60 frames per second.
@@ -42,10 +50,10 @@ class Dependants:
     whose predictions run far ahead or behind does not make behaviours come too late.
     """
 
-    def __init__(self, scheduler, pegs: Iterable[TimePeg], planned_now=None):
-        self.scheduler = scheduler
+    def __init__(self, book: BlockBook, pegs: Iterable[TimePeg], planned_now: Callable[[], float]):
+        self.book = book
         self.peg_ids = {id(p) for p in pegs}
-        self.planned_now = planned_now if planned_now is not None else (lambda: scheduler.env.now)
+        self.planned_now = planned_now
         self.version = -1
         self.behaviours: list[TimedBehaviour] = []
         self._starts: list[float] = []
@@ -53,10 +61,10 @@ class Dependants:
         self._near: dict[TimedBehaviour, None] = {}
 
     def _refresh(self) -> None:
-        if self.version == self.scheduler.structure_version:
+        if self.version == self.book.structure_version:
             return
-        self.version = self.scheduler.structure_version
-        found = [t for t in self.scheduler.live_behaviours() if t.hangs_from(self.peg_ids)]
+        self.version = self.book.structure_version
+        found = [t for t in self.book.live_behaviours() if t.hangs_from(self.peg_ids)]
         starts = [t.planned_start if t.planned_start is not None and math.isfinite(t.planned_start) else -math.inf
                   for t in found]
         order = sorted(range(len(found)), key=starts.__getitem__)
@@ -82,87 +90,105 @@ class Dependants:
         return list(self._near)
 
 
-class Retiming:
-    """Re-timing, predictions and validity for the scheduler (it provides ``env``, ``board``, ``log``,
-    ``runs``, ``engine_list``, ``structure_version``, ``prediction_tolerance``, ``drop``, ``end_if_done``,
-    ``dormant`` and ``predicted_start``)."""
+@dataclass
+class Judged:
+    """What a re-timing pass found: the behaviours whose timing is no longer valid, with why, in the order
+    they were looked at, and the times computed on the way (for the predictions that follow)."""
+
+    invalid: list[tuple[TimedBehaviour, str]]
+    times: dict[TimedBehaviour, list[float | None] | None]
+
+
+class Retimer:
+    """Re-timing, predictions and validity for the scheduler.
+
+    Parameters
+    ----------
+    env : simpy.Environment
+        The clock.
+    book : BlockBook
+        The runs and their live behaviours (for :meth:`dependants_of`).
+    reporter : Reporter
+        Where predictionFeedback goes.
+    prediction_tolerance : float
+        A behaviour is predicted again when one of its sync points moved by more than this (seconds).
+    """
+
+    def __init__(self, env: simpy.Environment, book: BlockBook, reporter: Reporter,
+                 prediction_tolerance: float = FRAME):
+        self.env = env
+        self.book = book
+        self.reporter = reporter
+        self.prediction_tolerance = prediction_tolerance
+        self._pending: dict[TimedBehaviour, None] | None = {}  # to re-time this instant; None: all
+        self._pending_until = 0.0  # ... and up to when
+        self._retime_due = False
 
     def dependants_of(self, pegs: Iterable[TimePeg], planned_now=None) -> Dependants:
         """The live behaviours whose timing hangs from ``pegs``, kept up to date as blocks come.
 
         ``planned_now()``: the planned time the owner of the pegs has reached (default: the clock).
         """
-        return Dependants(self, pegs, planned_now)
+        env = self.env
+        return Dependants(self.book, pegs, planned_now if planned_now is not None else (lambda: env.now))
 
-    def pegs_moved(self, pegs: Iterable[TimePeg] | TimePeg | Dependants | None = None,
-                   horizon: float | None = None) -> None:
-        """Pegs moved (set, shifted, or their computed times changed): re-time what hangs from them.
+    def moved(self, pegs: Iterable[TimePeg] | TimePeg | Dependants | None = None,
+              horizon: float | None = None) -> bool:
+        """Pegs moved (see :meth:`~agentsim.core.scheduler.Scheduler.pegs_moved`): note what is to be
+        re-timed. True if a pass has to be run at this instant (none is due yet): the caller runs it after
+        everything that moves pegs now, with what :meth:`due` then says.
 
-        The one entry point for every peg movement. Without ``horizon`` every live behaviour is looked at;
-        with ``pegs`` given as :class:`Dependants` and a ``horizon`` (seconds), only those that start
-        within it. The re-timing itself happens once per instant, after everything that moved pegs then.
+        Without ``horizon`` every live behaviour is to be looked at; with ``pegs`` given as
+        :class:`Dependants` and a ``horizon`` (seconds), only those that start within it.
         """
-        self.board.invalidate_times()
         if self._pending is not None:
             if horizon is not None and isinstance(pegs, Dependants):
                 self._pending_until = self.env.now + horizon
                 self._pending.update(dict.fromkeys(pegs.near(horizon)))
             else:
                 self._pending = None
-        if not self._retime_scheduled:
-            self._retime_scheduled = True
-            self.env.process(self._retime_soon())
+        if self._retime_due:
+            return False
+        self._retime_due = True
+        return True
 
-    def _retime_soon(self):
-        yield self.env.timeout(0)
-        self._retime_scheduled = False
+    def due(self) -> tuple[list[TimedBehaviour] | None, float | None]:
+        """The pass is run now: the behaviours to re-time (None: every live one) and up to when (None: all
+        of their sync points); what moves from now on is noted for another pass."""
+        self._retime_due = False
         pending, self._pending = self._pending, {}
         if pending is None:
-            self.retime()
-        else:
-            self.retime(list(pending), until=self._pending_until)
+            return None, None
+        return list(pending), self._pending_until
 
-    def retime(self, behaviours: list[TimedBehaviour] | None = None, until: float | None = None) -> None:
-        """Pegs moved: drop behaviours that became invalid, update predictions, wake the players.
-
-        ``behaviours``: the ones affected (default: every live behaviour, and the start of every block
-        waiting to be appended). ``until``: only their sync points due by then (global seconds) are
-        predicted again; later ones are when they come nearer.
-        """
-        if behaviours is None:
-            with self.board.quiet():
-                for run in self.runs:
-                    if run.state == "pending" and not self.dormant(run) and (run.after or run.chunk_after):
-                        run.block_peg.set(self.predicted_start(run))
-            candidates = [t for engine in self.engine_list for t in engine.planner.plan]
-        else:
-            candidates = behaviours
-        dropped: dict[BlockRun, None] = {}
-        timed_now: dict[TimedBehaviour, list[float | None]] = {}  # times computed once, for both uses
+    def retime(self, candidates: Iterable[TimedBehaviour]) -> Judged:
+        """Judge the live ``candidates`` as their pegs now place them: which became invalid (the caller
+        drops them before the predictions), with the times computed for both."""
+        invalid: list[tuple[TimedBehaviour, str]] = []
+        timed_now: dict[TimedBehaviour, list[float | None] | None] = {}  # times computed once, for both uses
         for timed in candidates:
             if timed.live:
                 planner = timed.engine.planner
                 times = timed_now[timed] = timed.times() if planner.judges(timed) else None
                 reason = planner.invalid(timed, times)
                 if reason is not None:
-                    self.drop(timed, f"after re-timing: {reason}")
-                    dropped[timed.run] = None
-        if behaviours is None:
-            for run in list(self.runs):
-                self.predict(run, timed_now=timed_now)
-                self.end_if_done(run, self.env.now)
-            for engine in self.engine_list:
-                engine.plan.kick()
-            return
+                    invalid.append((timed, reason))
+        return Judged(invalid, timed_now)
+
+    def predict_moved(self, behaviours: list[TimedBehaviour], until: float | None,
+                      timed_now: dict[TimedBehaviour, list[float | None] | None]) -> None:
+        """Predict again, block by block, the sync points of ``behaviours`` due by ``until`` that moved."""
         by_run: dict[BlockRun, list[TimedBehaviour]] = {}
         for timed in behaviours:
             by_run.setdefault(timed.run, []).append(timed)
         for run, affected in by_run.items():
             self.predict(run, affected, until, timed_now)
-        for run in dropped:
-            self.end_if_done(run, self.env.now)
+
+    @staticmethod
+    def kick(behaviours: Iterable[TimedBehaviour]) -> None:
+        """Wake the players of the ``behaviours`` that play: their times may have moved."""
         for timed in behaviours:
-            if timed.state == "active":
+            if timed.state is ACTIVE:
                 timed.engine.plan.kick([timed])
 
     def predict(self, run: BlockRun, behaviours: list[TimedBehaviour] | None = None, until: float | None = None,
@@ -222,4 +248,4 @@ class Retiming:
         run.predicted_start = start
         end = run.predicted_end()
         end = start if end is None else max(start, end)
-        self.log.send(fb.prediction(run.id, self.env.now, run.block.character_id, start, end, entries))
+        self.reporter.prediction(run, start, end, entries)

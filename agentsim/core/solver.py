@@ -136,7 +136,7 @@ class BlockSolver:
             self.fail(f"required behaviour {behaviour_id} cannot be realized ({reason})")
         timed = self.timed.pop(behaviour_id, None)
         if timed is not None:
-            timed.state = "dropped"
+            timed.drop()
 
     def fail(self, reason: str) -> None:
         if not self.failed:

@@ -4,6 +4,11 @@ A :class:`TimedBehaviour` has one key per sync point. Keys tied to time pegs (:c
 their pegs move; the other keys are placed by linear time warping between their tied neighbours, using
 the behaviour's preferred timing. A :class:`BlockRun` is one submitted block on its way from pending to
 ended, with the timed behaviours the solver made of it and what was last predicted of them.
+
+Each owns its state (:class:`BehaviourState`, :class:`BlockState`) and changes it only in its own methods
+(:meth:`TimedBehaviour.activate`, :meth:`~TimedBehaviour.finish`, :meth:`~TimedBehaviour.drop`;
+:meth:`BlockRun.start`, :meth:`~BlockRun.end`, :meth:`~BlockRun.refuse`). The states are strings too
+(``enum.StrEnum``): the recording, the reports and the warnings print and compare them as they always did.
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ from __future__ import annotations
 import heapq
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any, Iterable, Iterator, Sequence
 
 import simpy
@@ -20,6 +26,32 @@ from agentsim.core.pegboard import ComputedPeg, OffsetPeg, TimePeg
 
 #: Two times closer than this (seconds) are the same time.
 EPSILON = 1e-9
+
+
+class BehaviourState(StrEnum):
+    """Where a timed behaviour is: ``planned`` -> ``active`` -> ``finished`` | ``dropped``."""
+
+    PLANNED = "planned"
+    ACTIVE = "active"
+    FINISHED = "finished"
+    DROPPED = "dropped"
+
+
+class BlockState(StrEnum):
+    """Where a block run is: ``pending`` -> ``running`` -> ``ended``, or ``refused``."""
+
+    PENDING = "pending"
+    RUNNING = "running"
+    ENDED = "ended"
+    REFUSED = "refused"
+
+
+#: The states as names of this module too, which the code that checks them often reads (an enum's member looked
+#: up on its class goes through the enum's metaclass: several times slower).
+PLANNED, ACTIVE, FINISHED, DROPPED = BehaviourState
+PENDING, RUNNING, ENDED, REFUSED = BlockState
+#: The states of a block run that is still to end (it waits, or it runs).
+OPEN = (PENDING, RUNNING)
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,7 +95,7 @@ class TimedBehaviour:
         self.heap_version = 0  # which of the player's heap entries for this behaviour is current
         self.next_index = 0
         self._state = ""
-        self.state = "planned"  # planned -> active -> finished | dropped
+        self._enter(PLANNED)
         self.stopped: float | None = None  # when it was dropped, cut or interrupted, if it was
         self.planned_start: float | None = None  # its start as first planned
         self.interrupted = False  # interrupted: what is left of it runs to its end whatever the timing
@@ -83,16 +115,30 @@ class TimedBehaviour:
         return self.run.block.id
 
     @property
-    def state(self) -> str:
-        """``planned`` -> ``active`` -> ``finished`` | ``dropped``."""
+    def state(self) -> BehaviourState:
+        """``planned`` -> ``active`` -> ``finished`` | ``dropped`` (changed by :meth:`activate`,
+        :meth:`finish` and :meth:`drop` alone)."""
         return self._state
 
-    @state.setter
-    def state(self, value: str) -> None:
-        was, now = self._state in _LIVE, value in _LIVE
-        self._state = value
+    def _enter(self, state: BehaviourState) -> None:
+        was, now = self._state in _LIVE, state in _LIVE
+        self._state = state
         if was != now and isinstance(self.run, BlockRun):
             self.run.live_count += 1 if now else -1
+
+    def activate(self) -> None:
+        """Its block started: its engine plays it."""
+        self._enter(ACTIVE)
+
+    def finish(self) -> None:
+        """Its last sync point was passed."""
+        self._enter(FINISHED)
+
+    def drop(self, when: float | None = None) -> None:
+        """It will not be played (on), from ``when`` (seconds) if it is given: the time it was stopped."""
+        self._enter(DROPPED)
+        if when is not None:
+            self.stopped = when
 
     @property
     def live(self) -> bool:
@@ -173,7 +219,7 @@ class TimedBehaviour:
 
     def next_time(self) -> float | None:
         """When the next sync point is due (None if not active, done, or not known to come)."""
-        if self.state != "active" or self.next_index >= len(self.sync_ids):
+        if self._state is not ACTIVE or self.next_index >= len(self.sync_ids):
             return None
         t = self.time(self.next_index)
         return t if t is not None and t < math.inf else None
@@ -270,13 +316,16 @@ def parameter_at(timed: TimedBehaviour, param: str, t: float, default: float) ->
 class BlockRun:
     """One submitted block on its way: pending, running, ended (or refused).
 
+    It owns its :attr:`state` and :attr:`ended_at` (:meth:`start`, :meth:`end`, :meth:`refuse`); the
+    scheduler's parts fill in the rest as their docstrings say: the composer what it waits for and its wake
+    event, the retimer what was predicted, the interrupter what was cut.
     ``predicted`` holds, for each behaviour, the times last sent in a predictionFeedback.
     """
 
     block: Block
     block_peg: TimePeg
     ended: simpy.Event
-    state: str = "pending"  # pending -> running -> ended, or refused
+    state: BlockState = PENDING  # pending -> running -> ended, or refused
     timed: list[TimedBehaviour] = field(default_factory=list)
     predicted: dict[str, list[float | None]] = field(default_factory=dict)
     predicted_start: float | None = None
@@ -326,3 +375,23 @@ class BlockRun:
     def has_live(self) -> bool:
         """Whether any of its behaviours is planned or playing (:attr:`live_count`, kept as they change)."""
         return self.live_count > 0
+
+    @property
+    def dormant(self) -> bool:
+        """A preplanned block that nothing has activated yet: nobody waits for it."""
+        return self.block.preplan and not self.activated and self.state is PENDING
+
+    def start(self) -> None:
+        """It starts (a pending run; its feedback is the scheduler's)."""
+        self.state = RUNNING
+
+    def end(self, time: float) -> None:
+        """It ended at ``time`` (s). Its :attr:`ended` event is succeeded by whoever closes it, once its end
+        has been said (what is told of the end may still see it not yet triggered)."""
+        self.state = ENDED
+        self.ended_at = time
+
+    def refuse(self) -> None:
+        """It was refused: it never starts, and whatever waits for its end goes on."""
+        self.state = REFUSED
+        self.ended.succeed()

@@ -56,6 +56,7 @@ from agentsim.animation.body import Body
 from agentsim.animation.drivers import EPSILON
 from agentsim.animation.manager import DriverManager
 from agentsim.core.recording import record_behaviours
+from agentsim.core.timed import REFUSED
 from agentsim.live.server import LiveRealizer, Server
 from agentsim.media.report.data import FACE, body_points, point_names
 
@@ -327,13 +328,13 @@ class LivePoses:
     def watch(self, now: float) -> tuple[list, list]:
         """The blocks not ended or ended less than :data:`FORGET` s ago, and those forgotten since the last
         time (whose shifts still hold a pose)."""
-        runs = self.live.realizer.scheduler.all_runs
+        runs = self.live.realizer.scheduler.book.all_runs
         if len(runs) > self.seen:
             self.watched += runs[self.seen:]
             self.seen = len(runs)
         kept, forgotten = [], []
         for run in self.watched:
-            if run.state == "refused":
+            if run.state is REFUSED:
                 continue
             if run.ended_at is not None and run.ended_at < now - FORGET:
                 forgotten.append(run)

@@ -493,7 +493,7 @@ class LiveRealizer:
             weighed = self.prepared.pop(id(block), [])
             if weighed:
                 self.audio.setdefault(block.id, []).extend(weighed)
-        running = any(run.id == block.id for run in self.realizer.scheduler.runs)
+        running = self.realizer.scheduler.book.is_open(block.id)
         if running and block.id in self.senders and self.senders[block.id] != sender:
             self.release(block.id, weighed)
             self.refused_taken += 1
