@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Iterable
+from pathlib import Path
+from typing import Callable, Iterable
 
 import simpy
 
 from agentsim.bml.parser import Refused, parse_document
-from agentsim.core.block import Block
+from agentsim.core.block import Behaviour, Block
 from agentsim.core.clock import make_environment, run_until
 from agentsim.core.feedback import FeedbackLog
 from agentsim.core.pegboard import PegBoard
@@ -16,7 +17,7 @@ from agentsim.core.recording import Recording
 from agentsim.core.scheduler import FRAME, Scheduler
 from agentsim.core.timed import BlockRun
 from agentsim.engines.animation import AnimationEngine
-from agentsim.engines.audio import AudioEngine
+from agentsim.engines.audio import AudioEngine, resolve_audio
 from agentsim.engines.control import ControlEngine
 from agentsim.engines.speech import SpeechConfig, SpeechEngine
 from agentsim.engines.wait import WaitEngine
@@ -52,16 +53,25 @@ class Realizer:
         Read only BML 1.0 (one block a document). By default BML as other realizers write it is read too,
         each block's adaptations said in one ``NONSTANDARD_BML`` warning; blocks without an id are named
         ``bml1``, ``bml2``, ... in the order they come, skipping ids already used.
+    locate_audio : callable, optional
+        Where the file of a ``<bmlt:audiofile>`` behaviour is (given the behaviour; a ScheduleError if it may
+        not be read); by default beside its BML document, else in the working directory. The live service
+        confines it to one directory.
+    keep_feedback : int, optional
+        How many feedback items the log keeps (by default ``100 * keep``, or all).
     """
 
     def __init__(self, env: simpy.Environment | None = None, realtime: bool = False,
                  tts: TTSBackend | None = None, anticipators: Iterable = (), speech: SpeechConfig | None = None,
-                 prediction_tolerance: float = FRAME, strict: bool = False, keep: int | None = None):
+                 prediction_tolerance: float = FRAME, strict: bool = False, keep: int | None = None, *,
+                 locate_audio: Callable[[Behaviour], Path] | None = None, keep_feedback: int | None = None):
         self.strict = strict
         self._unnamed = 0
         self.env = env if env is not None else make_environment(realtime)
         self.board = PegBoard()
-        self.feedback = FeedbackLog(keep=None if keep is None else 100 * keep)
+        if keep_feedback is None and keep is not None:
+            keep_feedback = 100 * keep
+        self.feedback = FeedbackLog(keep=keep_feedback)
         if tts is None:
             from speech_timing.choice import default_backend
             tts = default_backend()
@@ -71,7 +81,7 @@ class Realizer:
         self.animation = AnimationEngine(context)
         self.wait = WaitEngine(context)
         self.control = ControlEngine(context)
-        self.audio = AudioEngine(context)
+        self.audio = AudioEngine(context, locate_audio or resolve_audio)
         self.engines = [self.speech, self.animation, self.wait, self.control, self.audio]
         for engine in self.engines:
             self.scheduler.add_engine(engine)
