@@ -5,9 +5,11 @@ that prepares blocks without a realizer (:mod:`agentsim.live.intake`), and the r
 
 from __future__ import annotations
 
+import ast
 import json
 import queue
 import threading
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -15,6 +17,7 @@ import pytest
 from agentsim.bml.parser import parse_document
 from agentsim.core import feedback as fb
 from agentsim.errors import UsageError
+from agentsim.live import access, intake, routing
 from agentsim.live.access import Access
 from agentsim.live.intake import Intake, Prepared, TakeTurns
 from agentsim.live.limits import Limits
@@ -23,6 +26,24 @@ from agentsim.live.runtime import BlockNames, HeldAudio, LiveRealizer
 from speech_timing.builtin import BuiltinBackend
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
+
+
+def uses(module) -> tuple[set[str], set[str]]:
+    """The modules ``module`` imports and the attributes its code reads or writes."""
+    tree = ast.parse(Path(module.__file__).read_text(encoding="utf-8"))
+    imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+    imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
+    return imported, {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)}
+
+
+def test_the_reader_knows_nothing_of_the_realizer_and_routing_and_access_do_no_io():
+    imported, attributes = uses(intake)
+    assert not imported & {"agentsim.realizer", "agentsim.live.runtime", "agentsim.core.scheduler"}
+    assert not attributes & {"realizer", "planner", "scheduler", "engines", "env"}
+    for module in (routing, access):
+        imported, attributes = uses(module)
+        assert not {name.split(".")[0] for name in imported} & {"asyncio", "socket", "websockets", "threading"}
+        assert not attributes & {"recv", "ping", "transport", "call_soon_threadsafe", "ensure_future", "create_task"}
 
 
 def routed() -> tuple[Routing, list]:

@@ -254,7 +254,7 @@ class LiveRealizer:
                 submitted = True
                 del prepared  # (its reply reaches the client: not kept while the realizer waits)
             if submitted:
-                self.names.publish(run.id for run in self.realizer.scheduler.all_runs)
+                self.names.publish(self.block_ids())
             yield self.env.timeout(self.poll)
 
     def tick(self, period: float, fn: Callable[[float], None]):
@@ -276,6 +276,10 @@ class LiveRealizer:
     def running(self, block_id: str) -> bool:
         """Whether a block of this id has not ended."""
         return any(run.id == block_id for run in self.realizer.scheduler.runs)
+
+    def block_ids(self) -> list[str]:
+        """The ids of the blocks the realizer holds, those that ended and are kept too."""
+        return [run.id for run in self.realizer.scheduler.all_runs]
 
     def submit(self, prepared: Prepared) -> None:
         """Submit a block that was read. A block whose id is that of another client's block that has not
