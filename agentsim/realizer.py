@@ -5,13 +5,13 @@ from __future__ import annotations
 import contextlib
 from dataclasses import replace
 from pathlib import Path
-from typing import Iterable
+from typing import Callable, Iterable
 
 import simpy
 
 from agentsim.animation.lexicon import Lexicon, as_lexicon
 from agentsim.bml.parser import Refused, parse_document
-from agentsim.core.block import Block
+from agentsim.core.block import Behaviour, Block
 from agentsim.core.clock import make_environment, run_until
 from agentsim.core.feedback import FeedbackLog
 from agentsim.core.gcpause import CollectionPause
@@ -20,7 +20,7 @@ from agentsim.core.recording import Recording
 from agentsim.core.scheduler import FRAME, Scheduler
 from agentsim.core.timed import BlockRun
 from agentsim.engines.animation import AnimationEngine
-from agentsim.engines.audio import AudioEngine
+from agentsim.engines.audio import AudioEngine, resolve_audio
 from agentsim.engines.control import ControlEngine
 from agentsim.engines.physics import ControllerEngine
 from agentsim.engines.speech import SpeechConfig, SpeechEngine
@@ -66,19 +66,28 @@ class Realizer:
         Hold the garbage collector off while documents are read and planned, as this
         :class:`~agentsim.core.gcpause.CollectionPause` does (the command line and the live service pass
         theirs); by default the collector is left alone.
+    locate_audio : callable, optional
+        Where the file of a ``<bmlt:audiofile>`` behaviour is (given the behaviour; a ScheduleError if it may
+        not be read); by default beside its BML document, else in the working directory. The live service
+        confines it to one directory.
+    keep_feedback : int, optional
+        How many feedback items the log keeps (by default ``100 * keep``, or all).
     """
 
     def __init__(self, env: simpy.Environment | None = None, realtime: bool = False,
                  tts: TTSBackend | None = None, anticipators: Iterable = (), speech: SpeechConfig | None = None,
                  prediction_tolerance: float = FRAME, strict: bool = False, keep: int | None = None,
-                 lexicon: Lexicon | str | Path | None = None, gc_pause: CollectionPause | None = None):
+                 lexicon: Lexicon | str | Path | None = None, gc_pause: CollectionPause | None = None, *,
+                 locate_audio: Callable[[Behaviour], Path] | None = None, keep_feedback: int | None = None):
         self.strict = strict
         self.lexicon = as_lexicon(lexicon)
         self.gc_pause = gc_pause
         self._unnamed = 0
         self.env = env if env is not None else make_environment(realtime)
         self.board = PegBoard()
-        self.feedback = FeedbackLog(keep=None if keep is None else 100 * keep)
+        if keep_feedback is None and keep is not None:
+            keep_feedback = 100 * keep
+        self.feedback = FeedbackLog(keep=keep_feedback)
         if tts is None:
             from speech_timing.choice import default_backend
             tts = default_backend()
@@ -88,7 +97,7 @@ class Realizer:
         self.animation = AnimationEngine(context, self.lexicon)
         self.wait = WaitEngine(context)
         self.control = ControlEngine(context)
-        self.audio = AudioEngine(context)
+        self.audio = AudioEngine(context, locate_audio or resolve_audio)
         self.physics = ControllerEngine(context)
         self.engines = [self.speech, self.animation, self.wait, self.control, self.audio, self.physics]
         for engine in self.engines:

@@ -241,7 +241,9 @@ def churn(seconds: float, n: int) -> dict:
         time.sleep(3.0)
         after = settled(service, "z")
         counters = dict(server.counters)
-        left = {"clients": len(server.clients), "outboxes": len(server.outboxes), "subscribers": len(server.subscribers)}
+        routing = server.routing
+        left = {"clients": len(routing.clients), "outboxes": len(routing.outboxes),
+                "subscribers": len(routing.subscribers)}
     ms = np.array(handshakes) * 1000.0
     return {
         "benchmark": "serve-churn", "clients": n, "seconds": seconds, "connections": len(handshakes),
@@ -285,7 +287,7 @@ def large_speech(n: int) -> dict:
         for part, limits in (("default_limits", Limits()),
                              ("raised_limits", Limits(speech_characters=100_000, speech_seconds=10_000,
                                                       block_characters=100_000, block_seconds=10_000))):
-            live.limits = limits
+            service.service.intake.limits = limits
             started = time.monotonic()
             held, warnings, ended = [], [], set()
             with Watch(service, part[0]) as watch, connect(service.url, max_size=2 ** 22) as ws:

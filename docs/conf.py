@@ -53,6 +53,10 @@ napoleon_use_ivar = True  # a dataclass's "Attributes" once, not beside its fiel
 # the modules of optional extras import without them
 autodoc_mock_imports: list[str] = []
 nitpicky = False
+# a builtin in a signature (``str | bytes``) is looked up among the documented objects too, and where two classes
+# have an attribute of that name (``bytes``) Sphinx says the reference is ambiguous: such references are left
+# as plain text. Broken links between pages (ref.doc, myst) stay errors.
+suppress_warnings = ["ref.python"]
 smartquotes = False  # "--out" stays two hyphens
 
 html_theme = "pydata_sphinx_theme"

@@ -210,6 +210,24 @@ def receive(ws, done, timeout: float = 10.0) -> list[tuple[float, dict]]:
     raise AssertionError(f"timed out after {len(got)} messages")
 
 
+def counted(server, name: str, at_least: int = 1):
+    """A ``threading.Event`` set (with the ``time.monotonic()`` it happened at in its ``at``) once the live
+    server's counter ``name`` is at least ``at_least``: a test waits on it instead of polling."""
+    import threading
+
+    reached = threading.Event()
+    reached.at = None
+
+    def listener(key: str, value: int) -> None:
+        if key == name and value >= at_least and not reached.is_set():
+            reached.at = time.monotonic()
+            reached.set()
+
+    server.counters.listeners.append(listener)
+    listener(name, server.counters[name])
+    return reached
+
+
 # ------------------------------------------------------------------------------------------------ BVH
 class BvhFk:
     """A BVH file read and composed here, from its text alone (not the project's kinematics nor a BVH

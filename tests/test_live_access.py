@@ -20,7 +20,7 @@ from websockets.sync.client import connect
 
 from agentsim.errors import UsageError
 from agentsim.live.poses import viewer_files
-from agentsim.live.server import is_loopback, origin_of
+from agentsim.live.access import is_loopback, origin_of
 from agentsim.live.service import Background, Service
 from speech_timing.builtin import BuiltinBackend
 
@@ -136,7 +136,7 @@ def test_a_page_fetched_from_a_foreign_origin_is_refused(open_server):
 
 def test_the_token_is_needed_on_the_websocket_and_the_page(token_server):
     server = token_server.service.server
-    assert not server.token_made and token_server.url.endswith("/?token=s3cret")
+    assert not server.access.token_made and token_server.url.endswith("/?token=s3cret")
     plain = f"ws://127.0.0.1:{server.port}/"
     before = server.counters["refused_tokens"]
     refused(plain)

@@ -1,7 +1,7 @@
 """What a client that does not read costs ``agentsim serve``, with real WebSocket clients: a bare socket that
 subscribes to the poses and then stops reading (the surest way to stop the TCP flow; its receive buffer is
 made small so that the server's own buffers fill within seconds) loses poses first, counted, and once it has
-taken nothing, or answered no ping, for :data:`~agentsim.live.server.STALL_SECONDS` it is closed with code
+taken nothing, or answered no ping, for :data:`~agentsim.live.routing.STALL_SECONDS` it is closed with code
 1008 and a reason, while a well-behaved client's blocks keep their timing; one with the system's large
 buffers is closed as soon; a client that is slow for a moment loses poses only, never feedback."""
 
@@ -13,9 +13,10 @@ import time
 import pytest
 from websockets.sync.client import connect
 
-from agentsim.live.server import CLOSE_CODE, PING_EVERY, STALL_SECONDS
+from agentsim.live.routing import PING_EVERY, STALL_SECONDS
+from agentsim.live.server import CLOSE_CODE
 from agentsim.live.service import Background, Service
-from helpers import receive
+from helpers import counted, receive
 from rawws import RawClient
 from speech_timing.builtin import BuiltinBackend
 
@@ -39,14 +40,12 @@ def service():
         yield running
 
 
-def wait_for(condition, timeout: float, what: str) -> float:
-    """Poll ``condition()`` until it holds (then the time.monotonic() it did), or fail after ``timeout`` s."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return time.monotonic()
-        time.sleep(0.02)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+def wait_for(reached, timeout: float, what: str) -> float:
+    """The time.monotonic() at which a counter reached what :func:`~helpers.counted` waits for, or fail after
+    ``timeout`` s."""
+    if not reached.wait(timeout):
+        raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+    return reached.at
 
 
 def feedback_until(ws, last: str, timeout: float = 20.0) -> list[tuple[float, dict]]:
@@ -72,6 +71,7 @@ def raw_messages_until(raw: RawClient, done, timeout: float) -> list[dict]:
 def test_a_client_that_never_reads_is_closed_and_another_runs_on_time(service):
     server = service.service.server
     live = service.service.live
+    closing, left = counted(server, "closed_not_reading"), counted(server, "closed_clients")
     with connect(service.url) as good:
         raw = RawClient(service.url, receive_buffer=SMALL_BUFFER)
         raw.send(json.dumps({"subscribe": "poses"}))
@@ -85,7 +85,7 @@ def test_a_client_that_never_reads_is_closed_and_another_runs_on_time(service):
         assert len(timed) >= 15 and sorted(lateness)[len(lateness) // 2] <= LATENESS_MEDIAN, sorted(lateness)
         assert -0.005 <= min(lateness) and max(lateness) <= LATENESS_MAX, sorted(lateness)
         # the slow one is closed once it has not answered a ping, or taken anything, for STALL_SECONDS
-        closed = wait_for(lambda: server.counters["closed_not_reading"] == 1, STALL_SECONDS + 5, "the close")
+        closed = wait_for(closing, STALL_SECONDS + 5, "the close")
         assert STALL_SECONDS - PING_EVERY <= closed - stopped <= STALL_SECONDS + PING_EVERY + 0.5, closed - stopped
         # what it finds once it reads: the poses its buffers held, then the close frame, code and reason
         deadline = time.monotonic() + 5
@@ -95,7 +95,7 @@ def test_a_client_that_never_reads_is_closed_and_another_runs_on_time(service):
         assert code == CLOSE_CODE == 1008 and "did not read" in reason, (code, reason)
         raw.send(frame[1][:2], opcode=0x8)  # the closing handshake, answered
         raw.close()
-        wait_for(lambda: server.counters["closed_clients"] == 1, 10, "the closed client to be counted")
+        wait_for(left, 10, "the closed client to be counted")
         good.send(json.dumps({"status": True}))
         status = json.loads(good.recv(timeout=10))
         assert status["closed_not_reading"] == 1 and status["closed_clients"] == 1 and status["clients"] == 1
@@ -111,11 +111,12 @@ def test_a_client_with_the_systems_buffers_is_closed_within_seconds_of_its_last_
     """Buffers of megabytes take the poses of many seconds before sending to a client waits: it is the ping it
     does not answer (behind them, unread) that closes it, not its backlog (it took some 15 s that way)."""
     server = service.service.server
+    closing = counted(server, "closed_not_reading")
     raw = RawClient(service.url)  # the receive buffer the system makes
     raw.send(json.dumps({"subscribe": "poses"}))
     raw_messages_until(raw, lambda m: m["type"] == "poses", 10)
     stopped = time.monotonic()
-    closed = wait_for(lambda: server.counters["closed_not_reading"] == 1, 20, "the close")
+    closed = wait_for(closing, 20, "the close")
     assert STALL_SECONDS - PING_EVERY <= closed - stopped <= STALL_SECONDS + PING_EVERY + 0.5, closed - stopped
     deadline = time.monotonic() + 10
     while (frame := raw.frame(deadline))[0] != 0x8:  # what its buffers held, then the close frame
@@ -144,10 +145,11 @@ def test_a_client_slow_for_a_moment_loses_poses_only(fast_poses):
         slow.send(json.dumps({"subscribe": "poses"}))
         raw_messages_until(slow, lambda m: m["type"] == "poses", 10)
         before = server.counters["dropped_poses"]
+        dropping = counted(server, "dropped_poses", before + 1)
         slow.send(nods("s1", 12.0, every=0.3))  # its feedback comes while it does not read
         # it reads nothing until it has lost poses (sooner than it would be closed), and then reads everything
         paused = time.monotonic()
-        dropped = wait_for(lambda: server.counters["dropped_poses"] > before, 20, "poses to be dropped")
+        dropped = wait_for(dropping, 20, "poses to be dropped")
         assert dropped - paused < STALL_SECONDS - 1.0, dropped - paused
         got = raw_messages_until(slow, lambda m: m.get("id") == "s1:end", 30)
         seen = [f for _, f in feedback_until(witness, "s1:end", 30)]

@@ -14,8 +14,9 @@ import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
 
-from agentsim.live.server import RealizerStopped
+from agentsim.live.faults import RealizerStopped
 from agentsim.live.service import Background, Service
+from helpers import counted
 from speech_timing.builtin import BuiltinBackend
 
 NS = 'xmlns="http://www.bml-initiative.org/bml/bml-1.0"'
@@ -60,11 +61,10 @@ def test_status_counts_what_was_refused_and_who_left():
             # a foreign origin and a client that leaves are counted
             with pytest.raises(InvalidStatus):
                 connect(running.url, origin="https://evil.example", open_timeout=5)
+            left = counted(running.service.server, "closed_clients")
             other.close()
-            deadline = time.monotonic() + 10
+            assert left.wait(10)
             now = status(ws)
-            while now["closed_clients"] < 1 and time.monotonic() < deadline:
-                now = status(ws)
             assert now["closed_clients"] == 1 and now["clients"] == 1
             assert now["refused_origins"] == first["refused_origins"] + 1
 
@@ -74,7 +74,7 @@ def test_a_dead_realizer_thread_stops_the_server(monkeypatch):
     try:
         live = running.service.live
 
-        def broken(block, reply, sender=None):
+        def broken(prepared):
             raise RuntimeError("injected fault")
 
         monkeypatch.setattr(live, "submit", broken)
@@ -96,9 +96,9 @@ def test_a_dead_realizer_thread_stops_the_server(monkeypatch):
 BROKEN_SERVE = """
 import sys
 from agentsim.cli import main
-from agentsim.live.server import LiveRealizer
+from agentsim.live.runtime import LiveRealizer
 
-def broken(self, block, reply, sender=None):
+def broken(self, prepared):
     raise RuntimeError("injected fault")
 
 LiveRealizer.submit = broken
@@ -143,14 +143,14 @@ def test_waiting_documents_are_weighed_in_all_and_per_client(monkeypatch):
         return item["description"]
 
     with Background(Service(port=0, audio="none", fps=0, tts=BuiltinBackend())) as running:
-        live = running.service.live
-        live.incoming.max_bytes, live.incoming.sender_bytes = 2 ** 20, 3 * 2 ** 18
-        gate = threading.Event()
-        read_one = live.read_one
-        monkeypatch.setattr(live, "read_one", lambda *entry: (gate.wait(30), read_one(*entry)))
+        intake = running.service.intake
+        intake.incoming.max_bytes, intake.incoming.sender_bytes = 2 ** 20, 3 * 2 ** 18
+        at_gate, gate = threading.Event(), threading.Event()
+        read_one = intake.read_one
+        monkeypatch.setattr(intake, "read_one", lambda *entry: (at_gate.set(), gate.wait(30), read_one(*entry)))
         with connect(running.url) as a, connect(running.url) as b, connect(running.url) as c:
             a.send(f'<bml {NS} id="first"><head id="h" lexeme="NOD"/></bml>')  # the reader holds it at the gate
-            time.sleep(0.5)
+            assert at_gate.wait(10)
             assert len(padded("a1")) == 2 ** 18
             for name in ("a1", "a2", "a3"):
                 a.send(padded(name))
@@ -177,15 +177,15 @@ def test_waiting_documents_are_weighed_in_all_and_per_client(monkeypatch):
 
 def test_a_fault_of_the_reader_in_one_document_refuses_it_and_the_next_runs(monkeypatch, capsys):
     with Background(Service(port=0, audio="none", fps=0, tts=BuiltinBackend())) as running:
-        live = running.service.live
-        prepare = live.prepare
+        intake = running.service.intake
+        prepare = intake.prepare
 
         def broken(block, reply=None):
             if block.id == "bad":
                 raise RuntimeError("injected fault")
             return prepare(block, reply)
 
-        monkeypatch.setattr(live, "prepare", broken)
+        monkeypatch.setattr(intake, "prepare", broken)
         with connect(running.url) as ws:
             ws.send(f'<bml {NS} id="bad"><head id="h" lexeme="NOD"/></bml>')
             ws.send(f'<bml {NS} id="good"><head id="h" lexeme="NOD"/></bml>')
@@ -210,7 +210,7 @@ def test_a_dead_reader_thread_stops_the_server(monkeypatch):
         def dies(*entry):
             raise Killed("the reader's thread died")
 
-        monkeypatch.setattr(running.service.live, "read_one", dies)
+        monkeypatch.setattr(running.service.intake, "read_one", dies)
         with connect(running.url) as ws:
             ws.send(f'<bml {NS} id="b"><head id="h" lexeme="NOD"/></bml>')
             with pytest.raises(ConnectionClosed):

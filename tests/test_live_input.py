@@ -4,7 +4,6 @@ says so (a machine without a sound card records zeros; listening to them would o
 from __future__ import annotations
 
 import queue
-import threading
 import time
 
 import numpy as np
@@ -29,23 +28,28 @@ class FakeInput(DeviceSource):
     def open(self):
         source = self
 
+        class Blocks:
+            """What the device has captured by now, a block at a time, stamped with when it was complete
+            (the queue a real device's callback fills, without a thread: ``get_nowait`` alone is asked)."""
+
+            def __init__(self):
+                self.opened = time.monotonic()
+                self.taken = 0
+                self.rng = np.random.default_rng(0)
+
+            def get_nowait(self):
+                stamp = self.opened + (self.taken + 1) * source.block / source.sample_rate
+                if source.level is None or stamp > time.monotonic():
+                    raise queue.Empty
+                self.taken += 1
+                return stamp, (source.level * self.rng.standard_normal(source.block)).astype(np.float32)
+
         class Stream:
             def __enter__(self):
-                self.blocks = queue.Queue()
-                self.running = True
-
-                def feed():
-                    rng = np.random.default_rng(0)
-                    while self.running and source.level is not None:
-                        self.blocks.put((time.monotonic(), (source.level * rng.standard_normal(source.block))
-                                         .astype(np.float32)))
-                        time.sleep(source.block / source.sample_rate)
-
-                threading.Thread(target=feed, daemon=True).start()
-                return self.blocks
+                return Blocks()
 
             def __exit__(self, *exc):
-                self.running = False
+                pass
 
         return Stream()
 

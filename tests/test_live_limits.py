@@ -38,7 +38,7 @@ def status(ws) -> dict:
 
 def refused(service, ws, limits: Limits, document: str, block_id: str) -> list[dict]:
     """What the sender hears of a document under ``limits``: up to a small block sent after it has ended."""
-    service.service.live.limits = limits
+    service.service.intake.limits = limits
     ws.send(document)
     ws.send(f'<bml {NS} id="after_{block_id}"><head id="h" lexeme="NOD"/></bml>')
     got = [m for _, m in receive(ws, lambda m: m["id"] == f"after_{block_id}:end", timeout=30)]
@@ -82,7 +82,7 @@ def test_a_speech_the_estimate_lets_through_is_refused_on_its_audio(service):
 
 def test_a_blocks_audio_is_weighed_and_released_when_it_ends(service):
     live = service.service.live
-    live.limits = Limits()
+    service.service.intake.limits = Limits()
     with connect(service.url) as ws:
         released = status(ws)["speech_audio_released"]
         ws.send(speeches("talk", 2000))
@@ -114,8 +114,7 @@ def test_limits_must_be_positive():
 def test_a_client_sending_many_long_speeches_delays_another_by_one_at_most(service):
     """The reader takes each client's documents in turn: a block sent just after five long speeches of another
     client is read after the first of them, not after all five (each takes a while to synthesise)."""
-    live = service.service.live
-    live.limits = Limits()
+    service.service.intake.limits = Limits()
     with connect(service.url) as greedy, connect(service.url) as other:
         for i in range(5):
             greedy.send(speeches(f"long{i}", 5000))

@@ -10,6 +10,7 @@ place of its thread); the others run the live service with a real client."""
 from __future__ import annotations
 
 import json
+import threading
 import time
 
 import numpy as np
@@ -194,9 +195,9 @@ def test_subscribers_get_the_skeleton_then_every_frame_when_it_is_due(service):
         ws.send(json.dumps({"subscribe": "poses"}))
         (_, skeleton), = receive(ws, lambda m: True)
         assert skeleton == json.loads(json.dumps(poses.skeleton()))
-        time.sleep(0.5)
+        got = receive(ws, lambda m: m["type"] == "poses")  # the stream has started
         ws.send(BLOCK)
-        got = receive(ws, lambda m: m.get("id") == "b1:end")
+        got += receive(ws, lambda m: m.get("id") == "b1:end")
         end = got[-1][1]["globalTime"]
         got += receive(ws, lambda m: m["type"] == "poses" and m["time"] > end + 0.3)
     messages = pose_messages(got)
@@ -233,7 +234,8 @@ def test_nothing_is_evaluated_while_nobody_subscribes(service):
     with connect(service.url) as ws:
         ws.send(BLOCK)
         got = receive(ws, lambda m: m.get("id") == "b1:end")
-        time.sleep(0.3)
+        ws.send(f'<bml {NS} id="pause"><wait id="w" start="0" end="0.3"/></bml>')  # three snapshots more
+        got += receive(ws, lambda m: m.get("id") == "pause:end")
         assert not pose_messages(got)
         assert poses.sent_frames == 0 and len(poses.costs) == 0
         subscribed = live.env.now
@@ -251,7 +253,10 @@ def test_a_fault_in_the_poses_stops_neither_the_realizer_nor_the_stream(service,
     poses = service.service.poses
     live = service.service.live
 
+    failing = threading.Event()
+
     def broken(*args, **kwargs):
+        failing.set()
         raise RuntimeError("the evaluation broke")
 
     with connect(service.url) as ws:
@@ -259,7 +264,7 @@ def test_a_fault_in_the_poses_stops_neither_the_realizer_nor_the_stream(service,
         (_, before), = pose_messages(receive(ws, lambda m: m["type"] == "poses"))
         # the worker's evaluation fails (in the evaluator process: the worker hears of it from there)
         monkeypatch.setattr(poses, "evaluate", broken)
-        time.sleep(0.3)
+        assert failing.wait(10)
         ws.send(BLOCK)
         got = receive(ws, lambda m: m.get("id") == "b1:end")
         # and then the snapshot in the realizer's thread fails as well

@@ -142,25 +142,30 @@ def test_a_client_that_has_gone_is_not_kept_by_its_blocks():
     """The realizer remembers who sent a block by a number, not by its connection: a client's connection (its
     buffers) is let go when it leaves, though the blocks it sent are remembered (a server with thousands of
     clients coming and going had kept 4,096 closed connections, 250 MB)."""
+    import asyncio
     import gc
     import weakref
 
     with Background(Service(port=0, audio="none", fps=0, tts=BuiltinBackend())) as running:
         server = running.service.server
+        routing = server.routing
         with connect(running.url) as ws:
             ws.send(nod("gone"))
             until(ws, lambda m: m["id"] == "gone:end")
-            (connection,) = server.clients
+            (connection,) = routing.clients
             held = weakref.ref(connection)
             del connection
-        # (the library still holds a connection for a moment after its handler returned, until its socket has
-        # closed: on busy cores that outlasted the handler by more than the poll below had waited)
-        deadline = time.monotonic() + 5
+
+        async def handled() -> None:
+            """Until the library's task for the connection has ended (the library holds a connection until
+            its socket has closed, after the server's handler returned; the server's handler returns once
+            its tasks for the client have)."""
+            if server.endpoint.handler_tasks:
+                await asyncio.wait(set(server.endpoint.handler_tasks))
+
+        asyncio.run_coroutine_threadsafe(handled(), server.loop).result(timeout=10)
         gc.collect()
-        while held() is not None and time.monotonic() < deadline:
-            time.sleep(0.05)
-            gc.collect()
-        assert not server.clients and not server.outboxes and not server.key_of
+        assert not routing.clients and not routing.outboxes and not routing.key_of and not server.links
         assert "gone" in running.service.live.senders  # its block is remembered
         assert held() is None  # its connection is not
 

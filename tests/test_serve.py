@@ -60,11 +60,11 @@ def test_feedback_arrives_on_time_over_a_three_second_block(service):
 
 
 def test_an_interrupt_sent_while_a_speech_plays_ends_it_at_once(service):
-    talk = (f'<bml {NS} id="talk"><speech id="s"><text>' + "This goes on and on. " * 20 + "</text></speech></bml>")
+    talk = (f'<bml {NS} id="talk"><speech id="s"><text>This goes on <sync id="m"/>and on. '
+            + "This goes on and on. " * 19 + "</text></speech></bml>")
     with connect(service.url) as ws:
         ws.send(talk)
-        receive_until(ws, lambda f: f["id"] == "talk:s:start")
-        time.sleep(0.8)
+        receive_until(ws, lambda f: f["id"] == "talk:s:m")  # well into the speech
         sent = time.monotonic()
         ws.send(f'<bml {NS} id="stop"><bmla:interrupt id="i" target="talk"/></bml>')
         got = receive_until(ws, lambda f: f["id"] == "talk:s:end")
@@ -147,6 +147,8 @@ def test_a_port_in_use_is_one_clear_line():
 
 
 def test_sigterm_stops_the_service_and_what_it_started():
+    import os
+    import select
     import signal
     from pathlib import Path
 
@@ -162,8 +164,15 @@ def test_sigterm_stops_the_service_and_what_it_started():
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=30) == 130
         deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and any(Path(f"/proc/{c}").exists() for c in children):
-            time.sleep(0.1)
+        for child in children:  # until each has ended (its pidfd is readable then)
+            try:
+                pidfd = os.pidfd_open(child)
+            except ProcessLookupError:
+                continue
+            try:
+                select.select([pidfd], [], [], max(0.0, deadline - time.monotonic()))
+            finally:
+                os.close(pidfd)
         assert not [c for c in children if Path(f"/proc/{c}").exists()
                     and "zombie" not in Path(f"/proc/{c}/status").read_text()]
     finally:

@@ -79,7 +79,7 @@ def run_server(args: argparse.Namespace) -> int:
 
     if not 0 <= args.fps <= options.MAX_FPS:  # (0: no poses)
         raise UsageError(f"--fps must be between 0 and {options.MAX_FPS:g} poses per second, got {args.fps:g}")
-    from agentsim.live.server import origin_of
+    from agentsim.live.access import origin_of
 
     for origin in args.allow_origins:  # a usage error before anything starts
         origin_of(origin)
@@ -110,7 +110,7 @@ def run_server(args: argparse.Namespace) -> int:
                               "with --calibrate INPUT (e.g. --calibrate pulse with PULSE_SOURCE set)") from None
         raise Unavailable(f"{exc.problem}. Serve without sound with --audio none, or {GET_A_DEVICE} and name "
                           "its device with --audio DEVICE (e.g. --audio pulse)") from None
-    print(f"speech: {options.describe_backend(service.live.realizer.speech.planner.backend)}", file=sys.stderr)
+    print(f"speech: {options.describe_backend(service.live.backend)}", file=sys.stderr)
     import asyncio
 
     async def serve_until_a_signal() -> bool:

@@ -52,11 +52,11 @@ class AudioPlanner(Planner):
     behaviour_types = ("audiofile",)
     rigid = True
 
-    def __init__(self) -> None:
+    def __init__(self, locate: Callable[[Behaviour], Path] = resolve_audio) -> None:
         super().__init__()
         self.durations: dict[int, tuple[Path, float]] = {}
-        #: where a behaviour's file is (a service confines it: :class:`agentsim.live.server.MediaDirectory`)
-        self.locate: Callable[[Behaviour], Path] = resolve_audio
+        #: where a behaviour's file is (a service confines it: :class:`agentsim.live.intake.MediaDirectory`)
+        self.locate = locate
 
     def sound(self, behaviour: Behaviour) -> tuple[Path, float]:
         """The file and its length (s); ScheduleError if it is missing or not audio."""
@@ -91,8 +91,8 @@ class AudioEngine(Engine):
 
     name = "audio"
 
-    def __init__(self, context: EngineContext):
-        super().__init__(context, AudioPlanner())
+    def __init__(self, context: EngineContext, locate: Callable[[Behaviour], Path] = resolve_audio):
+        super().__init__(context, AudioPlanner(locate))
         #: who hears the files as they play: ``file_started(heard)``, ``sound_stopped(block, behaviour, at)``
         self.listeners: list = []
         self.played: list[HeardAudio] = []

@@ -1,4 +1,4 @@
-"""Live poses: the body's pose evaluated frame by frame while a :class:`~agentsim.live.server.LiveRealizer`
+"""Live poses: the body's pose evaluated frame by frame while a :class:`~agentsim.live.runtime.LiveRealizer`
 plays, streamed to the viewers that subscribed to them, and the viewer's files.
 
 Messages (JSON text) to a client that sent ``{"subscribe": "poses"}``:
@@ -24,7 +24,7 @@ Messages (JSON text) to a client that sent ``{"subscribe": "poses"}``:
   :attr:`~agentsim.live.server.Server.delay` seconds after its last frame's time, as feedback is.
 
 Where the work is done. Every ``period`` the realizer's thread (through
-:meth:`~agentsim.live.server.LiveRealizer.every`) takes a snapshot of what the body may be doing: the
+:meth:`~agentsim.live.runtime.LiveRealizer.every`) takes a snapshot of what the body may be doing: the
 records (:func:`~agentsim.core.recording.record_behaviours`) of the blocks that have not ended or ended
 lately, and of older blocks only the shifts that still hold a pose; that costs a few hundredths of a
 millisecond and does not grow with the run. A worker thread of its own evaluates the frames due since the
@@ -57,7 +57,8 @@ from agentsim.animation.drivers import EPSILON
 from agentsim.animation.manager import DriverManager
 from agentsim.core.recording import record_behaviours
 from agentsim.core.timed import REFUSED
-from agentsim.live.server import LiveRealizer, Server
+from agentsim.live.runtime import LiveRealizer
+from agentsim.live.server import Server
 from agentsim.media.report.data import FACE, body_points, point_names
 
 #: How often the poses are sent (s of the realizer's clock): the frames due since the last time.
@@ -298,7 +299,7 @@ class LivePoses:
     def publish(self, server: Server) -> None:
         """Greet subscribers of ``"poses"`` with the skeleton and start sending them poses."""
         self.server = server
-        server.hello["poses"] = self.skeleton()
+        server.routing.hello["poses"] = self.skeleton()
         if not self.worker.is_alive():
             self.worker.start()
 
@@ -366,10 +367,7 @@ class LivePoses:
         server = self.server
         if server is None or server.loop is None:
             return False
-        try:
-            return any("poses" in wanted for wanted in list(server.subscribers.values()))
-        except RuntimeError:  # the loop changed the table meanwhile: ask again next time
-            return True
+        return server.routing.wanted("poses")
 
     def work(self) -> None:
         """The worker thread: evaluate and send the frames due at each snapshot."""
@@ -452,9 +450,9 @@ class LivePoses:
         def schedule() -> None:
             when = self.live.wall_time(last) + server.delay
             if when > loop.time() + 0.0005:
-                loop.call_at(when, server.broadcast, message, {"poses"}, True)
+                loop.call_at(when, server.routing.broadcast, message, {"poses"}, True)
             else:
-                server.broadcast(message, {"poses"}, True)
+                server.routing.broadcast(message, {"poses"}, True)
 
         try:
             loop.call_soon_threadsafe(schedule)
