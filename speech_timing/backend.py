@@ -238,6 +238,21 @@ def audio_bytes(utterance: "Utterance") -> int:
     return int(held if held is not None else audio.nbytes)
 
 
+def check_marks(text: str, marks: Sequence[tuple[int, str]]) -> None:
+    """ValueError if a mark's offset is outside ``text`` (a mark may sit at its very end)."""
+    for offset, name in marks:
+        if not 0 <= offset <= len(text):
+            raise ValueError(f"mark {name!r} at offset {offset} is outside the text (length {len(text)})")
+
+
+def spoken_text(speech: SpeechText) -> str:
+    """The text of ``speech`` as a synthesiser is given it: every kind of white space (and NUL) a plain space,
+    one character for one, so that offsets into it are offsets into the speech; its marks checked."""
+    text = "".join(" " if ch.isspace() or ch == "\0" else ch for ch in speech.text)
+    check_marks(text, speech.marks)
+    return text
+
+
 def check_prosody(speech: SpeechText) -> list[Prosody]:
     """The prosody spans of ``speech`` a backend can apply, properly nested, in the order they open.
 

@@ -69,7 +69,7 @@ import wave
 from dataclasses import dataclass
 
 from agentsim.errors import SpeechBackendUnavailable
-from speech_timing.backend import (Phoneme, Prosody, SpeechText, Spoken, Utterance, Word, check_prosody,
+from speech_timing.backend import (Phoneme, Prosody, SpeechText, Spoken, Utterance, Word, check_prosody, spoken_text,
                                      mark_times_from_words, parse_time)
 from speech_timing.builtin import rate_factor
 from speech_timing.espeak import core_span
@@ -377,10 +377,7 @@ class FestivalBackend:
     def _synthesize(self, speech: SpeechText) -> Utterance:
         import numpy as np
 
-        text = "".join(" " if ch.isspace() or ch == "\0" else ch for ch in speech.text)
-        for offset, name in speech.marks:
-            if not 0 <= offset <= len(text):
-                raise ValueError(f"mark {name!r} at offset {offset} is outside the text (length {len(text)})")
+        text = spoken_text(speech)
         spans = check_prosody(speech)
         chunks = _chunks(text)
         rate = min(max(self.rate * speech.rate, RATE_RANGE[0]), RATE_RANGE[1])

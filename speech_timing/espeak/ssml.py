@@ -8,8 +8,8 @@ import re
 from dataclasses import dataclass
 from xml.sax.saxutils import escape
 
-from speech_timing.backend import (BREAK_STRENGTHS, Prosody, SpeechText, check_prosody, nest_spans, parse_number,
-                                     parse_time)
+from speech_timing.backend import (BREAK_STRENGTHS, Prosody, SpeechText, check_marks, check_prosody, nest_spans,
+                                   parse_number, parse_time)
 
 MARK_NAME = "m{}"
 _MARK_ELEMENT = '<mark name="' + MARK_NAME + '"/>'
@@ -31,9 +31,7 @@ def to_ssml(text: str, marks: tuple[tuple[int, str], ...], prosody: tuple[Prosod
     that close come first (the inner before the outer), then breaks, marks, and the elements that open
     (the outer before the inner).
     """
-    for offset, name in marks:
-        if not 0 <= offset <= len(text):
-            raise ValueError(f"mark {name!r} at offset {offset} is outside the text (length {len(text)})")
+    check_marks(text, marks)
     order = sorted(range(len(marks)), key=lambda i: (marks[i][0], i))
     opens: dict[int, list[str]] = {}
     closes: dict[int, list[str]] = {}

@@ -6,7 +6,7 @@ import bisect
 import warnings
 from dataclasses import dataclass, field
 
-from speech_timing.backend import (BREAK_STRENGTHS, Phoneme, Prosody, SpeechText, Utterance, Word,
+from speech_timing.backend import (BREAK_STRENGTHS, Phoneme, Prosody, SpeechText, Utterance, Word, spoken_text,
                                      check_prosody, mark_times_from_words, parse_time)
 from speech_timing.builtin import rate_factor
 from speech_timing.espeak.ssml import written_tokens
@@ -126,10 +126,7 @@ class PiperBackend:
     def _synthesize(self, speech: SpeechText) -> Utterance:
         import numpy as np
 
-        text = "".join(" " if ch.isspace() or ch == "\0" else ch for ch in speech.text)
-        for offset, name in speech.marks:
-            if not 0 <= offset <= len(text):
-                raise ValueError(f"mark {name!r} at offset {offset} is outside the text (length {len(text)})")
+        text = spoken_text(speech)
         spans = check_prosody(speech)
         tokens = written_tokens(text)
         breaks, factors = self._prosody(text, tokens, spans)
