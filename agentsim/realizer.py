@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Iterable
@@ -14,7 +13,7 @@ from agentsim.bml.parser import Refused, parse_document
 from agentsim.core.block import Behaviour, Block
 from agentsim.core.clock import make_environment, run_until
 from agentsim.core.feedback import FeedbackLog
-from agentsim.core.gcpause import CollectionPause
+from agentsim.core.gcpause import CollectionPause, paused
 from agentsim.core.pegboard import PegBoard
 from agentsim.core.recording import Recording
 from agentsim.core.scheduler import FRAME, Scheduler
@@ -144,7 +143,7 @@ class Realizer:
 
     def _paused(self):
         """The garbage collector held off as :attr:`gc_pause` does, if the realizer was given one."""
-        return self.gc_pause.paused() if self.gc_pause is not None else contextlib.nullcontext()
+        return paused(self.gc_pause)
 
     def name_block(self) -> str:
         """The next free ``bml<n>`` for a block without id."""

@@ -36,6 +36,11 @@ GROWTH = 16
 FLOOR = 100_000
 
 
+def paused(pause: "CollectionPause | None") -> contextlib.AbstractContextManager:
+    """``pause.paused()``, or a ``with`` that does nothing where a program chose no pause (None)."""
+    return pause.paused() if pause is not None else contextlib.nullcontext()
+
+
 class CollectionPause:
     """A program's policy of holding automatic garbage collection off while blocks are read and planned.
 

@@ -8,7 +8,6 @@ the runtime's inbox (:mod:`agentsim.live.runtime`)."""
 from __future__ import annotations
 
 import collections
-import contextlib
 import dataclasses
 import queue
 import sys
@@ -17,6 +16,7 @@ from pathlib import Path
 from typing import Callable
 
 from agentsim.core import feedback as fb
+from agentsim.core.gcpause import paused
 from agentsim.errors import ScheduleError
 from agentsim.live.faults import note
 from agentsim.live.limits import Limits
@@ -240,7 +240,7 @@ class Intake:
         from agentsim.bml.parser import Refused, parse_document
 
         try:
-            with self.gc_pause.paused() if self.gc_pause is not None else contextlib.nullcontext():
+            with paused(self.gc_pause):
                 blocks = parse_document(text, strict=self.strict, name_block=self.name_block, lexicon=self.lexicon)
         except Exception as exc:  # the reader's own fault: the client hears of it, the operator too
             self.reader_failed(reply, exc)
