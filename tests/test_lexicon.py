@@ -86,6 +86,19 @@ def test_lexicon_list_shows_the_built_in_entries():
                          + len(builtin.postures) + len(builtin.visemes) + len(builtin.channels))
 
 
+def test_agentsim_lexicon_alone_lists_as_lexicon_list_does_the_files_given_before_or_after_list(tmp_path):
+    (tmp_path / "mine.toml").write_text(PRESENT + HIGH_BEAT)
+    listed = agentsim("lexicon", "list", "--lexicon", tmp_path / "mine.toml")
+    assert listed.returncode == 0 and "mine.toml" in listed.stdout, listed.stderr
+    for args in (("lexicon", "--lexicon", tmp_path / "mine.toml"), ("lexicon", "--lexicon", tmp_path / "mine.toml",
+                                                                   "list")):
+        run = agentsim(*args)
+        assert (run.returncode, run.stdout) == (0, listed.stdout), (args, run.stderr)
+    bare = agentsim("lexicon")
+    assert bare.returncode == 0 and bare.stdout == agentsim("lexicon", "list").stdout
+    assert "mine.toml" not in bare.stdout
+
+
 def test_a_lexicon_file_adds_a_form_and_replaces_a_stroke(tmp_path):
     (tmp_path / "mine.toml").write_text(PRESENT + HIGH_BEAT + WIDE_SMILE + MORE)
     run = agentsim("lexicon", "list", "--lexicon", tmp_path / "mine.toml")

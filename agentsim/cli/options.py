@@ -208,8 +208,10 @@ def explained(result: dict, units: dict[str, str]) -> dict:
     return {**tidy(result), "units": units, "glossary": GLOSSARY}
 
 
-def add_lexicon(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--lexicon", action="append", default=[], metavar="FILE",
+def add_lexicon(parser: argparse.ArgumentParser, nested: bool = False) -> None:
+    """``--lexicon FILE``; ``nested``: on a nested command whose parent takes it too (it then leaves the
+    parent's files as they are when it is not given again)."""
+    parser.add_argument("--lexicon", action="append", default=argparse.SUPPRESS if nested else [], metavar="FILE",
                         help="add the lexemes of a lexicon file to the built-in ones, replacing those of the same "
                              "name (TOML: gestures as strokes or MURML forms, conducting patterns, face lexemes, "
                              "FACS units, postures, visemes; see 'agentsim lexicon list' and docs/howto/gestures.md); "

@@ -67,11 +67,14 @@ def add_parsers(commands) -> None:
                                   description="The lexicon's entries (built in, and those of --lexicon files): "
                                               "gestures (strokes and MURML forms), the conducting patterns, face "
                                               "lexemes, FACS units, postures, visemes and face channels, each with "
-                                              "its name, kind and the file it comes from.")
-    lexicon_actions = lexicon.add_subparsers(dest="action", required=True)
+                                              "its name, kind and the file it comes from (as 'lexicon list' "
+                                              "says them).")
+    options.add_lexicon(lexicon)
+    lexicon.set_defaults(handler=list_lexicon)
+    lexicon_actions = lexicon.add_subparsers(dest="action")
     lexicon_list = lexicon_actions.add_parser("list", help="every entry, its kind and source",
                                               description="One line an entry: name, kind, source.")
-    options.add_lexicon(lexicon_list)
+    options.add_lexicon(lexicon_list, nested=True)
     lexicon_list.set_defaults(handler=list_lexicon)
 
     anticipators = commands.add_parser("anticipators", help="installed anticipators, and a new plugin",
