@@ -218,9 +218,16 @@ def clear_scratch(prefix: str) -> list[Path]:
     return removed
 
 
+#: zlib's compression level of the PNG pictures :func:`save_figure` writes.
+PNG_COMPRESSION = 3
+
+
 def save_figure(fig, path: str | Path, **options) -> Path:
     """Save a matplotlib figure through :func:`written` (the format from ``path``'s suffix)."""
     path = Path(path)
+    kind = path.suffix.lstrip(".").lower() or None
+    if kind == "png" and "pil_kwargs" not in options:  # zlib's level 3: three times faster than its default
+        options["pil_kwargs"] = {"compress_level": PNG_COMPRESSION}  # for a fifth more bytes, the same pixels
     with written(path) as tmp:
         fig.savefig(tmp, format=path.suffix.lstrip(".") or None, **options)
     return path

@@ -63,8 +63,13 @@ def _changed_rc() -> dict:
     """The matplotlib settings this process changed (that a worker process changes in turn)."""
     import matplotlib
 
-    return {k: v for k, v in matplotlib.rcParams.items()
-            if k != "backend" and matplotlib.rcParamsOrig.get(k, v) != v}
+    # (the keys, not items(): reading ``backend`` resolves it, which imports pyplot, a quarter of a second)
+    settings, original = matplotlib.rcParams, matplotlib.rcParamsOrig
+    changed = {}
+    for key in settings:
+        if key != "backend" and key in original and original[key] != settings[key]:
+            changed[key] = settings[key]
+    return changed
 
 
 #: In a worker process: the recording and the pose panel it draws (``"run"``).
@@ -97,9 +102,12 @@ def _take_run(payload: bytes) -> None:
     """Start a worker process: keep the run it draws (pickled once for all of its pictures)."""
     import matplotlib
 
+    from agentsim.core.gcpause import keep_out_of_collections
+
     recording, panel, rc = pickle.loads(payload)
     matplotlib.rcParams.update(rc)
     _WORKER["run"] = (recording, panel)
+    keep_out_of_collections()  # (the run and matplotlib's modules stay for the worker's life)
 
 
 def _draw(job: tuple, recording=None, panel=None) -> Path:

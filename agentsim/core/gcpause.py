@@ -36,6 +36,19 @@ GROWTH = 16
 FLOOR = 100_000
 
 
+def keep_out_of_collections() -> None:
+    """Keep every object alive now out of the collector's later passes (``gc.freeze``), for the rest of the
+    process.
+
+    For a program that runs once and exits (a scenario's run, a worker that draws pictures): what it has
+    imported and built by then (modules, classes, tables, a finished run) lives until it exits, yet each full
+    collection would look at all of it again. A program that runs on (the live service) freezes only what it
+    has warmed up. Objects frozen are never collected, garbage among them included: call this where what is
+    alive is meant to stay.
+    """
+    gc.freeze()
+
+
 def paused(pause: "CollectionPause | None") -> contextlib.AbstractContextManager:
     """``pause.paused()``, or a ``with`` that does nothing where a program chose no pause (None)."""
     return pause.paused() if pause is not None else contextlib.nullcontext()

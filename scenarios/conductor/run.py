@@ -110,6 +110,11 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
         from agentsim.animation.pictures import warm_workers
 
         warm_workers()  # the processes that draw the timeline pictures get ready while the run is simulated
+    import agentsim.realizer  # noqa: F401  (what a run imports, imported now: see below)
+    import scenarios.conductor.ensemble  # noqa: F401
+    from agentsim.core.gcpause import keep_out_of_collections
+
+    keep_out_of_collections()  # the modules, classes and tables stay for the process's life
     for name in stages.over(list(strategies), "strategies", unit="strategy") if args.compare else strategies:
         started = time.perf_counter()
         run = simulate(config, name, args.seed, stages=stages)
