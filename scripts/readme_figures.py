@@ -21,6 +21,7 @@ Tables:
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import difflib
 import json
 import re
@@ -93,8 +94,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     old = README.read_text(encoding="utf-8")
     new = old
-    for name in ([args.only] if args.only else TABLES):
-        new = place(new, name, TABLES[name]())
+    names = [args.only] if args.only else list(TABLES)
+    # each table is a run of processes of its own: they run side by side (each waits for its cluster, its
+    # synthesis, its files at times the others compute)
+    with concurrent.futures.ThreadPoolExecutor(len(names)) as pool:
+        tables = dict(zip(names, pool.map(lambda name: TABLES[name](), names)))
+    for name in names:
+        new = place(new, name, tables[name])
     if new == old:
         print("readme_figures: every table matches a fresh run", file=sys.stderr)
         return 0

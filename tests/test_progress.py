@@ -77,7 +77,7 @@ def without_figures(text: str) -> str:
 
 
 STORY_STAGES = ("synthesising speech", "simulating", "poses/BVH", "audio", "report", "pictures")
-CONDUCTOR_STAGES = ("simulating", "measuring", "audio", "poses/BVH", "report", "pictures")
+CONDUCTOR_STAGES = ("simulating", "measuring", "poses/BVH", "audio", "report", "pictures")
 
 
 @pytest.mark.system  # a whole scenario, a real-time wait or a long synthesis: the system run

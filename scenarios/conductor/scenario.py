@@ -429,18 +429,18 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     # the poses and the rest are made; the timeline pictures are drawn by worker processes from when the poses
     # are known, and waited for at the end
     with contextlib.ExitStack() as drawing, concurrent.futures.ThreadPoolExecutor(1) as sound:
+        with say("poses/BVH"):  # first: the pictures, the longest to make, begin as soon as the poses are known
+            stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
+            timelines = (drawing.enter_context(start_timelines(
+                recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
+                title=f"conductor ({run.strategy_name})")) if plots and pictures else None)
+            write_bvh(out / "conductor.bvh", stream)
         with say("audio"):
             # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the
             # feedback's)
             track = run_track(recording, [ensemble_source(run)])
             ogg = start_audio(out / "report.html", track, sound)
             write_wav(out / "ensemble.wav", track)
-        with say("poses/BVH"):
-            stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
-            timelines = (drawing.enter_context(start_timelines(
-                recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
-                title=f"conductor ({run.strategy_name})")) if plots and pictures else None)
-            write_bvh(out / "conductor.bvh", stream)
         with say("report"):
             write_csv(out / "beats.csv", beat_rows(run))
             gestures = gesture_rows(recording, beat_sounded(run))
