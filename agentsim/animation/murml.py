@@ -33,7 +33,6 @@ import functools
 import json
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from agentsim.animation.arms import side_sign
 from agentsim.animation.body import FINGERS, euler_matrix, matrix_euler
@@ -339,6 +338,8 @@ class MurmlDriver(MotionDriver):
                                       values[f"{side}_shoulder.yaw"])
         bent = upper @ euler_matrix(np.zeros(len(t)), values[f"{side}_elbow.pitch"], np.zeros(len(t)))
         local = np.transpose(bent, (0, 2, 1)) @ target
+        from scipy.spatial.transform import Rotation  # (scipy.spatial: a third of a second, for MURML only)
+
         twist, roll, pitch = Rotation.from_matrix(local).as_euler("YZX", degrees=True).T
         lo, hi = body.lower, body.upper
         clip = lambda name, v: np.clip(v, lo[body.dof(name)], hi[body.dof(name)])  # noqa: E731

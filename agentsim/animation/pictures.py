@@ -61,6 +61,10 @@ def _portable(recording):
 
 def _changed_rc() -> dict:
     """The matplotlib settings this process changed (that a worker process changes in turn)."""
+    import sys
+
+    if "matplotlib" not in sys.modules:  # never imported here: nothing changed (and nothing to import)
+        return {}
     import matplotlib
 
     # (the keys, not items(): reading ``backend`` resolves it, which imports pyplot, a quarter of a second)
@@ -71,6 +75,11 @@ def _changed_rc() -> dict:
             changed[key] = settings[key]
     return changed
 
+
+#: What the server that drawing processes are forked from imports once, so that none imports it again:
+#: this module and the parts of matplotlib a picture uses (the figure alone is a third of a second).
+PRELOADED = [__name__, "matplotlib.backends.backend_agg", "matplotlib.figure", "matplotlib.collections",
+             "matplotlib.patches", "matplotlib.colors", "matplotlib.font_manager", "matplotlib.textpath"]
 
 #: In a worker process: the recording and the pose panel it draws (``"run"``).
 _WORKER: dict = {}
@@ -93,7 +102,7 @@ def warm_workers():
     if "forkserver" not in multiprocessing.get_all_start_methods() or not _may_start_processes():
         return None
     context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload([__name__, "matplotlib.backends.backend_agg"])
+    context.set_forkserver_preload(PRELOADED)
     multiprocessing.forkserver.ensure_running()
     return context
 
@@ -112,8 +121,12 @@ def _take_run(payload: bytes) -> None:
 
 def _draw(job: tuple, recording=None, panel=None) -> Path:
     """Draw one picture of :func:`plot_timelines` of the run given or, in a worker process, of its run;
-    ``job``: ``("whole", file, title, width)``, ``("overview", file, title, width, window)`` or
-    ``("window", file, title, width, start, end)``. Returns the file."""
+    ``job``: ``("whole", file, title, width)``, ``("overview", file, title, width, window)``,
+    ``("window", file, title, width, start, end)`` or ``("figure", file, function, arguments)`` (a module-level
+    function making a matplotlib figure from the arguments, saved to the file). Returns the file."""
+    if job[0] == "figure":  # ("figure", file, function, arguments): a figure of the caller's own
+        _, path, function, arguments = job
+        return save_figure(function(*arguments), path)
     if recording is None:
         recording, panel = _WORKER["run"]
     kind, path, title, width, *span = job
@@ -176,8 +189,8 @@ class TimelineDrawing:
             self._starting = None
 
     def result(self) -> list[Path]:
-        """Wait for the pictures (or draw them) and return their files, the overview (or the one picture)
-        first; window files of an earlier, longer run left in the folder are removed. Raises what drawing
+        """Wait for the pictures (or draw them) and return their files: the caller's figures, then the overview
+        (or the one picture), then the windows; window files of an earlier, longer run left in the folder are removed. Raises what drawing
         one of them raised. A picture whose worker died (killed, or unable to start) is drawn here."""
         from concurrent.futures import BrokenExecutor
 
@@ -218,7 +231,7 @@ class TimelineDrawing:
 
 def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | None = None, window: float = WINDOW,
                     threshold: float | None = None, title: str | None = None, width: float = 16.0,
-                    workers: int | None = None) -> TimelineDrawing:
+                    workers: int | None = None, figures: list[tuple] = ()) -> TimelineDrawing:
     """Begin drawing the pictures of :func:`plot_timelines`; the caller writes its other files meanwhile
     and asks :meth:`TimelineDrawing.result` for these when it needs them.
 
@@ -239,6 +252,11 @@ def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | No
     workers : int, optional
         How many processes draw side by side (default :data:`WORKERS`; at most one per core this process
         may run on, and one per picture).
+    figures : list of (file, function, arguments)
+        Other pictures of the run drawn by the same processes, first: ``function(*arguments)`` (a function a
+        worker can import by name, arguments it can be handed) makes a matplotlib figure saved to ``file``;
+        so the caller never imports matplotlib's figures itself. Their files come first in
+        :meth:`TimelineDrawing.result`.
 
     Returns
     -------
@@ -264,6 +282,7 @@ def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | No
     n = min(WORKERS if workers is None else workers, _cores(), len(jobs))
     if len(jobs) < 3:  # one window at most: nothing to draw side by side
         n = 1
+    jobs = [("figure", Path(file), function, tuple(arguments)) for file, function, arguments in figures] + jobs
     return TimelineDrawing(jobs, png, recording, panel, n)
 
 

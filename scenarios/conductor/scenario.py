@@ -385,7 +385,15 @@ def run_tempo_figure(run: Run, metrics: dict):
     """The tempo figure of a finished run (:func:`~scenarios.conductor.metrics.tempo_figure`):
     its tempo curves, where it recovered (or a title that says it did not), its asynchrony, and the
     conductor's "play louder" and stop gestures."""
-    from scenarios.conductor.metrics import recovery_phrase, tempo_figure
+    from scenarios.conductor.metrics import tempo_figure
+
+    return tempo_figure(*tempo_figure_arguments(run, metrics))
+
+
+def tempo_figure_arguments(run: Run, metrics: dict) -> tuple:
+    """The arguments of :func:`~scenarios.conductor.metrics.tempo_figure` for a finished run (what a process
+    drawing it is handed)."""
+    from scenarios.conductor.metrics import recovery_phrase
 
     if "tempo" not in run.extra:
         collect_metrics(run)
@@ -394,8 +402,8 @@ def run_tempo_figure(run: Run, metrics: dict):
         events.append((run.conductor.stopped_at, "stop"))
     title = (f"{run.config.piece.title}: {run.strategy_name}, seed {run.seed} "
              f"({recovery_phrase(metrics.get('beats_to_recover'))})")
-    return tempo_figure(run.extra["beats"], run.extra["tempo"], run.extra["target"], run.conductor.ictus, title,
-                        events, first_index=run.extra["first_index"], onsets=run.extra["onsets"])
+    return (run.extra["beats"], run.extra["tempo"], run.extra["target"], dict(run.conductor.ictus), title, events,
+            run.extra["first_index"], run.extra["onsets"])
 
 
 def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True,
@@ -431,9 +439,14 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     with contextlib.ExitStack() as drawing, concurrent.futures.ThreadPoolExecutor(1) as sound:
         with say("poses/BVH"):  # first: the pictures, the longest to make, begin as soon as the poses are known
             stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
+            # the tempo figure is drawn by the pictures' processes too (this one never imports matplotlib's figures)
+            from scenarios.conductor.metrics import tempo_figure
+
             timelines = (drawing.enter_context(start_timelines(
                 recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
-                title=f"conductor ({run.strategy_name})")) if plots and pictures else None)
+                title=f"conductor ({run.strategy_name})",
+                figures=[(out / "tempo.png", tempo_figure, tempo_figure_arguments(run, metrics))]))
+                if plots and pictures else None)
             write_bvh(out / "conductor.bvh", stream)
         with say("audio"):
             # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the
@@ -452,7 +465,8 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
         if not plots:
             return out
         with say("pictures"):
-            save_figure(run_tempo_figure(run, metrics), out / "tempo.png")
             if timelines is not None:
                 timelines.result()
+            else:
+                save_figure(run_tempo_figure(run, metrics), out / "tempo.png")
     return out
