@@ -253,7 +253,7 @@ class EmlReader:
                     inner = Scope(scope) if count > 1 else scope
                     it = Iteration(clause, k)
                     it.children = self.instances(node.elements(), inner, it,
-                                                 suffix if count == 1 else f"{suffix}_{k + 1}")
+                                                 suffix if k == 0 else f"{suffix}_{k + 1}")
                     clause.iterations.append(it)
                     if k == 0 and inner is not scope:  # from outside, names mean the first iteration's
                         for key, value in inner.names.items():

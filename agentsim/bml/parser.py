@@ -2,8 +2,8 @@
 
 :func:`parse_bml` reads one BML 1.0 block, strictly. :func:`parse_document` reads what a document holds:
 strictly, one BML 1.0 block; leniently (the default), also BML as other realizers write it (see
-:mod:`agentsim.bml.dialects`), several blocks to a document, each adaptation said in one
-``NONSTANDARD_BML`` warning of its block. Problems that spoil a whole block refuse it
+:mod:`agentsim.bml.dialects`) and de Melo's Expression Markup Language (:mod:`agentsim.bml.eml`), several
+blocks to a document, each adaptation said in one ``NONSTANDARD_BML`` warning of its block. Problems that spoil a whole block refuse it
 (:class:`~agentsim.errors.BMLError`); problems with one behaviour or constraint become
 :class:`~agentsim.core.block.ParseWarning` entries and the rest of the block is kept.
 """
