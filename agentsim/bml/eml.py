@@ -22,7 +22,8 @@ and Appendix D) read as one BML block, each adaptation noted as the other dialec
   and say-as. ``<voice-say>`` of text is a speech without sync points.
 * GEML: ``<gesture-key>`` becomes a MURML gesture (:mod:`agentsim.bml.eml_gestures`) whose stroke is at
   the key's time; a key that would start before the block (its time less its preparation) is clamped to
-  the block's start; ``<gesture-is-on isOn="false">`` leaves out the keys after it (in document order)
+  the block's start, its stroke at its time or :data:`MIN_PREPARATION` after the block's start, whichever
+  is later; ``<gesture-is-on isOn="false">`` leaves out the keys after it (in document order)
   until one turns gestures on again.
 * ``<event type>`` is a sync point without motion (``event`` behaviour); ``<null>`` only takes time.
 
