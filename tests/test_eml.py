@@ -143,3 +143,32 @@ def test_a_bad_time_or_an_unknown_element_gives_one_warning_and_the_rest_is_real
     got = syncs(feedback)
     assert got["doc:ok:start"] == got["doc:v:m1"] and "doc:v:end" in got
     assert "doc:bad:start" not in got
+
+
+def test_motion_keys_put_the_wrist_where_speaker_coordinates_say_and_both_hands_mirror(tmp_path, capsys):
+    from agentsim.bml.eml_gestures import location
+
+    poses = tmp_path / "poses.npz"
+    got = syncs(realize(tmp_path, capsys, None, "--tts", "builtin", "--poses", str(poses), "--fps", "100"))
+    data = np.load(poses)
+    joints = [str(j) for j in data["joints"]]
+
+    def wrist(side, t):
+        return data["positions"][int(round(t * 100)), joints.index(f"{side}_wrist")]
+
+    head = data["positions"][0, joints.index("skullbase")][1]
+    # the salutation: above the head, where (-7, 45, 3) is; the beat: (-15, 40, 3) 0.1 s after "world"
+    raised = wrist("r", got["helloWorld:key1:strokeEnd"])
+    assert raised[1] > head + 0.3
+    assert np.allclose(raised, location(-7.0, 45.0, 3.0), atol=0.01)
+    assert np.allclose(wrist("r", got["helloWorld:t1:t2"] + 0.12), location(-15.0, 40.0, 3.0), atol=0.01)
+    # both hands: the left one mirrors the right on the sagittal plane
+    text = ('<eml name="both"><body><gesture-key time="1" duration="0.4" handedness="both"><motion>'
+            '<key time="0" x="-10" y="20" z="-10"/><key time="0.2" x="-14" y="22" z="-12"/></motion>'
+            '</gesture-key></body></eml>')
+    realize(tmp_path, capsys, text, "--tts", "builtin", "--poses", str(poses), "--fps", "100")
+    data = np.load(poses)
+    right, left = wrist("r", 1.3), wrist("l", 1.3)
+    root = data["positions"][130, joints.index("HumanoidRoot")] * np.array([1.0, 0.0, 1.0])  # (its sway)
+    assert np.allclose(right, location(-14.0, 22.0, -12.0), atol=0.01)
+    assert np.allclose(left - root, (right - root) * np.array([-1.0, 1.0, 1.0]), atol=0.002)
