@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Iterable
+from typing import Callable, Iterable
 
 from agentsim.animation.lexicon import Lexicon
 from agentsim.animation.units import motion_unit
@@ -68,6 +68,10 @@ class Envelope:
     notes: Notes = field(default_factory=Notes)
     character: str | None = None
     losses: list[tuple[str, Node]] = field(default_factory=list)
+    #: what writes the block instead of the Adapter, called with the envelope and the block namer (EML's)
+    reader: Callable[["Envelope", Callable[[], str]], None] | None = None
+    #: warnings of their own kind: (kind, message, element)
+    warnings: list[tuple[str, str, Node]] = field(default_factory=list)
 
 
 def seconds(value: float) -> str:

@@ -2,8 +2,8 @@
 
 :func:`parse_bml` reads one BML 1.0 block, strictly. :func:`parse_document` reads what a document holds:
 strictly, one BML 1.0 block; leniently (the default), also BML as other realizers write it (see
-:mod:`agentsim.bml.dialects`), several blocks to a document, each adaptation said in one
-``NONSTANDARD_BML`` warning of its block. Problems that spoil a whole block refuse it
+:mod:`agentsim.bml.dialects`) and de Melo's Expression Markup Language (:mod:`agentsim.bml.eml`), several
+blocks to a document, each adaptation said in one ``NONSTANDARD_BML`` warning of its block. Problems that spoil a whole block refuse it
 (:class:`~agentsim.errors.BMLError`); problems with one behaviour or constraint become
 :class:`~agentsim.core.block.ParseWarning` entries and the rest of the block is kept.
 """
@@ -22,7 +22,7 @@ from agentsim.animation.lexicon import Lexicon
 from agentsim.bml import lexemes
 from agentsim.bml.dialect_tables import DRAFT_NAMESPACES
 from agentsim.bml.dialects import Adapter
-from agentsim.bml.documents import Notes, find_blocks
+from agentsim.bml.documents import Envelope, Notes, find_blocks
 from agentsim.bml.spelling import fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
 from agentsim.core.xmltree import Node, encode, read_forest, read_tree
@@ -219,7 +219,12 @@ def parse_document(text: str | bytes, strict: bool = False, name_block: Callable
         return [Refused(guess_block_id(text), exc)]
     folded = fold_case(root, made["names"])
     drafts = any(uri in DRAFT_NAMESPACES for scope in made["scopes"] for uri in scope.values())
-    envelopes = find_blocks(root, forest)
+    if root.local == "eml" and root.namespace is None:  # de Melo's Expression Markup Language
+        from agentsim.bml.eml import read_eml
+
+        envelopes = [Envelope(root, reader=read_eml)]
+    else:
+        envelopes = find_blocks(root, forest)
     for envelope in envelopes:
         if doctype:
             envelope.notes.add("document type declaration (an external DTD, never read) left out")
@@ -236,7 +241,10 @@ def parse_document(text: str | bytes, strict: bool = False, name_block: Callable
     results: list[Block | Refused] = []
     for envelope in envelopes:
         try:
-            Adapter(envelope, name_free, drafts, lexicon).adapt()
+            if envelope.reader is not None:
+                envelope.reader(envelope, name_free)
+            else:
+                Adapter(envelope, name_free, drafts, lexicon).adapt()
             block = read_block(envelope.node, envelope.notes)
         except BMLError as exc:
             results.append(Refused(envelope.node.attrs.get("id", ""), exc))
@@ -252,6 +260,8 @@ def parse_document(text: str | bytes, strict: bool = False, name_block: Callable
         for message, node in envelope.losses:
             block.warnings.append(ParseWarning("BEHAVIOR_TYPE_NOT_SUPPORTED", f"{message} ({node.where()})", [],
                                                node.line, node.column))
+        for kind, message, node in envelope.warnings:
+            block.warnings.append(ParseWarning(kind, message, [], node.line, node.column))
         results.append(warn_defaults(block, defaults))
     return results
 

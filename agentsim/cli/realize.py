@@ -29,7 +29,8 @@ def add_parsers(commands) -> None:
                     "per line. Diagnostics go to stderr.")
     realize.add_argument("files", nargs="+", metavar="FILE",
                          help="BML files ('-' reads standard input): BML 1.0, or BML written for Greta, SmartBody, "
-                              "the Virtual Human Toolkit, EMBR or the BML drafts (each adaptation is reported)")
+                              "the Virtual Human Toolkit, EMBR or the BML drafts, or EML (de Melo's Expression "
+                              "Markup Language) (each adaptation is reported)")
     realize.add_argument("--strict", action="store_true",
                          help="read pure BML 1.0 only (one block a file; no adaptation of other dialects)")
     realize.add_argument("--at", type=_times, metavar="T1,T2,...", help="submission time of each file (seconds)")
