@@ -153,7 +153,7 @@ def storyteller(name: str) -> list[OrderedDict]:
     from scenarios.storytelling.run import shipped_stories
     from scenarios.storytelling.telling import make_voice, tell
 
-    voice = make_voice(name, cache=False)
+    voice = make_voice(name)  # the speech cache: a story synthesised before is read back (the same figures)
     rows = []
     for path in sorted(shipped_stories().values(), key=lambda p: -len(read_story(p).words)):
         story = read_story(path)
