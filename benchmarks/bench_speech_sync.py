@@ -9,10 +9,11 @@ linear characters-to-time model calibrated on ``calibration.txt`` with that back
 text is synthesised once per backend; all strategies see the same delivered events (same seed per
 text). ``side_by_side`` puts the backends' figures next to each other, row by row, and ``speech`` gives
 each backend's speaking rate (words per minute of speech), synthesis real-time factor (wall seconds
-of synthesis per second of speech, each text synthesised once in a process that had not spoken it) and
+of synthesis per second of speech, each text synthesised once in a process that had not spoken it; and in CPU
+seconds of this process, which other work on the machine does not inflate, for Piper, which synthesises in it) and
 first-synthesis latency (wall seconds from the import of the backend to the end of its first sentence, in a new
 process: what a user waits for before the first word);
-``--storyteller`` adds each backend's storyteller run (the longest shipped story, ``best``). Errors of all
+``--storyteller`` adds each backend's storyteller runs (both shipped stories, ``best``). Errors of all
 texts are pooled before the percentiles are taken; snaps and stall time are summed over the texts.
 
 All conditions share a nominal latency of 80 ms with an unknown extra 0-40 ms and an audio clock
@@ -107,20 +108,28 @@ def strategy_table(backend, texts: OrderedDict, model, args) -> OrderedDict:
     return table
 
 
+#: Backends that synthesise in this process, whose CPU time is measured (espeak-ng synthesises in forks of an
+#: engine process of its own, Festival in a server process).
+IN_PROCESS = frozenset({"piper"})
+
+
 def speech_figures(backend, texts: OrderedDict) -> OrderedDict:
     """Speaking rate and synthesis real-time factor of ``backend`` on ``texts`` (each synthesised here, once,
-    and kept for the strategy runs)."""
-    words = seconds = wall = 0.0
+    and kept for the strategy runs), in wall seconds and in CPU seconds (None but for a backend of
+    :data:`IN_PROCESS`)."""
+    words = seconds = wall = cpu = 0.0
     sample_rate = 0
     for text in texts.values():
-        started = time.perf_counter()
+        started, cpu_started = time.perf_counter(), time.process_time()
         utterance = synthesize_cached(backend, text)
         wall += time.perf_counter() - started
+        cpu += time.process_time() - cpu_started
         words += len(utterance.words)
         seconds += utterance.duration
         sample_rate = utterance.sample_rate
     return OrderedDict(words=int(words), speech_s=round(seconds, 2), words_per_minute=round(60.0 * words / seconds, 1),
                        synthesis_s=round(wall, 3), real_time_factor=round(wall / seconds, 4),
+                       cpu_real_time_factor=round(cpu / seconds, 4) if backend.name in IN_PROCESS else None,
                        sample_rate=sample_rate)
 
 
@@ -137,19 +146,23 @@ def first_synthesis(name: str) -> float:
     return float(done.stdout.split()[-1])
 
 
-def storyteller(name: str) -> OrderedDict:
-    """The storyteller with backend ``name``: the longest shipped story told with ``best`` (condition A, seed
-    0, strokes on the stressed syllables, as ``agentsim run storytelling``), its sync error and snaps."""
+def storyteller(name: str) -> list[OrderedDict]:
+    """The storyteller with backend ``name``: each shipped story told with ``best`` (condition A, seed 0, strokes
+    on the stressed syllables, as ``agentsim run storytelling --tts NAME``), its sync error and snaps."""
     from scenarios.storytelling.markup import read_story
-    from scenarios.storytelling.run import resolve_story
+    from scenarios.storytelling.run import shipped_stories
     from scenarios.storytelling.telling import make_voice, tell
 
-    story = read_story(resolve_story(None))
-    m = tell(story, "best", seed=0, voice=make_voice(name, cache=False)).metrics()
-    e = m["sync_error_ms"]
-    return OrderedDict(story=story.title, gestures=m["gestures"], speech_s=round(m["duration_s"], 1),
-                       p50_ms=round(e["p50"], 2), p95_ms=round(e["p95"], 2), max_ms=round(e["max"], 2),
-                       snaps=m["snaps"], missed=m["missed"])
+    voice = make_voice(name)  # the speech cache: a story synthesised before is read back (the same figures)
+    rows = []
+    for path in sorted(shipped_stories().values(), key=lambda p: -len(read_story(p).words)):
+        story = read_story(path)
+        m = tell(story, "best", seed=0, voice=voice).metrics()
+        e = m["sync_error_ms"]
+        rows.append(OrderedDict(story=story.title, gestures=m["gestures"], speech_s=round(m["duration_s"], 1),
+                                p50_ms=round(e["p50"], 2), p95_ms=round(e["p95"], 2), max_ms=round(e["max"], 2),
+                                snaps=m["snaps"], missed=m["missed"]))
+    return rows
 
 
 def side_by_side(results: OrderedDict) -> list[OrderedDict]:
@@ -179,15 +192,28 @@ def markdown(result: dict) -> str:
             c = row[b]
             cells += [f"{c['p50_ms']:g} / {c['p95_ms']:g} / {c['max_ms']:g}", str(c["snaps"]), f"{c['stall_s']:g}"]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "| backend | voice | words | speech s | words per minute | synthesis s | real-time factor | "
-                  "first synthesis s |", "|---|---|---|---|---|---|---|---|"]
-    for b, sp in result["speech"].items():
-        lines.append(f"| {b} | {result['voices'][b]} | {sp['words']} | {sp['speech_s']:g} | {sp['words_per_minute']:g} | "
-                     f"{sp['synthesis_s']:g} | {sp['real_time_factor']:g} | {sp['first_synthesis_s']:g} |")
+    lines += ["", speech_markdown(result)]
     if result.get("storyteller"):
-        lines += ["", "| backend | story | gestures | speech s | p50 ms | p95 ms | max ms | snaps |",
-                  "|---|---|---|---|---|---|---|---|"]
-        for b, st in result["storyteller"].items():
+        lines += ["", storyteller_markdown(result)]
+    return "\n".join(lines)
+
+
+def speech_markdown(result: dict) -> str:
+    """The speech figures of each backend as a Markdown table."""
+    lines = ["| backend | voice | words | speech s | words per minute | synthesis s | real-time factor | "
+             "CPU real-time factor | first synthesis s |", "|---|---|---|---|---|---|---|---|---|"]
+    for b, sp in result["speech"].items():
+        cpu = "-" if sp.get("cpu_real_time_factor") is None else f"{sp['cpu_real_time_factor']:g}"
+        lines.append(f"| {b} | {result['voices'][b]} | {sp['words']} | {sp['speech_s']:g} | {sp['words_per_minute']:g} | "
+                     f"{sp['synthesis_s']:g} | {sp['real_time_factor']:g} | {cpu} | {sp['first_synthesis_s']:g} |")
+    return "\n".join(lines)
+
+
+def storyteller_markdown(result: dict) -> str:
+    """The storyteller's runs of each backend as a Markdown table."""
+    lines = ["| backend | story | gestures | speech s | p50 ms | p95 ms | max ms | snaps |", "|---|---|---|---|---|---|---|---|"]
+    for b, stories in result["storyteller"].items():
+        for st in stories:
             lines.append(f"| {b} | {st['story']} | {st['gestures']} | {st['speech_s']:g} | {st['p50_ms']:g} | "
                          f"{st['p95_ms']:g} | {st['max_ms']:g} | {st['snaps']} |")
     return "\n".join(lines)
@@ -204,7 +230,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--stress", action="store_true", help="aim strokes at stressed vowels")
     ap.add_argument("--table", action="store_true", help="print the side-by-side table as Markdown after the JSON")
     ap.add_argument("--storyteller", action="store_true",
-                    help="also tell the longest shipped story with each backend (best strategy, condition A)")
+                    help="also tell each shipped story with each backend (best strategy, condition A)")
     args = ap.parse_args(argv)
     names = [name.strip() for name in args.tts.split(",") if name.strip()]
     unknown = [name for name in names if name not in BACKENDS]

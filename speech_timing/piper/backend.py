@@ -12,6 +12,7 @@ from speech_timing.builtin import rate_factor
 from speech_timing.espeak.ssml import written_tokens
 from speech_timing.piper.alignment import is_sound, join_symbols, owners, word_groups
 from speech_timing.piper.engine import loaded_voice, voice_files
+from speech_timing.piper.onsets import started_at_their_sound
 
 #: Seconds of silence a break of each strength adds (as espeak-ng makes them; a break without attributes: medium).
 BREAK_SECONDS = {"none": 0.0, "x-weak": 0.0, "weak": 0.0, "medium": 0.15, "strong": 0.3, "x-strong": 0.6}
@@ -20,7 +21,7 @@ RATE_LABELS = {"x-slow": 0.6, "slow": 0.8, "medium": 1.0, "default": 1.0, "fast"
 #: Rate factors the backend takes (the text's rate times a span's).
 RATE_RANGE = (0.25, 4.0)
 #: Version of how Piper's symbols are read into words and phonemes; a cache keyed by it is read again after a change.
-READING = 1
+READING = 2
 #: Symbols that end a sentence in Piper's phonemes.
 _SENTENCE_ENDS = frozenset(".!?")
 assert set(BREAK_SECONDS) == set(BREAK_STRENGTHS)
@@ -168,6 +169,7 @@ class PiperBackend:
         pcm = np.concatenate(pieces) if pieces else np.zeros(0, dtype=np.int16)
 
         words, phonemes, sentence_words = _words(text, tokens, timeline, rate, sentences)
+        words, phonemes = started_at_their_sound(words, phonemes, pcm, rate, voice.config.hop_length)
         duration = len(pcm) / rate
         marks = mark_times_from_words(speech, words, duration)
         from speech_timing.samples import Pcm

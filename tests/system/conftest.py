@@ -119,22 +119,30 @@ def user_env(user_environment) -> dict:
 
 
 @pytest.fixture(scope="session")
-def piper_stories(tmp_path_factory) -> dict[str, Path]:
+def piper_stories(tmp_path_factory) -> dict[str, Path | float]:
     """Both shipped stories told with ``--tts piper`` (best strategy, seed 0, no pictures), once per session:
-    ``{story: output folder, "cache": the cache of synthesised speech they share}``. The cache is the fresh
-    install's too, so that each story is synthesised once in a run of the system tests."""
+    ``{story: output folder, "cache": the cache of synthesised speech they share, "STORY cpu_s": the CPU seconds
+    of its command}``. The cache is the fresh install's too, so that each story is synthesised once in a run of
+    the system tests."""
     import os
+    import resource
     import subprocess
     import sys
 
+    def cpu() -> float:
+        used = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return used.ru_utime + used.ru_stime
+
     root = Path(__file__).resolve().parents[2]
     where = tmp_path_factory.mktemp("piper-stories")
-    told: dict[str, Path] = {"cache": where / "cache"}
+    told: dict[str, Path | float] = {"cache": where / "cache"}
     for story in ("the_lamp_on_heron_hill", "the_north_wind_and_the_sun"):
+        before = cpu()
         done = subprocess.run([sys.executable, "-m", "agentsim", "run", "storytelling", "--story", story, "--tts",
                                "piper", "--cache", str(told["cache"]), "--out", str(where / story), "--no-pictures"],
                               cwd=where, env={**os.environ, "PYTHONPATH": str(root)}, capture_output=True, text=True,
                               timeout=1200)
         assert done.returncode == 0, done.stderr
+        told[f"{story} cpu_s"] = cpu() - before
         told[story] = where / story
     return told

@@ -108,19 +108,25 @@ def test_words_rise_out_of_silence_where_piper_aligned_them_and_marks_are_at_the
     assert rate == 22050
     after_pause = [k for k, (_, start, _) in enumerate(words) if k == 0 or start - words[k - 1][2] >= PAUSE]
     assert [words[k][0] for k in after_pause] == ["Welcome", "Tonight", "we", "Listen", "everyone", "the"]
+    own = _piper_own_word_starts(TEXT)
+    assert len(own) == len(words)
+    # every word within one alignment step of Piper's own time (in samples: 256 at most)
+    shifts = [round((w[1] - a) * rate) for a, w in zip(own, words)]
+    assert max(abs(s) for s in shifts) <= 256, shifts
     leads = {}
     for k in after_pause:
         onset = _rises_out_of_silence(samples, rate, words[k][1])
         assert onset is not None
-        leads[words[k][0]] = words[k][1] - onset
-    # within 15 ms, but for "Tonight" after a full stop: Piper gives the aspiration of its /t/ to the sentence's
-    # start symbol, 35 ms before the /t/ it aligns (the word's time is Piper's, see the next assertion)
-    assert {w: abs(lead) <= ONSET_TOLERANCE for w, lead in leads.items() if w != "Tonight"} == {
+        leads[words[k][0]] = (words[k][1] - onset, own[k] - onset)
+    # each word after a pause rises out of silence within 15 ms of its time, but for "Tonight", the first word
+    # of a sentence: Piper makes the breath before its /t/ in the frames of the sentence start "^", 34.8 ms
+    # before the /t/'s first frame. No time within one step of Piper's can be within 15 ms of that: the word
+    # starts one step before Piper's time, and its sound leads it by 23.2 ms
+    assert {w: abs(lead) <= ONSET_TOLERANCE for w, (lead, _) in leads.items() if w != "Tonight"} == {
         w: True for w in ("Welcome", "we", "Listen", "everyone", "the")}
-    assert 0.025 <= leads["Tonight"] <= 0.045
-    own = _piper_own_word_starts(TEXT)
-    assert len(own) == len(words)
-    assert max(abs(a - w[1]) for a, w in zip(own, words)) <= STEP
+    lead, piper_lead = leads["Tonight"]
+    assert piper_lead > STEP + ONSET_TOLERANCE and round(lead * 1000, 1) == 23.2 and round(piper_lead * 1000, 1) == 34.8
+    assert shifts[after_pause[1]] == -256
     feedback = [json.loads(line) for line in done.stdout.splitlines()]
     assert not [f for f in feedback if f["type"] == "warningFeedback"]
     marks = {f["id"].split(":")[-1]: f["time"] for f in feedback if f["type"] == "syncPointProgress"
@@ -155,8 +161,9 @@ def test_the_storyteller_speaks_with_piper_in_sync_and_its_report_plays_piper_s_
         assert errors["p95"] < 2.0
     else:
         # 65 gestures, a fifth of them in the first 15 s, while the best strategy has yet to measure the audio
-        # clock's drift (500 ppm): p95 is that start's; the gestures after it are within 2 ms
-        assert errors["p95"] < 3.5
+        # clock's drift (500 ppm; it reads 785 ppm from its first 8 s of events): p95 is that start's, as with
+        # espeak-ng (5.36 ms) and Festival (2.64 ms); the gestures after it are within 2 ms
+        assert round(errors["p95"], 2) == 2.73
         with open(out / "gestures.csv", newline="") as f:
             later = [abs(float(r["error_ms"])) for r in csv.DictReader(f)
                      if r["error_ms"] and float(r["sounded_s"]) >= 16.0]
@@ -176,6 +183,16 @@ def test_the_storyteller_speaks_with_piper_in_sync_and_its_report_plays_piper_s_
     match = np.corrcoef(_envelope(heard, rate), _envelope(said[:10 * rate], rate))[0, 1]
     off = np.corrcoef(_envelope(heard, rate), _envelope(said[rate // 2:rate // 2 + 10 * rate], rate))[0, 1]
     assert match > 0.95 and off < 0.5, (match, off)  # the narration's drift (500 ppm) blurs it a little
+
+
+def test_synthesis_takes_at_most_a_fifth_of_a_cpu_second_a_second_of_speech(piper_stories):
+    """The longest story told with Piper, synthesised in that run: the whole command (Python and Piper imported,
+    the voice loaded, 370 s of speech synthesised, the story simulated and its files written) in CPU seconds, which
+    other work on a shared machine does not inflate as it does wall time; its synthesis alone takes less."""
+    story = "the_lamp_on_heron_hill"
+    metrics = json.loads((piper_stories[story] / "metrics.json").read_text())
+    assert metrics["cached"] is False and metrics["duration_s"] > 360
+    assert piper_stories[f"{story} cpu_s"] / metrics["duration_s"] <= 0.2
 
 
 def test_breaks_and_rate_spans_are_applied_and_what_piper_cannot_do_is_said():

@@ -36,3 +36,21 @@ def test_the_check_fails_on_a_stale_figure(tmp_path, monkeypatch):
     assert readme_figures.main([]) == 0
     assert readme.read_text() == ("a\n<!-- figures:storyteller-strategies -->\n| fresh |\n"
                                   "<!-- /figures:storyteller-strategies -->\n")
+
+
+def test_the_check_passes_over_measured_times_but_not_over_other_figures(tmp_path, monkeypatch):
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        import readme_figures
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    head = "| backend | voice | speech s | real-time factor | first synthesis s |\n|---|---|---|---|---|\n"
+    page = tmp_path / "voices.md"
+    page.write_text(f"<!-- figures:voices -->\n{head}| piper | joe | 42.5 | 0.08 | 3.3 |\n<!-- /figures:voices -->\n")
+    monkeypatch.setattr(readme_figures, "PAGES", {"voices": page})
+    monkeypatch.setattr(readme_figures, "TABLES", {"voices": lambda: f"{head}| piper | joe | 42.5 | 0.31 | 7.7 |"})
+    assert readme_figures.main(["--check"]) == 0
+    monkeypatch.setattr(readme_figures, "TABLES", {"voices": lambda: f"{head}| piper | joe | 42.6 | 0.08 | 3.3 |"})
+    assert readme_figures.main(["--check"]) == 1
+    assert readme_figures.main([]) == 0
+    assert "| piper | joe | 42.6 | 0.08 | 3.3 |" in page.read_text()
