@@ -240,12 +240,14 @@
     s.va = new T.Vector3();
     s.vb = new T.Vector3();
     s.dir = new T.Vector3();
+    if (window.REPORT_STAGE && D && D.environment) window.REPORT_STAGE.build(s, M, pts, D.environment);  // stage.js
     return s;
   }
   function updateSkeleton(t) {
     if (!three) return;
     poseAt(t);
     placeSkeleton(three, pts);
+    if (three.stage) three.stage.time(three, t, pts);
   }
   /* Move the joints, bones and head of scene s to the positions pts. */
   function placeSkeleton(s, pts) {
@@ -265,6 +267,7 @@
       var h = s.headPoints[0] * 3, e = s.headPoints[1] * 3;
       s.head.position.set((pts[h] + pts[e]) / 2, (pts[h + 1] + pts[e + 1]) / 2, (pts[h + 2] + pts[e + 2]) / 2);
     }
+    if (s.stage) s.stage.place(s, pts);
     if ($("follow") && $("follow").checked) {
       // keep the character in view when it walks: move camera and target with the root, on the floor plane
       var dx = pts[0] - s.follow[0], dz = pts[2] - s.follow[2];
@@ -747,6 +750,7 @@
   api.cursorTime = function () { return cursorT; };
   api.window = function () { return [win.start, win.start + win.width]; };
   api.joint = function (name) { return jointPosition(three, M, name); };
+  api.environment = function () { return three && three.stage ? three.stage.state(three) : null; };
 
   try {
     summaryText();
