@@ -54,7 +54,7 @@ PIECES = (
     Piece("walking-home", "neutral", 100.0, 65, False, 0, 32),       # piano over bass, F major
     Piece("river-road", "neutral", 96.0, 57, True, 24, 48),          # guitar over strings, A minor
     Piece("quiet-hours", "neutral", 104.0, 64, False, 11, 0),        # vibraphone over piano, E major
-    Piece("long-night", "negative", 60.0, 57, True, 42, 48),         # cello over strings, A minor
+    Piece("long-night", "negative", 60.0, 57, True, 46, 48),         # harp over strings, A minor
     Piece("grey-shore", "negative", 64.0, 62, True, 0, 89),          # piano over a pad, D minor
     Piece("the-empty-house", "negative", 68.0, 55, True, 71, 48),    # clarinet over strings, G minor
 )
