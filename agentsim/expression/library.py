@@ -7,8 +7,8 @@ positive ones in a major key at 128-144 BPM, neutral ones at 96-104 BPM, negativ
 beats, so that a tempo estimate (librosa's) reads the piece's own tempo, not half or double it. A piece is
 :data:`BEATS` beats long and loops: what rings past its last beat is added to the start of the next turn.
 
-Rendered pieces are cached in ``~/.cache/agentsim/music/`` (``$XDG_CACHE_HOME``), one WAV file per piece and
-sample rate, named after the piece and a digest of its MIDI.
+Rendered pieces are cached in ``~/.cache/agentsim/music/`` (``$XDG_CACHE_HOME``), one ``.npy`` file (float32
+samples) per piece and sample rate, named after the piece and a digest of the piece and of this module.
 """
 
 from __future__ import annotations
@@ -137,28 +137,43 @@ def cache_dir() -> Path:
 
 def rendered(piece: Piece, rate: int, folder: Path | None = None) -> np.ndarray:
     """The piece rendered at ``rate`` (float32 mono, its beat 0 at sample 0, :attr:`Piece.period` plus
-    :data:`TAIL` seconds), from the cache, or rendered with FluidSynth and cached."""
-    import soundfile
+    :data:`TAIL` seconds), from the cache, or rendered with FluidSynth and cached; read once a process (the
+    array is shared: not to be written to)."""
+    key = (piece, rate, str(folder or cache_dir()))
+    if key not in _READ:
+        _READ[key] = _rendered(piece, rate, folder)
+        _READ[key].flags.writeable = False
+    return _READ[key]
 
+
+#: The pieces read in this process, by piece, rate and cache folder.
+_READ: dict[tuple, np.ndarray] = {}
+
+
+def _rendered(piece: Piece, rate: int, folder: Path | None) -> np.ndarray:
     from agentsim.music.rendering import render_midi_file
     from agentsim.written import written
 
-    data = midi_bytes(piece)
-    digest = hashlib.sha256(data + str(TAIL).encode()).hexdigest()[:16]
+    # the key: the piece and this module's source, which writes its MIDI (reading it costs less than writing it)
+    digest = hashlib.sha256(repr(piece).encode() + Path(__file__).read_bytes()).hexdigest()[:16]
     folder = folder or cache_dir()
-    path = folder / f"{piece.name}-{rate}-{digest}.wav"
+    path = folder / f"{piece.name}-{rate}-{digest}.npy"
     if path.is_file():
-        samples, _ = soundfile.read(path, dtype="float32")
-        return samples
+        try:
+            samples = np.load(path, allow_pickle=False)
+            if samples.dtype == np.float32 and samples.ndim == 1:
+                return samples
+        except (OSError, ValueError):
+            pass  # a damaged file: rendered again
     folder.mkdir(parents=True, exist_ok=True)
     with written(folder / f"{piece.name}.mid") as tmp:
-        Path(tmp).write_bytes(data)
+        Path(tmp).write_bytes(midi_bytes(piece))
     audio, _ = render_midi_file(folder / f"{piece.name}.mid", sample_rate=rate, gain=0.5)
     n = int(round((piece.period + TAIL) * rate))
     samples = np.zeros(n, np.float32)
     samples[:min(n, len(audio))] = audio[:n]
-    with written(path) as tmp:
-        soundfile.write(tmp, samples, rate, format="WAV", subtype="FLOAT")
+    with written(path) as tmp, open(tmp, "wb") as f:
+        np.save(f, samples, allow_pickle=False)
     return samples
 
 

@@ -19,12 +19,13 @@ REFERENCE_LEVEL = 0.1
 
 def sounding_level(samples: np.ndarray, rate: int) -> float:
     """The root mean square of the 50 ms frames that sound (within 40 dB of the loudest frame); 0 for silence."""
-    samples = np.asarray(samples, np.float64)
+    samples = np.asarray(samples, np.float32)
     hop = max(1, int(rate * 0.05))
     n = len(samples) // hop
     if n == 0:
         return 0.0
-    power = np.mean(samples[:n * hop].reshape(n, hop) ** 2, axis=1)
+    frames = samples[:n * hop].reshape(n, hop)
+    power = np.einsum("ij,ij->i", frames, frames, dtype=np.float64) / hop
     loud = power > power.max() * 1e-4
     return float(np.sqrt(power[loud].mean())) if loud.any() and power.max() > 0 else 0.0
 
@@ -48,20 +49,20 @@ def music_samples(rows: list[EnvironmentRow], end: float, rate: int, level: floa
         return np.zeros(0, np.float32)
     fade = int(round(CROSSFADE * rate))
     length = int(np.ceil(max(stop for _, stop, _, _ in spans) * rate)) + fade
-    out = np.zeros(length, np.float64)
+    out = np.zeros(length, np.float32)
     target = level * 10.0 ** (-UNDER_SPEECH / 20.0)
     for start, stop, _, name in spans:
         piece = BY_NAME[name]
         a, b = int(round(start * rate)), min(length, int(round(stop * rate)) + fade)
-        samples = looped(piece, rate, b - a).astype(np.float64)
-        own = sounding_level(samples[:int(piece.period * rate)], rate)
-        gain = target / own if own > 0 else 0.0
-        envelope = np.ones(b - a)
+        samples = looped(piece, rate, b - a)
+        own = sounding_level(looped(piece, rate, int(piece.period * rate)), rate)
+        gain = np.float32(target / own if own > 0 else 0.0)
+        samples *= gain
         rise = min(fade, b - a)
-        envelope[:rise] = np.arange(rise) / fade  # comes in over the fade
+        samples[:rise] *= (np.arange(rise) / fade).astype(np.float32)  # comes in over the fade
         tail = b - int(round(stop * rate))  # goes out over the fade after its stop
         if tail > 0:
-            envelope[-tail:] *= 1.0 - np.arange(1, tail + 1) / fade
-        out[a:b] += gain * samples * envelope
-    return out.astype(np.float32)
+            samples[-tail:] *= (1.0 - np.arange(1, tail + 1) / fade).astype(np.float32)
+        out[a:b] += samples
+    return out
 
