@@ -449,7 +449,7 @@ def compile_bml(story: Story, timeline: Utterance | None = None, anchor: str = "
                 start: float = 1.0, character: str = "storyteller") -> str:
     """The BML block that tells ``story``: one speech with a sync mark in front of every annotated word,
     and one behaviour per gesture with its syllable sync point tied to that mark (and one ``<ex:emotion>`` per
-emotion, from the onset of its word, ``w12``, to that of its end's or the speech's end).
+    emotion, from the onset of its word, ``w12``, to that of its end's or the speech's end).
 
     Parameters
     ----------
