@@ -79,3 +79,31 @@ def test_the_shipped_story_with_emotions_is_shorter_than_the_default():
     assert default.title == "The Lamp on Heron Hill" and len(wolf.words) < len(default.words)
     kinds = {e.kind for e in wolf.emotions}
     assert {"joy", "fear", "anger", "neutral"} <= kinds and len(wolf.gestures) >= 60
+
+
+def test_the_storyteller_writes_the_environment_with_any_backend(tmp_path, capsys):
+    import csv
+
+    import soundfile
+
+    from agentsim.cli import main
+
+    (tmp_path / "two.story").write_text("@title Two moods\n[emotion:joy,3]The [beat]wind and the [beat]sun were "
+                                        "glad.\n\n[emotion:fear,6.5]Then the [beat]storm came [beat]down.\n")
+    (tmp_path / "none.story").write_text("@title None\nThe [beat]wind and the [beat]sun were glad.\n")
+    for name, extra in (("two", []), ("none", []), ("off", ["--no-environment"])):
+        story = "none" if name == "none" else "two"
+        assert main(["run", "storytelling", "--story", str(tmp_path / f"{story}.story"), "--tts", "builtin",
+                     "--no-pictures", "--out", str(tmp_path / name), *extra]) == 0
+    capsys.readouterr()
+    with open(tmp_path / "two" / "environment.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["emotion"], r["shot"], r["angle"], r["valence"]) for r in rows] == [
+        ("none", "full", "eye", "none"), ("joy", "close-up", "eye", "positive"),
+        ("fear", "extreme-close-up", "high", "negative"), ("none", "full", "eye", "none")]
+    music, rate = soundfile.read(tmp_path / "two" / "music.wav", dtype="int16")
+    narration, _ = soundfile.read(tmp_path / "two" / "narration.wav", dtype="int16")
+    assert rate == 22050 and len(music) > rate and (music == narration).all()  # the built-in voice is silent
+    for name in ("none", "off"):  # no emotion, or the channels left out: no environment, no music, no narration
+        assert not any((tmp_path / name / f).exists() for f in ("environment.csv", "music.wav", "narration.wav"))
+    assert "ex:emotion" in (tmp_path / "off" / "story.bml").read_text()

@@ -378,15 +378,17 @@ def _environment(telling: Telling, out: Path, seed: int, enabled: bool) -> tuple
     if not rows:
         return [], []
     from agentsim.expression.environment import write_environment_csv
-    from agentsim.media.audio import Track, speech_sources
+    from agentsim.media.audio import Track, file_sources, mix_stream, speech_sources
     from agentsim.media.files import write_wav
 
     write_environment_csv(out / "environment.csv", rows)
-    speech = speech_sources(telling.recording)
-    music = music_for(rows, speech, max((s.end for s in speech), default=telling.recording.now))
+    sounds = [*speech_sources(telling.recording), *file_sources(telling.recording)]
+    music = music_for(rows, sounds, max((s.end for s in sounds), default=telling.recording.now))
     if music is None:
         return rows, []
-    write_wav(out / "music.wav", Track(music.samples, music.rate))
+    # as long as the narration it is mixed into (whose length the mix rounds up)
+    length = mix_stream([*sounds, music], music.rate).length
+    write_wav(out / "music.wav", Track(np.pad(music.samples, (0, max(0, length - len(music.samples)))), music.rate))
     return rows, [music]
 
 
