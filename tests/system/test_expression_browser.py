@@ -76,3 +76,34 @@ def test_the_report_films_and_lights_the_emotions(browser, tmp_path):
     # fear: high angle, the camera above the eyes; anger: low angle, below them, in red light
     assert fear[0]["camera"][1] > fear[0]["eyes"] + 0.1 and fear[0]["shot"] == "extreme-close-up"
     assert anger[0]["camera"][1] < anger[0]["eyes"] - 0.3 and anger[1][0] > 1.4 * anger[1][2]
+
+
+LIVE = ('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" xmlns:ex="urn:agentsim:expression" id="b1">'
+        '<head id="h1" lexeme="NOD" start="0.2"/>'
+        '<ex:emotion id="e1" type="joy" intensity="3.2" start="0.3" end="2.5"/>'
+        '<ex:emotion id="e2" type="fear" intensity="6.5" start="2.5" end="4.5"/></bml>')
+
+
+def test_the_live_viewer_films_and_lights_the_emotions(browser):
+    from test_live_viewer import clean, feedback_until, free_port, serve
+
+    port = free_port()
+    server = serve(port)
+    try:
+        browser.navigate(f"http://127.0.0.1:{port}/")
+        browser.wait_for("window.report && report.ready && report.live.connected && report.live.skeleton",
+                         timeout=10)
+        assert browser.evaluate("report.environment().emotion") == "none"
+        times = feedback_until(server.url, LIVE, "b1:e1:start")
+        browser.wait_for("report.environment().emotion === 'joy'", timeout=10)
+        joy = browser.evaluate("report.environment()")
+        browser.wait_for("report.environment().emotion === 'fear'", timeout=10)
+        fear = browser.evaluate("report.environment()")
+        browser.wait_for("report.environment().emotion === 'none'", timeout=10)
+        clean(browser)
+    finally:
+        server.close()
+    print(f"joy from {joy['t']:.3f} s (fed back {times['b1:e1:start']:.3f} s): {joy['shot']}, {joy['key']}; fear "
+          f"camera {fear['camera'][1]:.3f} m, eyes {fear['eyes']:.3f} m")
+    assert joy["t"] == times["b1:e1:start"] and (joy["shot"], joy["angle"], joy["key"]) == ("close-up", "eye", [1, 1, 0])
+    assert (fear["shot"], fear["angle"]) == ("extreme-close-up", "high") and fear["camera"][1] > fear["eyes"] + 0.1
