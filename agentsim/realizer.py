@@ -21,6 +21,7 @@ from agentsim.core.timed import BlockRun
 from agentsim.engines.animation import AnimationEngine
 from agentsim.engines.audio import AudioEngine, resolve_audio
 from agentsim.engines.control import ControlEngine
+from agentsim.engines.expression import ExpressionEngine
 from agentsim.engines.physics import ControllerEngine
 from agentsim.engines.speech import SpeechConfig, SpeechEngine
 from agentsim.engines.wait import WaitEngine
@@ -98,7 +99,9 @@ class Realizer:
         self.control = ControlEngine(context)
         self.audio = AudioEngine(context, locate_audio or resolve_audio)
         self.physics = ControllerEngine(context)
-        self.engines = [self.speech, self.animation, self.wait, self.control, self.audio, self.physics]
+        self.expression = ExpressionEngine(context)
+        self.engines = [self.speech, self.animation, self.wait, self.control, self.audio, self.physics,
+                        self.expression]
         for engine in self.engines:
             self.scheduler.add_engine(engine)
         self._submissions: list[simpy.Event] = []

@@ -20,7 +20,8 @@ AGENTSIM = [sys.executable, "-m", "agentsim"]
     (["speech", "export", "nosuch.txt", "--wav", "x.wav"], "agentsim: no text file 'nosuch.txt'"),
     (["eval", "speech-sync", "--text", "folder"], "agentsim: 'folder' is a folder, not a text file"),
     (["run", "storytelling", "--story", "nosuch"], "agentsim: no story file or shipped story 'nosuch'; shipped "
-                                                   "stories: the_lamp_on_heron_hill, the_north_wind_and_the_sun"),
+                                                   "stories: the_boy_who_cried_wolf, the_lamp_on_heron_hill, "
+                                                   "the_north_wind_and_the_sun"),
     (["run", "conductor", "--config", "nosuch"], "agentsim: no configuration file or shipped configuration named "
      "'nosuch' (shipped: default, falls_apart, march_2_4, waltz_3_4; 'agentsim run conductor --list-configs')"),
     (["sweep", "nosuch", "--out", "x"], "agentsim: no sweep spec 'nosuch'"),

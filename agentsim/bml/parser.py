@@ -433,6 +433,13 @@ class _Reader:
             self.warn("PARSING_FAILURE", f"{bid}: <{node.tag}> needs {' and '.join(missing)}; behaviour ignored",
                       node, [bid])
             return
+        if kind.name == "emotion":
+            from agentsim.expression.emotions import emotion_problem
+
+            problem = emotion_problem(node.attrs.get("type", "").strip(), node.attrs.get("intensity"))
+            if problem is not None:
+                self.warn("PARSING_FAILURE", f"{bid}: {problem}; behaviour ignored", node, [bid])
+                return
         self.block.behaviours.append(beh)
 
     def speech_text(self, node: Node, beh: Behaviour) -> bool:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 #: MURML, the form language of gestures AsapRealizer reads inside BML (:mod:`agentsim.animation.murml_form`).
 from agentsim.animation.murml_form import MURML_NAMESPACE
+#: agentsim's own extension: emotions shown through camera, light and music (:mod:`agentsim.expression`).
+from agentsim.expression.emotions import EXPRESSION_NAMESPACE
 
 BML_NAMESPACE = "http://www.bml-initiative.org/bml/bml-1.0"
 #: AsapRealizer's extensions: BMLA (continuous interaction) and BMLT (sound files, transitions, physical
@@ -17,6 +19,7 @@ EXTENSION_BEHAVIOURS = {
     BMLA_NAMESPACE: {"interrupt", "activate", "parametervaluechange"},
     BMLT_NAMESPACE: {"audiofile", "transition", "controller"},
     MURML_NAMESPACE: {"murmlgesture", "murmlface"},
+    EXPRESSION_NAMESPACE: {"emotion"},
 }
 
 #: Behaviour types that no BML namespace defines: only the lenient reader makes them, from other realizers'
@@ -43,7 +46,7 @@ READ_ATTRIBUTES = frozenset({
     "include", "exclude", "paramId", "fileName", "value", "name", "alias", "approach", "duration", "hand",
     "tempo", "retract", "motion", "hold", "audio", "object", "dXRot", "dYRot", "x", "y", "z", "meter", "beats",
     "shape", "coord", "strength", "level", "rate", "time", "role", "importance", "format", "viseme", "detail",
-    "articulation", "dynamics", "repeat", "args", "class", "start_", "xmlns",
+    "articulation", "dynamics", "repeat", "args", "class", "start_", "xmlns", "intensity",
     # what other realizers write that the lenient reader takes as it comes (a voice, a language, an event)
     "language", "voice", "message", "ref", "text", "emotion",
 })

@@ -116,6 +116,11 @@ def add_outputs(parser: argparse.ArgumentParser) -> None:
                         "(one row per phoneme heard, with its viseme) into DIR")
     parser.add_argument("--report", metavar="OUT.html", help="write a report to watch and hear in a browser (with "
                                                              "a folder OUT_files beside it)")
+    parser.add_argument("--environment-csv", metavar="OUT.csv",
+                        help="write the camera, light and music that <ex:emotion> behaviours chose, one row at 0 s "
+                             "and one at each change")
+    parser.add_argument("--no-environment", action="store_true",
+                        help="leave the camera, light and music of emotions out of --wav and --report")
 
 
 def add_physics(parser: argparse.ArgumentParser) -> None:
@@ -161,7 +166,8 @@ def run_outputs(args: argparse.Namespace) -> list[str]:
     """The files (and the ``--csv`` folder, with a slash) that ``args`` asks :func:`write_run_outputs` for."""
     return [f"{name}/" if name == args.csv else name
             for name in (args.wav, args.bvh, args.poses, args.textgrid, args.csv, args.report,
-                         getattr(args, "physics_csv", None) if getattr(args, "physics", False) else None) if name]
+                         getattr(args, "physics_csv", None) if getattr(args, "physics", False) else None,
+                         getattr(args, "environment_csv", None)) if name]
 
 
 def write_run_outputs(args: argparse.Namespace, realizer, title: str, extra_sources=(), beat_times=None) -> None:
@@ -185,6 +191,13 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
 
     recording = realizer.recording()
     duration = run_duration(recording)
+    environment = None
+    if args.wav or args.report or getattr(args, "environment_csv", None):
+        from agentsim.media.environment import run_environment
+
+        environment = run_environment(recording, args.seed, not getattr(args, "no_environment", False))
+    if environment and (args.wav or args.report):
+        extra_sources = [*extra_sources, *_music(recording, environment, extra_sources)]
     track = run_track_stream(recording, extra_sources) if (args.wav or args.report) else None
     physics = getattr(args, "physics", False)
     physics_csv = getattr(args, "physics_csv", None) if physics else None
@@ -221,11 +234,30 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
         from agentsim.animation.lips import VisemeRow, speech_visemes
 
         write_csv(Path(args.csv) / "visemes.csv", speech_visemes(recording), list(VisemeRow.__dataclass_fields__))
+    if getattr(args, "environment_csv", None):
+        from agentsim.expression.environment import environment_rows, write_environment_csv
+
+        write_environment_csv(args.environment_csv, environment or environment_rows(recording, args.seed))
     if args.report:
         from agentsim.media.report import write_report
 
+        extra = {}
+        if environment:
+            from agentsim.media.environment import report_environment
+
+            extra["environment"] = report_environment(environment, stream)
         write_report(args.report, recording=recording, stream=stream, track=track if track.duration > 0 else None,
-                     gestures=gestures, title=title)
+                     gestures=gestures, title=title, **extra)
+
+
+def _music(recording, environment, extra_sources) -> list:
+    """The music of the environment under the run's speech (a list of one source, or none)."""
+    from agentsim.media.audio import file_sources, speech_sources
+    from agentsim.media.environment import music_for
+
+    sounds = [*speech_sources(recording), *file_sources(recording), *extra_sources]
+    music = music_for(environment, sounds, max((s.end for s in sounds), default=recording.now))
+    return [music] if music is not None else []
 
 
 def _physics_manager(args, realizer):
@@ -258,7 +290,8 @@ def check_outputs(args: argparse.Namespace) -> None:
 
     inputs = [resolve(f) for f in args.files]
     check_writable([args.wav, args.bvh, args.poses, args.textgrid, args.report,
-                    getattr(args, "physics_csv", None)], [args.csv], inputs=inputs)
+                    getattr(args, "physics_csv", None), getattr(args, "environment_csv", None)], [args.csv],
+                   inputs=inputs)
     if args.report:  # its folder too: never one that holds someone else's files or the input
         from agentsim.media.report.page import OWN_FILES, report_paths
         from agentsim.written import check_folder

@@ -140,6 +140,9 @@ def add_storytelling(scenarios) -> argparse.ArgumentParser:
                              "(30); timeline.png is the overview of the whole story")
     options.add_delivery(parser)
     add_no_pictures(parser)
+    parser.add_argument("--no-environment", action="store_true",
+                        help="leave out the camera, light and music of the story's [emotion:...] tags (no "
+                             "environment.csv, no music.wav, no music in narration.wav and the report)")
     add_json(parser)
     parser.set_defaults(handler=run_storytelling)
     return parser

@@ -211,6 +211,8 @@ BEHAVIOUR_TYPES: dict[str, BehaviourType] = {
         # MURML (AsapRealizer's form language of gestures): a gesture or face made from its form
         BehaviourType("murmlgesture", GESTURE_SYNCS),
         BehaviourType("murmlface", FACE_SYNCS),
+        # agentsim's expression extension: an emotion the camera, light and music show (agentsim.expression)
+        BehaviourType("emotion", SHIFT_SYNCS),
         # What other realizers' BML is mapped to where BML 1.0 has nothing alike (read only by the lenient
         # reader): a viseme of lip sync, keyframed face channels, and a sync point without motion
         BehaviourType("lips", GAZE_SYNCS),

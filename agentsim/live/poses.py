@@ -6,13 +6,14 @@ Messages (JSON text) to a client that sent ``{"subscribe": "poses"}``:
 * first the skeleton, once::
 
     {"type": "skeleton", "joints": ["HumanoidRoot", ..., "l_fingers.end", ...], "parents": [-1, 0, ...],
-     "rest": [[x, y, z], ...], "face": [...], "ends": [...], "fps": 30.0, "period": 0.1}
+     "rest": [[x, y, z], ...], "face": [...], "ends": [...], "fps": 30.0, "period": 0.1, "segments": [...]}
 
   ``joints`` are the points drawn (every joint of the body in BVH order, then the end sites named
   ``joint.end``; :func:`~agentsim.media.report.data.point_names`), ``parents`` the index of each one's
   parent (-1: the root), ``rest`` their world positions in the rest pose (m), ``face`` and ``ends`` the
   indices of the face's joints and of the end sites (drawn smaller), ``fps`` the frame rate of the poses,
-  ``period`` how often a message of poses is sent (s);
+  ``period`` how often a message of poses is sent (s), ``segments`` the capsules the viewer draws the body
+  with (``[parent, child, radius]``, :func:`~agentsim.media.environment.body_segments`);
 * then the poses, a few frames at a time (every ``period`` seconds)::
 
     {"type": "poses", "time": 4.2, "index": 126, "fps": 30.0, "frames": [[x1, y1, z1, x2, ...], ...]}
@@ -21,7 +22,8 @@ Messages (JSON text) to a client that sent ``{"subscribe": "poses"}``:
   feedback); ``index`` is the first frame's number (``time = index / fps``); each frame holds the world
   positions of the skeleton's ``joints`` in that order, in metres rounded to the millimetre. Frames follow
   each other with no gap and no repeat from one message to the next. A message is sent
-  :attr:`~agentsim.live.server.Server.delay` seconds after its last frame's time, as feedback is.
+  :attr:`~agentsim.live.server.Server.delay` seconds after its last frame's time, as feedback is;
+* and each change of the environment that the run's emotions make (:mod:`agentsim.live.environment`).
 
 Where the work is done. Every ``period`` the realizer's thread (through
 :meth:`~agentsim.live.runtime.LiveRealizer.every`) takes a snapshot of what the body may be doing: the
@@ -60,6 +62,7 @@ from agentsim.core.timed import REFUSED
 from agentsim.live.runtime import LiveRealizer
 from agentsim.live.server import Server
 from agentsim.media.report.data import FACE, body_points, point_names
+from agentsim.media.environment import body_segments
 
 #: How often the poses are sent (s of the realizer's clock): the frames due since the last time.
 PERIOD = 0.1
@@ -94,7 +97,7 @@ def viewer_files() -> dict[str, Path]:
 
     return {"index.html": VIEWER / "index.html", "report.js": ASSETS / "report.js",
             "report.css": ASSETS / "report.css", "three.min.js": VENDOR / "three.min.js",
-            "LICENSE-three.txt": VENDOR / "LICENSE-three.txt"}
+            "LICENSE-three.txt": VENDOR / "LICENSE-three.txt", "stage.js": ASSETS / "stage.js"}
 
 
 def record_span(record) -> tuple[float, float] | None:
@@ -294,12 +297,19 @@ class LivePoses:
                 "rest": np.round(rest, 3).tolist(),
                 "face": [i for i, n in enumerate(self.names) if n.split(".")[0] in FACE],
                 "ends": [i for i, n in enumerate(self.names) if n.endswith(".end")],
-                "fps": self.fps, "period": self.period}
+                "fps": self.fps, "period": self.period, "segments": body_segments(self.body)}
 
     def publish(self, server: Server) -> None:
         """Greet subscribers of ``"poses"`` with the skeleton and start sending them poses."""
         self.server = server
         server.routing.hello["poses"] = self.skeleton()
+        from agentsim.live.environment import LiveEmotions
+
+        def send(message: dict) -> None:  # from the realizer's thread
+            if server.loop is not None:
+                server.loop.call_soon_threadsafe(server.routing.broadcast, message, {"poses"})
+
+        self.live.listeners.append(LiveEmotions(self.live, send))
         if not self.worker.is_alive():
             self.worker.start()
 

@@ -22,7 +22,7 @@ from agentsim.written import written
 PEG_ORDER = ("stroke", "strokeStart", "attackPeak", "ready", "strokeEnd", "relax", "start", "end")
 #: Behaviour types that are never pegged behaviours of their own (they are what others are pegged to, or
 #: have no motion).
-NOT_PEGGED = {"speech", "wait", "event", "interrupt", "activate", "parametervaluechange", "audiofile"}
+NOT_PEGGED = {"speech", "wait", "event", "interrupt", "activate", "parametervaluechange", "audiofile", "emotion"}
 
 
 @dataclass

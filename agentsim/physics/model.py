@@ -84,6 +84,13 @@ def _segments(body: Body) -> dict[str, tuple[str, float, tuple[float, float, flo
     return seg
 
 
+def segment_radii(body: Body) -> dict[str, float]:
+    """The radius (m) of each simulated joint's segment, the capsule from the joint towards its child (the
+    head's sphere for ``skullbase``; the feet, boxes in the model, half their height)."""
+    return {name: (-FOOT_SOLE if name.endswith("_ankle") else radius)
+            for name, (_, _, _, radius) in _segments(body).items()}
+
+
 #: Names of the simulated joints (every other joint of the skeleton is kinematic, always).
 def simulated_joints(body: Body) -> list[str]:
     """The skeleton's joints that the model simulates, in the skeleton's (BVH) order."""

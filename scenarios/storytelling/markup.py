@@ -26,6 +26,12 @@ tag                      gesture (BML)
 ``[face:LEXEME]``        ``<faceLexeme lexeme="LEXEME">`` (FROWN, SMILE, WIDEN_EYES, SURPRISE, ...)
 =======================  ==========================================================================
 
+An emotion tag, ``[emotion:TYPE]`` or ``[emotion:TYPE,INTENSITY]`` (``[emotion:fear,6.5]``; intensity
+:data:`~agentsim.expression.emotions.DEFAULT_INTENSITY` when not given), stands in front of the word it starts
+on and lasts until the next emotion tag or the end of its paragraph (a blank line ends one); it becomes an
+``<ex:emotion>`` (:mod:`agentsim.expression`) from that word's onset. Its type and intensity are read by the
+realizer, which warns of a type it does not know or an intensity outside 0-10.
+
 Hand gestures (``beat``, ``point``, ``icon``) take an optional last argument ``left``, ``right`` or
 ``both`` (``[beat:both]``, ``[point:door:left]``); without it the animation library chooses (the right hand,
 or the left when the right is busy; pointing: the hand on the target's side). Targets are the points
@@ -46,13 +52,13 @@ from xml.sax.saxutils import escape, quoteattr
 from agentsim.animation.lexicon import Lexicon
 from agentsim.animation.scene import DEFAULT_SCENE
 from agentsim.bml.speech_text import normalize_space
-from agentsim.bml.vocabulary import BML_NAMESPACE
+from agentsim.bml.vocabulary import BML_NAMESPACE, EXPRESSION_NAMESPACE
 from agentsim.errors import AgentsimError
 from scenarios.storytelling.names import ANCHORS  # where a gesture's sync point is tied (compile_bml)
 from speech_timing.backend import Utterance
 from speech_timing.linear_model import written_words
 
-__all__ = ["StoryError", "Gesture", "Story", "parse_story", "read_story", "compile_bml", "KINDS", "HANDS",
+__all__ = ["StoryError", "Gesture", "Emotion", "Story", "parse_story", "read_story", "compile_bml", "KINDS", "HANDS",
            "ICON_LEXEMES", "ANCHORS", "anchor_sync", "mark_name", "release_mark", "release_delay", "gesture_ids"]
 
 #: Gesture kinds of the format and the BML behaviour each becomes.
@@ -123,6 +129,22 @@ class Gesture:
         return ":".join(parts)
 
 
+@dataclass(frozen=True)
+class Emotion:
+    """An emotion of a story: its type and intensity as written, from the onset of word ``word`` to that of
+    word ``end`` (None: to the end of the speech)."""
+
+    kind: str
+    intensity: str
+    word: int
+    end: int | None
+
+    @property
+    def label(self) -> str:
+        """The tag as written in the format, without brackets (``emotion:fear,6.5``)."""
+        return f"emotion:{self.kind}" + (f",{self.intensity}" if self.intensity else "")
+
+
 @dataclass
 class Story:
     """A story to tell: its text, its words, its gestures, and the places it points at.
@@ -141,6 +163,8 @@ class Story:
         The other directives (``@author``, ``@license``, ``@source``, ...).
     source : str
         Where the story was read from.
+    emotions : list of Emotion
+        The emotion tags, in text order.
     """
 
     title: str
@@ -149,6 +173,7 @@ class Story:
     scene: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     meta: dict[str, str] = field(default_factory=dict)
     source: str = ""
+    emotions: list[Emotion] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.words: list[tuple[int, int]] = written_words(self.text)
@@ -171,6 +196,8 @@ class Story:
         lines += [f"@{k} {v}" for k, v in self.meta.items()]
         lines += [f"@scene {name} {x:g} {y:g} {z:g}" for name, (x, y, z) in self.scene.items()]
         tags: dict[int, list[str]] = {}
+        for e in self.emotions:
+            tags.setdefault(e.word, []).append(f"[{e.label}]")
         for g in self.gestures:
             tags.setdefault(g.word, []).append(f"[{g.label}]")
         pieces, last = [], 0
@@ -231,6 +258,7 @@ def parse_story(source: str, name: str = "<story>", title: str = "") -> Story:
     meta: dict[str, str] = {}
     scene: dict[str, tuple[float, float, float]] = {}
     raw_parts: list[str] = []
+    breaks: list[int] = []  # offsets in the raw text of the blank lines that end paragraphs
     where: list[tuple[int, int]] = []  # (line, column) of each character of the raw text
     for number, line in enumerate(source.splitlines(), start=1):
         stripped = line.strip()
@@ -239,6 +267,8 @@ def parse_story(source: str, name: str = "<story>", title: str = "") -> Story:
         if stripped.startswith("@"):
             _directive(stripped, number, name, meta, scene)
             continue
+        if not stripped and raw_parts:
+            breaks.append(sum(map(len, raw_parts)))  # a paragraph ends here
         raw_parts.append(line + "\n")
         where.extend((number, c) for c in range(1, len(line) + 2))
     raw = "".join(raw_parts)
@@ -246,14 +276,19 @@ def parse_story(source: str, name: str = "<story>", title: str = "") -> Story:
 
     plain_parts: list[str] = []
     tags: list[tuple[int, str, int, int]] = []  # (offset in the plain raw text, tag, line, column)
+    plain_breaks: list[int] = []  # the paragraph breaks' offsets in the plain raw text
     plain_len, last = 0, 0
+    pending = list(breaks)
     for match in _TAG.finditer(raw):
         piece = raw[last:match.start()]
+        while pending and pending[0] < match.start():
+            plain_breaks.append(plain_len + pending.pop(0) - last)
         plain_parts.append(piece)
         plain_len += len(piece)
         line_no, col = where[match.start()]
         tags.append((plain_len, match.group(1), line_no, col))
         last = match.end()
+    plain_breaks += [plain_len + b - last for b in pending]
     plain_parts.append(raw[last:])
     plain_raw = "".join(plain_parts)
     for bracket in ("[", "]"):
@@ -261,21 +296,41 @@ def parse_story(source: str, name: str = "<story>", title: str = "") -> Story:
             line_no, col = _locate(raw, where, bracket)
             raise StoryError(f"{name}:{line_no}:{col}: unmatched {bracket!r}; tags look like [beat] or "
                              f"[point:door]")
-    text, positions = normalize_space(plain_raw, [offset for offset, _, _, _ in tags])
+    text, positions = normalize_space(plain_raw, [offset for offset, _, _, _ in tags] + plain_breaks)
     words = written_words(text)
     if not words:
         raise StoryError(f"{name}: the story has no words")
     starts = [a for a, _ in words]
 
     gestures: list[Gesture] = []
+    felt: list[tuple[int, str, str]] = []  # (word, type, intensity) of the emotion tags
     for offset, tag, line_no, col in tags:
         at = positions[offset]
         k = bisect.bisect_left(starts, at)  # the words' starts are in order
         if k == len(starts):
             raise StoryError(f"{name}:{line_no}:{col}: the tag [{tag}] stands in front of no word")
+        if tag.split(":", 1)[0].strip().lower() == "emotion":
+            felt.append((k, *emotion_from_tag(tag, f"{name}:{line_no}:{col}")))
+            continue
         gestures.append(gesture_from_tag(tag, k, targets, f"{name}:{line_no}:{col}", line_no, col))
     gestures.sort(key=lambda g: g.word)  # stable: tags on one word keep their order
-    return Story(meta.pop("title", title or Path(name).stem), text, gestures, scene, meta, name)
+    paragraphs = sorted({bisect.bisect_left(starts, positions[b]) for b in plain_breaks} - {0, len(starts)})
+    emotions = []
+    felt.sort(key=lambda e: e[0])
+    for n, (k, kind, intensity) in enumerate(felt):
+        ends = [p for p in paragraphs if p > k] + ([felt[n + 1][0]] if n + 1 < len(felt) else [])
+        emotions.append(Emotion(kind, intensity, k, min(ends) if ends else None))
+    return Story(meta.pop("title", title or Path(name).stem), text, gestures, scene, meta, name, emotions)
+
+
+def emotion_from_tag(tag: str, where: str) -> tuple[str, str]:
+    """The type and intensity (as written, '' when not given) of an emotion tag (without brackets)."""
+    _, _, value = tag.partition(":")
+    kind, _, intensity = value.partition(",")
+    kind, intensity = kind.strip().lower(), intensity.strip()
+    if not kind or "," in intensity:
+        raise StoryError(f"{where}: malformed tag [{tag}]; expected [emotion:TYPE] or [emotion:TYPE,INTENSITY]")
+    return kind, intensity
 
 
 def _locate(raw: str, where: list[tuple[int, int]], ch: str) -> tuple[int, int]:
@@ -393,7 +448,8 @@ def compile_bml(story: Story, timeline: Utterance | None = None, anchor: str = "
                 release: bool | None = None, block_id: str = "story", speech_id: str = "speech1",
                 start: float = 1.0, character: str = "storyteller") -> str:
     """The BML block that tells ``story``: one speech with a sync mark in front of every annotated word,
-    and one behaviour per gesture with its syllable sync point tied to that mark.
+    and one behaviour per gesture with its syllable sync point tied to that mark (and one ``<ex:emotion>`` per
+    emotion, from the onset of its word, ``w12``, to that of its end's or the speech's end).
 
     Parameters
     ----------
@@ -437,17 +493,24 @@ def compile_bml(story: Story, timeline: Utterance | None = None, anchor: str = "
     release = timeline is not None if release is None else release
     if timeline is None and (anchor == "offset" or release):
         raise ValueError('anchor="offset" and release marks need the planned utterance (timeline)')
-    words = sorted({g.word for g in story.gestures})
+    gestured = {g.word for g in story.gestures}
+    felt = {e.word for e in story.emotions} | {e.end for e in story.emotions if e.end is not None}
+    # With the planned utterance an emotion is pegged to a mark the speech has anyway, plus the time to its
+    # word's onset: a mark of its own would add a progress event to the speech's, and so change when the
+    # gestures' strokes come. Without it, an emotion's word has a mark of its own (w12).
+    marked = felt if timeline is None else set()
+    words = sorted(gestured | marked)
     onset: dict[int, float] = {}
     stress: dict[int, float] = {}
     if timeline is not None:
-        for k in words:
+        for k in sorted(gestured | felt):
             w = word_after(timeline, story.words[k][0])
             if w is None:
                 raise ValueError(f"the timeline has no word for {story.word_text(k)!r}")
             onset[k] = timeline.words[w].start
             stress[k] = stressed_onset(timeline, w)[0]
-    base_time = stress if anchor == "stress" else onset
+    # where each word's marks are on the timeline (a word only an emotion starts or ends on: its onset)
+    base_time = {k: (stress if anchor == "stress" else onset)[k] for k in gestured} if onset else {}
     delayed: dict[str, float] = {}  # release mark -> its time on the timeline
     behaviours = []
     for gid, g in zip(gesture_ids(story), story.gestures):
@@ -482,14 +545,35 @@ def compile_bml(story: Story, timeline: Utterance | None = None, anchor: str = "
         while first < len(words) and not base_time[words[first]] > t:
             first += 1
         before.setdefault(words[first] if first < len(words) else None, []).append(name)
+    marks = sorted([(base_time[k], mark_name(k, anchor)) for k in gestured] + [(t, n) for n, t in delayed.items()]
+                   if timeline is not None else [])
+
+    def word_ref(k: int) -> str:
+        """The sync reference of word ``k``'s onset."""
+        if timeline is None:
+            return f"{speech_id}:w{k}"
+        at = bisect.bisect_right(marks, (onset[k] + 1e-9, "\uffff")) - 1
+        base, name = marks[at] if at >= 0 else (0.0, "start")
+        offset = onset[k] - base
+        return f"{speech_id}:{name}" + (f"{offset:+.6f}" if abs(offset) >= 5e-7 else "")
+
+    for n, e in enumerate(story.emotions):
+        end = word_ref(e.end) if e.end is not None else f"{speech_id}:end"
+        intensity = f" intensity={quoteattr(e.intensity)}" if e.intensity else ""
+        behaviours.append(f'  <ex:emotion id="emotion{n + 1}" type={quoteattr(e.kind)}{intensity} '
+                          f'start="{word_ref(e.word)}" end="{end}"/>')
     pieces, last = [], 0
     for k in words:
         a = story.words[k][0]
-        names = before.get(k, []) + [mark_name(k, anchor)]
+        names = before.get(k, [])
+        if k in marked and not (k in gestured and mark_name(k, anchor) == f"w{k}"):
+            names = names + [f"w{k}"]
+        names += [mark_name(k, anchor)] if k in gestured else []
         pieces.append(escape(story.text[last:a]) + "".join(f'<sync id="{name}"/>' for name in names))
         last = a
     pieces.append(escape(story.text[last:]) + "".join(f'<sync id="{name}"/>' for name in before.get(None, [])))
-    lines = [f'<bml xmlns="{BML_NAMESPACE}" id={quoteattr(block_id)} characterId={quoteattr(character)}>',
+    expression = f' xmlns:ex="{EXPRESSION_NAMESPACE}"' if story.emotions else ""
+    lines = [f'<bml xmlns="{BML_NAMESPACE}"{expression} id={quoteattr(block_id)} characterId={quoteattr(character)}>',
              f'  <speech id={quoteattr(speech_id)} start="{start:g}"><text>{"".join(pieces)}</text></speech>']
     lines += behaviours
     lines.append("</bml>")

@@ -18,6 +18,9 @@ animator-time strategy under an event-delivery condition, and writes to ``--out`
 ``feedback.jsonl``     the BML feedback, one JSON object per line
 ``story.bml``          the BML block that was realized
 ``compare.json``       with ``--compare``: the figures of every strategy on the same seed
+``environment.csv``    a story with emotions: the camera, light and music they chose (one row at 0 s and
+                       one at each change), and ``music.wav``, the music exactly as mixed under the speech
+                       in ``narration.wav`` and the report (not with ``--no-environment``)
 =====================  ==============================================================================
 
 With ``--compare`` each strategy's files (all but the timeline pictures) go to ``--out/<strategy>/`` and only
@@ -164,7 +167,8 @@ def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: P
         telling = tell(story, strategy=strategy, delivery=delivery, seed=args.seed, voice=voice, anchor=args.anchor,
                        timing=args.timing, stages=stages)
         stages_seconds = write_outputs(telling, staging, fps=args.fps, window=args.window, seed=args.seed,
-                                       plots=plots, stages=stages)
+                                       plots=plots, stages=stages,
+                                       environment=not getattr(args, "no_environment", False))
         wall = time.perf_counter() - started - voice.backend.synthesis_seconds
         metrics = _metrics(telling, args, voice, stages_seconds, wall)
         write_text(staging / "metrics.json", json.dumps(_clean(metrics), indent=2) + "\n")
@@ -182,7 +186,8 @@ def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: P
         tellings[name] = t = tell(story, strategy=name, delivery=delivery, seed=args.seed, voice=voice,
                                   anchor=args.anchor, timing=args.timing, stages=stages)
         stages_seconds = write_outputs(t, staging / name, fps=args.fps, window=args.window, seed=args.seed,
-                                       plots=plots, pictures=False, stages=stages)
+                                       plots=plots, pictures=False, stages=stages,
+                                       environment=not getattr(args, "no_environment", False))
         every[name] = _metrics(t, args, voice, stages_seconds,
                                time.perf_counter() - begun - (voice.backend.synthesis_seconds - synthesis))
     wall = time.perf_counter() - started - voice.backend.synthesis_seconds
@@ -274,20 +279,21 @@ def _clean(value):
 
 def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float = 30.0,
                   seed: int = 0, plots: bool = True, pictures: bool = True,
-                  stages: Stages | None = None) -> "OrderedDict[str, float]":
+                  stages: Stages | None = None, environment: bool = True) -> "OrderedDict[str, float]":
     """Write a telling's files (all but ``metrics.json``) to ``out``; returns the wall seconds of each
     stage. ``plots``: draw the timeline and sync-error pictures too; ``pictures``: the timeline pictures
-    among them. ``stages``: where to say on a terminal which stage is under way."""
+    among them. ``stages``: where to say on a terminal which stage is under way. ``environment``: show the
+    story's emotions through camera, light and music (``environment.csv``, ``music.wav``)."""
     out.mkdir(parents=True, exist_ok=True)
     # the poses are evaluated into files of a scratch folder (removed at the end) and read back a window
     # of frames at a time by everything that uses them: a long story's poses are never held whole
     with tempfile.TemporaryDirectory(dir=out, prefix=".poses-") as scratch:
         return _write_outputs(telling, out, Path(scratch), fps, window, seed, plots, pictures,
-                              stages or Stages.off())
+                              stages or Stages.off(), environment)
 
 
 def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, window: float, seed: int,
-                   plots: bool, pictures: bool, say: Stages) -> "OrderedDict[str, float]":
+                   plots: bool, pictures: bool, say: Stages, environment: bool = True) -> "OrderedDict[str, float]":
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.media.audio import run_track_stream
     from agentsim.media.files import write_feedback, write_wav
@@ -311,7 +317,8 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
     # the track is made a stretch at a time, for the WAV and again for the report: never held whole; both
     # sound files are written on a thread of their own (mixing and encoding mostly run outside the
     # interpreter) while the poses and the rest are made, and waited for where they were written before
-    track = run_track_stream(telling.recording) if utterance.audio is not None else None
+    rows, music = _environment(telling, out, seed, environment)
+    track = (run_track_stream(telling.recording, music) if utterance.audio is not None or music else None)
     # the timeline pictures are drawn by worker processes from when the poses are known while the rest is
     # written, and waited for at the end
     with contextlib.ExitStack() as drawing, concurrent.futures.ThreadPoolExecutor(1) as sound:
@@ -343,8 +350,14 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
             gestures = gesture_rows(telling.recording)
             write_csv(out / "gestures.csv", gestures)
             t = stage("textgrid", t)
+            extra = {}
+            if rows:
+                from agentsim.media.environment import report_environment
+
+                extra["environment"] = report_environment(rows, stream)
             write_report(out / "report.html", recording=telling.recording, stream=stream, track=track,
-                         gestures=gestures, title=f"{telling.story.title} (strategy {telling.strategy})", audio=ogg)
+                         gestures=gestures, title=f"{telling.story.title} (strategy {telling.strategy})", audio=ogg,
+                         **extra)
             sound.shutdown(wait=True)  # the report's sound is encoded
         t = stage("report", t)
         if plots:
@@ -354,6 +367,29 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
                     timelines.result()
             stage("plots", t)
     return stages
+
+
+def _environment(telling: Telling, out: Path, seed: int, enabled: bool) -> tuple[list, list]:
+    """A story with emotions (and ``enabled``): ``environment.csv`` and ``music.wav`` written into ``out``; its
+    rows and the music's source to mix (a list of at most one). Without emotions: nothing done, two empty lists."""
+    from agentsim.media.environment import music_for, run_environment
+
+    rows = run_environment(telling.recording, seed, enabled) if telling.story.emotions else None
+    if not rows:
+        return [], []
+    from agentsim.expression.environment import write_environment_csv
+    from agentsim.media.audio import Track, file_sources, mix_stream, speech_sources
+    from agentsim.media.files import write_wav
+
+    write_environment_csv(out / "environment.csv", rows)
+    sounds = [*speech_sources(telling.recording), *file_sources(telling.recording)]
+    music = music_for(rows, sounds, max((s.end for s in sounds), default=telling.recording.now))
+    if music is None:
+        return rows, []
+    # as long as the narration it is mixed into (whose length the mix rounds up)
+    length = mix_stream([*sounds, music], music.rate).length
+    write_wav(out / "music.wav", Track(np.pad(music.samples, (0, max(0, length - len(music.samples)))), music.rate))
+    return rows, [music]
 
 
 def motion_strokes(telling: Telling, stream) -> "OrderedDict":

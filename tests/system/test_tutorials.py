@@ -64,6 +64,9 @@ MADE = {
         [r"^ ?\d+\.\d{3} s  Welcome$", r'"id": "p:h1:stroke"']),
     "howto/gestures.md": (["mine.toml", "present.bvh"], [r"^PRESENT +gesture form \(MURML\) +mine\.toml$"]),
     "howto/physics.md": (["talk.xml", "talk.bvh", "talk-physics.csv"], [r'"id": "talk:hang:end"']),
+    "howto/emotions.md": (["emotions.xml", "environment.csv", "feedback.jsonl"],
+                          [r"^[\d.]+,joy,3\.2,close-up,eye,255,255,0,0\.5,positive,\S+$",
+                           r"^[\d.]+,fear,6\.5,extreme-close-up,high,255,255,255,0\.65,negative,\S+$"]),
     "howto/piper.md": (["hello.xml", "hello.wav", "hello.TextGrid"],
                        [r'"id": "hello:g1:stroke"', r"^\['hello:g1:stroke'\]$"]),
     "howto/praat-blender.md": (

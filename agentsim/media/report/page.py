@@ -43,7 +43,8 @@ ASSETS = HERE / "assets"
 #: Files of the folder that :func:`write_report` writes or removes (a report written again over an older one).
 #: The sound's files (one of them: :func:`write_audio`).
 AUDIO_FILES = ("audio.ogg", "audio.wav")
-OWN_FILES = ("three.min.js", "LICENSE-three.txt", "report.js", "report.css", "data.js", "poses.js") + AUDIO_FILES
+OWN_FILES = ("three.min.js", "LICENSE-three.txt", "report.js", "report.css", "data.js", "poses.js",
+             "stage.js") + AUDIO_FILES
 #: Samples handed to the audio encoder at a time.
 AUDIO_BLOCK = 65536
 
@@ -105,7 +106,7 @@ def start_audio(path, track, executor: concurrent.futures.Executor) -> concurren
 
 
 def write_report(path, *, recording, stream=None, track=None, gestures=(), title: str = "", notes=(),
-                 audio: concurrent.futures.Future | None = None) -> Path:
+                 audio: concurrent.futures.Future | None = None, environment: dict | None = None) -> Path:
     """Write an HTML report of a run that a researcher watches and hears: its audio, a 3D skeleton driven by
     the poses, a timeline of behaviours, words and feedback with a cursor that follows the audio, and the
     per-gesture error table.
@@ -133,6 +134,10 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         ``track``): waited for instead of encoding the track here. The report is then written in place,
         for a report inside a run's folder that is staged whole
         (:func:`~agentsim.written.staged_folder`).
+    environment : dict, optional
+        The camera, lights and music of the run's emotions and the body's segments
+        (:func:`~agentsim.media.environment.report_environment`): the 3D view then draws the body as solid
+        segments under three-point lighting, filmed as the rows say (``stage.js``).
 
     Notes
     -----
@@ -154,7 +159,7 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         track = None
     if stream is not None and stream.n_frames == 0:
         stream = None
-    content = (recording, stream, track, list(gestures), title or path.stem, [str(n) for n in notes])
+    content = (recording, stream, track, list(gestures), title or path.stem, [str(n) for n in notes], environment)
     if audio is None:  # the page and its folder staged, swapped in together once whole (staged_page)
         with staged_page(path, folder, marks=OWN_FILES) as (page, staging):
             _write_into(page, staging, folder.name, *content, audio=None)
@@ -171,11 +176,11 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
 
 
 def _write_into(page: Path, folder: Path, name: str, recording, stream, track, gestures, title, notes,
-                audio) -> None:
+                environment, audio) -> None:
     """Write the report's files into ``folder`` and its HTML into ``page``, which loads them from the folder
     ``name`` beside it."""
     for source in (VENDOR / "three.min.js", VENDOR / "LICENSE-three.txt", ASSETS / "report.js",
-                   ASSETS / "report.css"):
+                   ASSETS / "report.css", *([ASSETS / "stage.js"] if environment else [])):
         with written(folder / source.name) as tmp:  # never through a link planted at the name
             shutil.copyfile(source, tmp)
 
@@ -188,6 +193,8 @@ def _write_into(page: Path, folder: Path, name: str, recording, stream, track, g
         src = audio.result() if audio is not None else None
         if src is not None and track is not None:
             data["audio"] = {"src": src, "duration": track.duration, "rate": int(track.rate)}
+    if environment:
+        data["environment"] = environment
     write_text(folder / "data.js", js_assignment(
         "REPORT_DATA", data, f"agentsim run report: timeline and tables of {title!r}, see "
         "agentsim.media.report.data"))
@@ -224,7 +231,8 @@ def page_html(folder: str, title: str, notes: list[str], data: dict) -> str:
         sound = '<p id="nosound" class="missing">no sound in this run</p>'
     motion = "" if data["motion"] is not None else '<p id="nomotion" class="missing">no motion in this run</p>'
     note_items = "".join(f"<li>{esc(n)}</li>" for n in notes)
-    scripts = ["three.min.js", "data.js"] + (["poses.js"] if data["motion"] is not None else []) + ["report.js"]
+    scripts = ["three.min.js", "data.js"] + (["poses.js"] if data["motion"] is not None else [])
+    scripts += (["stage.js"] if data.get("environment") else []) + ["report.js"]
     script_tags = "\n".join(f'<script src="{base}/{s}"></script>' for s in scripts)
     return f"""<!DOCTYPE html>
 <html lang="en">

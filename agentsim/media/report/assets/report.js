@@ -240,12 +240,14 @@
     s.va = new T.Vector3();
     s.vb = new T.Vector3();
     s.dir = new T.Vector3();
+    if (window.REPORT_STAGE && D && D.environment) window.REPORT_STAGE.build(s, M, pts, D.environment);  // stage.js
     return s;
   }
   function updateSkeleton(t) {
     if (!three) return;
     poseAt(t);
     placeSkeleton(three, pts);
+    if (three.stage) three.stage.time(three, t, pts);
   }
   /* Move the joints, bones and head of scene s to the positions pts. */
   function placeSkeleton(s, pts) {
@@ -265,6 +267,7 @@
       var h = s.headPoints[0] * 3, e = s.headPoints[1] * 3;
       s.head.position.set((pts[h] + pts[e]) / 2, (pts[h + 1] + pts[e + 1]) / 2, (pts[h + 2] + pts[e + 2]) / 2);
     }
+    if (s.stage) s.stage.place(s, pts);
     if ($("follow") && $("follow").checked) {
       // keep the character in view when it walks: move camera and target with the root, on the floor plane
       var dx = pts[0] - s.follow[0], dz = pts[2] - s.follow[2];
@@ -747,6 +750,7 @@
   api.cursorTime = function () { return cursorT; };
   api.window = function () { return [win.start, win.start + win.width]; };
   api.joint = function (name) { return jointPosition(three, M, name); };
+  api.environment = function () { return three && three.stage ? three.stage.state(three) : null; };
 
   try {
     summaryText();
@@ -819,6 +823,9 @@
     var lags = [], lastPlay = null, base = HOLD, steady = 0;  // steady: since when no frame came late (ms)
     var pending = [], beh = {}, behOrder = 0, ticks = [], blocks = {};
     var watches = {};
+    //: the environment's rows (stage.js), the one before any emotion first
+    var environment = [{ t: -Infinity, emotion: "none", intensity: 0, shot: "full", angle: "eye", key: [255, 255, 255],
+      attenuation: 0.5, valence: "none", music: "" }];
     api.live = state;
 
     /* ------------------------------------------------ the page */
@@ -926,6 +933,11 @@
       state.messages++;
       if (m.type === "skeleton") return skeleton(m);
       if (m.type === "poses") return poses(m, arrival);
+      if (m.type === "environment") {  // a change of the camera and the lights, shown from its time on
+        environment.push({ t: m.globalTime, emotion: m.emotion, intensity: m.intensity, shot: m.shot, angle: m.angle,
+          key: m.key, attenuation: m.attenuation, valence: m.valence, music: "" });
+        return;
+      }
       state.feedback++;
       if (typeof m.globalTime === "number") lagSample(arrival, m.globalTime);
       pending.push(m);
@@ -942,6 +954,9 @@
         if (three && three.renderer) three.renderer.domElement.remove();
         pts = new Float64Array(rest);
         three = buildScene(M, pts);
+        if (three && m.segments && window.REPORT_STAGE) {  // the body as solid segments, filmed and lit (stage.js)
+          window.REPORT_STAGE.build(three, M, pts, { rows: environment, segments: m.segments });
+        }
         if (three) placeSkeleton(three, pts);
       }
       state.skeleton = true;
@@ -1133,6 +1148,7 @@
         while (pending.length && pending[0].globalTime <= t) apply(pending.shift());
         var how = three ? poseAt(t) : NONE;
         if (how !== NONE) placeSkeleton(three, pts);
+        if (three && three.stage) three.stage.time(three, t, pts);
         trim(t);
         forget(t);
         Object.keys(watches).forEach(function (name) {
@@ -1162,6 +1178,7 @@
     api.joint = function (name) { return jointPosition(three, M, name); };
     api.watch = function (name) { watches[name] = []; return true; };
     api.watched = function (name) { return watches[name] || null; };
+    api.environment = function () { return three && three.stage ? three.stage.state(three) : null; };
     window.addEventListener("resize", function () { if (three) three.dirty = true; });
     status();
     connect();
