@@ -250,3 +250,16 @@ def test_a_body_that_falls_is_said_once_and_the_run_completes(tmp_path):
     first = int(np.argmax(rows[:, 10]))
     assert rows[first - 1, 10] == 0 and rows[first:, 10].min() == 1
     assert rows[first, 0] == pytest.approx(fell[0]["globalTime"], abs=1e-6)
+
+
+@pytest.mark.parametrize("command", [["run", "conductor"], ["run", "storytelling"], ["demo"], ["serve", "--port", "0"]])
+def test_every_command_with_physics_refuses_a_malformed_push_before_any_work(tmp_path, command, capsys, monkeypatch):
+    from agentsim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main([*command, "--physics", "--push", "1:0,0:0.2"]) == 2
+    out = capsys.readouterr()
+    assert out.err.strip() == ("agentsim: --push: the force needs three components FX,FY,FZ (newtons), got '0,0'")
+    assert main([*command, "--push", "1:0,0,150:0.2"]) == 2
+    assert capsys.readouterr().err.strip() == "agentsim: --push needs --physics"
+    assert list(tmp_path.iterdir()) == []

@@ -117,16 +117,19 @@ def add_outputs(parser: argparse.ArgumentParser) -> None:
                                                              "a folder OUT_files beside it)")
 
 
-def add_physics(parser: argparse.ArgumentParser) -> None:
-    """``--physics``, ``--push`` and ``--physics-csv`` (:mod:`agentsim.physics`)."""
+def add_physics(parser: argparse.ArgumentParser, csv: bool = True, where: str = "") -> None:
+    """``--physics``, ``--push`` and (``csv``) ``--physics-csv`` (:mod:`agentsim.physics`); ``where``: what
+    ``--physics`` adds to a scenario's folder."""
     group = parser.add_argument_group("physics (mixed dynamics: a physical body under the animation)")
     group.add_argument("--physics", action="store_true",
                        help="play the motion on a physically simulated body: the pelvis, legs and spine "
                             "physical under a BalanceController, the neck, head, arms and hands as animated; "
-                            "<bmlt:controller> behaviours make parts physical while they are active")
+                            "<bmlt:controller> behaviours make parts physical while they are active" + where)
     group.add_argument("--push", action="append", default=[], metavar="TIME:FX,FY,FZ:DURATION",
                        help="push the pelvis with a force (newtons; +Y up, +Z the way the body faces, +X its "
                             "left) from TIME for DURATION seconds (repeatable; needs --physics)")
+    if not csv:
+        return
     group.add_argument("--physics-csv", metavar="OUT.csv",
                        help="write the centre of mass, support polygon, pelvis height and whether the body has "
                             "fallen, one row a frame (needs --physics)")

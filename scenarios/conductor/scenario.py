@@ -398,11 +398,19 @@ def run_tempo_figure(run: Run, metrics: dict):
                         events, first_index=run.extra["first_index"], onsets=run.extra["onsets"])
 
 
+def physical_poses(recording, fps: float, seed: int, pushes: list, out: Path):
+    """The run's poses on the physical body, its ``physics.csv`` written in ``out``."""
+    from agentsim.physics.run import scenario_poses
+
+    return scenario_poses(recording, fps, seed, pushes, out)
+
+
 def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True,
-                  stages: Stages | None = None) -> Path:
+                  stages: Stages | None = None, physics: list | None = None) -> Path:
     """Write the run's files into the folder ``out`` (created if needed); ``pictures``: the timeline
     pictures too, ``plots``: any picture at all (``tempo.png`` and the timeline). ``stages``: where to say
-    on a terminal which stage is under way."""
+    on a terminal which stage is under way. ``physics``: the pushes of a run on the physical body (its
+    poses the physical body's, and ``physics.csv``); None: the animation's poses."""
     import concurrent.futures
     import contextlib
 
@@ -436,7 +444,10 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
             ogg = start_audio(out / "report.html", track, sound)
             write_wav(out / "ensemble.wav", track)
         with say("poses/BVH"):
-            stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
+            if physics is None:
+                stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
+            else:
+                stream = physical_poses(recording, run.config.conductor.fps, run.seed, physics, out)
             timelines = (drawing.enter_context(start_timelines(
                 recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
                 title=f"conductor ({run.strategy_name})")) if plots and pictures else None)

@@ -164,7 +164,7 @@ def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: P
         telling = tell(story, strategy=strategy, delivery=delivery, seed=args.seed, voice=voice, anchor=args.anchor,
                        timing=args.timing, stages=stages)
         stages_seconds = write_outputs(telling, staging, fps=args.fps, window=args.window, seed=args.seed,
-                                       plots=plots, stages=stages)
+                                       plots=plots, stages=stages, physics=getattr(args, "physics_pushes", None))
         wall = time.perf_counter() - started - voice.backend.synthesis_seconds
         metrics = _metrics(telling, args, voice, stages_seconds, wall)
         write_text(staging / "metrics.json", json.dumps(_clean(metrics), indent=2) + "\n")
@@ -182,7 +182,8 @@ def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: P
         tellings[name] = t = tell(story, strategy=name, delivery=delivery, seed=args.seed, voice=voice,
                                   anchor=args.anchor, timing=args.timing, stages=stages)
         stages_seconds = write_outputs(t, staging / name, fps=args.fps, window=args.window, seed=args.seed,
-                                       plots=plots, pictures=False, stages=stages)
+                                       plots=plots, pictures=False, stages=stages,
+                                       physics=getattr(args, "physics_pushes", None))
         every[name] = _metrics(t, args, voice, stages_seconds,
                                time.perf_counter() - begun - (voice.backend.synthesis_seconds - synthesis))
     wall = time.perf_counter() - started - voice.backend.synthesis_seconds
@@ -274,20 +275,21 @@ def _clean(value):
 
 def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float = 30.0,
                   seed: int = 0, plots: bool = True, pictures: bool = True,
-                  stages: Stages | None = None) -> "OrderedDict[str, float]":
+                  stages: Stages | None = None, physics: list | None = None) -> "OrderedDict[str, float]":
     """Write a telling's files (all but ``metrics.json``) to ``out``; returns the wall seconds of each
     stage. ``plots``: draw the timeline and sync-error pictures too; ``pictures``: the timeline pictures
-    among them. ``stages``: where to say on a terminal which stage is under way."""
+    among them. ``stages``: where to say on a terminal which stage is under way. ``physics``: the pushes of
+    a run on the physical body (its poses the physical body's, and ``physics.csv``); None: the animation's."""
     out.mkdir(parents=True, exist_ok=True)
     # the poses are evaluated into files of a scratch folder (removed at the end) and read back a window
     # of frames at a time by everything that uses them: a long story's poses are never held whole
     with tempfile.TemporaryDirectory(dir=out, prefix=".poses-") as scratch:
         return _write_outputs(telling, out, Path(scratch), fps, window, seed, plots, pictures,
-                              stages or Stages.off())
+                              stages or Stages.off(), physics)
 
 
 def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, window: float, seed: int,
-                   plots: bool, pictures: bool, say: Stages) -> "OrderedDict[str, float]":
+                   plots: bool, pictures: bool, say: Stages, physics: list | None) -> "OrderedDict[str, float]":
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.media.audio import run_track_stream
     from agentsim.media.files import write_feedback, write_wav
@@ -322,8 +324,14 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
             write_text(out / "story.bml", telling.bml)
             write_feedback(out / "feedback.jsonl", telling.recording.feedback)
             t = stage("feedback", t)
-            stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene,
-                                    folder=scratch)
+            if physics is None:
+                stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene,
+                                        folder=scratch)
+            else:
+                from agentsim.physics.run import scenario_poses
+
+                stream = scenario_poses(telling.recording, fps, seed, physics, out, scene=telling.story.scene,
+                                        folder=scratch)
             timelines = (drawing.enter_context(start_window(telling, out / "timeline.png", stream, window))
                          if plots and pictures else None)
             t = stage("poses", t)
