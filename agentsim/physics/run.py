@@ -110,6 +110,37 @@ class PhysicalManager(DriverManager):
         return None
 
 
+#: The modes of a gesture or pointing that leave the left hand alone.
+RIGHT_ONLY = ("RIGHT_HAND", "RIGHT")
+
+
+def hanging_left_arm(source, end: float) -> list[ControllerSpec]:
+    """HangControllers on the left arm whenever no gesture or pointing of ``source`` (a recording, or
+    records) uses it, up to ``end`` (s): it hangs while the right hand gestures alone, and is given back
+    to the animation :data:`~agentsim.physics.simulation.RELEASE` seconds before a gesture with the left or
+    both hands starts (so that the transition back has ended when the gesture begins), and taken again
+    when that gesture ends."""
+    from agentsim.physics.simulation import RELEASE
+
+    busy = []
+    for record in records_of(source):
+        b = record.behaviour
+        if b.type not in ("gesture", "pointing") or not record.times or record.times[0] is None:
+            continue
+        if b.attributes.get("mode", "").upper() in RIGHT_ONLY:
+            continue
+        last = record.stopped if record.stopped is not None else record.times[-1]
+        busy.append((float(record.times[0]) - RELEASE, float(last if last is not None else end)))
+    specs, free_from = [], 0.0
+    for start, stop in sorted(busy) + [(end, end)]:
+        if start > free_from + 1e-9:
+            spec = controller_spec("HangController", {"part": "left_arm"})
+            spec.start, spec.end, spec.name = free_from, start, "hanging left arm"
+            specs.append(spec)
+        free_from = max(free_from, stop)
+    return specs
+
+
 def physical_poses(recording, fps: float, seed: int, pushes=(), controllers=(), scene=None, folder=None):
     """The poses of a finished run on the physical body (as :func:`~agentsim.animation.evaluate_poses` gives
     the animation's), with the run's controllers under the default balance, ``controllers`` added (e.g. a

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agentsim.animation.body import Body, matrix_euler
-from agentsim.physics.controllers import LEGS, ControllerSpec
+from agentsim.physics.controllers import LEGS, SPINE, ControllerSpec
 from agentsim.physics.model import FOOT_HALF_WIDTH, FOOT_HEEL, FOOT_SOLE, FOOT_TOE, build_model
 
 #: The longest physics step (s).
@@ -145,6 +145,7 @@ class Simulation:
                                for z in (FOOT_HEEL, FOOT_TOE)])
         self._feet = [self.layout.body_id[f"{s}_ankle"] for s in ("l", "r")]
         self._ids = {name: self.index[name] for name in LEGS}
+        self._spine = [self.index[name] for name in SPINE]
 
     # ------------------------------------------------------------------ state and configuration
     def start(self, time: float, rows: np.ndarray) -> np.ndarray:
@@ -190,6 +191,8 @@ class Simulation:
                 kp = kd = 0.0
             elif new.kind == "HangController":
                 kp, kd = 0.0, new.params["damping"]
+            elif new.kind == "BalanceController" and self.joints[i] in SPINE:
+                kp, kd = new.params["spine_kp"], new.params["spine_kd"]
             else:
                 kp, kd = new.params["kp"], new.params["kd"]
             m.dof_armature[self.dadr[i]] = KINEMATIC_ARMATURE if new is None else PHYSICAL_ARMATURE
@@ -298,6 +301,10 @@ class Simulation:
         if height is not None and self.standing is not None and height < self.standing:
             leg = 0.81
             squat = math.acos(max(0.2, min(1.0, (leg - (self.standing - height)) / leg)))
+        spine_kp = spec.params["spine_kp"]
+        if spine_kp > 0:  # the soft spine holds the body above it against gravity (the torque that keeps it still)
+            for i in self._spine:
+                ctrl[i] += d.qfrc_bias[self.dadr[i]] / spine_kp
         for side in ("l", "r"):
             hip, knee, ankle = (self._ids[f"{side}_{j}"] for j in ("hip", "knee", "ankle"))
             ctrl[ankle, 1] += -lean_forward - squat

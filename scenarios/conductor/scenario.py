@@ -399,10 +399,14 @@ def run_tempo_figure(run: Run, metrics: dict):
 
 
 def physical_poses(recording, fps: float, seed: int, pushes: list, out: Path):
-    """The run's poses on the physical body, its ``physics.csv`` written in ``out``."""
-    from agentsim.physics.run import scenario_poses
+    """The run's poses on the physical body, its ``physics.csv`` written in ``out``: the left arm hangs
+    (a HangController) while the right hand conducts alone, and is taken back by the animation for the
+    gestures with the left or both hands ("play louder", stop)."""
+    from agentsim.animation.timeline import run_duration
+    from agentsim.physics.run import hanging_left_arm, scenario_poses
 
-    return scenario_poses(recording, fps, seed, pushes, out)
+    hang = hanging_left_arm(recording, run_duration(recording) + 2.0)
+    return scenario_poses(recording, fps, seed, pushes, out, controllers=hang)
 
 
 def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True,
