@@ -182,7 +182,8 @@ def in_process(tmp: Path, name: str, body: str, capsys, monkeypatch, *extra) -> 
 def test_physics_keeps_every_sync_time_and_the_kinematic_joints_channels(tmp_path, capsys, monkeypatch):
     short = '<head id="h1" lexeme="NOD" start="0.5" end="1.3"/>'
     plain, plain_bvh = in_process(tmp_path, "plain", short, capsys, monkeypatch)
-    phys, phys_bvh = in_process(tmp_path, "phys", short, capsys, monkeypatch, "--physics", "--physics-csv", "p.csv")
+    phys, phys_bvh = in_process(tmp_path, "phys", short, capsys, monkeypatch, "--physics", "--physics-csv", "p.csv",
+                                "--report", "r.html")
     assert phys == plain
     cols = channels_of(plain_bvh)
     _, frame_time, a = read_bvh(plain_bvh)
@@ -200,6 +201,11 @@ def test_physics_keeps_every_sync_time_and_the_kinematic_joints_channels(tmp_pat
     # the BVH's root is the simulated one: the pelvis (sacroiliac) is where the CSV says
     pelvis = world_positions(phys_bvh, ["sacroiliac"])["sacroiliac"]
     np.testing.assert_allclose(pelvis[:, 1], rows[:, 9], atol=2e-5)
+    # the report plots the centre of mass against the support polygon
+    svg = (tmp_path / "r_files" / "physics.svg").read_text()
+    assert 'src="r_files/physics.svg"' in (tmp_path / "r.html").read_text()
+    assert svg.count('class="com"') == 2 and svg.count('class="support"') == 2
+    assert f"({int((rows[:, 8] == 0).sum())} of {len(rows)})" in svg
 
 
 @pytest.mark.system

@@ -199,7 +199,7 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
         if name:
             sizes[f"{flag} {name}"] = (Path(name), poses[key] + (2 * track.length if key == "report" else 0))
     check_budget(sizes, duration, (scratch, poses["scratch"]) if poses else None)  # before any file is written
-    stream = None
+    stream = manager = None
     if poses:
         from agentsim.animation import evaluate_poses
 
@@ -227,7 +227,7 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
         from agentsim.media.report import write_report
 
         write_report(args.report, recording=recording, stream=stream, track=track if track.duration > 0 else None,
-                     gestures=gestures, title=title)
+                     gestures=gestures, title=title, physics=manager.result if manager is not None else None)
 
 
 def _physics_manager(args, realizer):

@@ -156,7 +156,8 @@ def physical_poses(recording, fps: float, seed: int, pushes=(), controllers=(), 
 
 def scenario_poses(recording, fps: float, seed: int, pushes, out: Path, controllers=(), scene=None, folder=None):
     """:func:`physical_poses` for a scenario's folder ``out``: its ``physics.csv`` written there, a fall or an
-    unstable simulation said on one line of stderr (the scenario's feedback is its realizer's); the stream."""
+    unstable simulation said on one line of stderr (the scenario's feedback is its realizer's); the stream and
+    the :class:`PhysicsResult`."""
     import sys
 
     stream, result = physical_poses(recording, fps, seed, pushes, controllers, scene, folder)
@@ -164,7 +165,7 @@ def scenario_poses(recording, fps: float, seed: int, pushes, out: Path, controll
     line = fell_line(result)
     if line:
         print(f"agentsim: {line}", file=sys.stderr)
-    return stream
+    return stream, result
 
 
 def fell_line(result: PhysicsResult) -> str | None:

@@ -399,7 +399,7 @@ def run_tempo_figure(run: Run, metrics: dict):
 
 
 def physical_poses(recording, fps: float, seed: int, pushes: list, out: Path):
-    """The run's poses on the physical body, its ``physics.csv`` written in ``out``: the left arm hangs
+    """The run's poses on the physical body and its figures, its ``physics.csv`` written in ``out``: the left arm hangs
     (a HangController) while the right hand conducts alone, and is taken back by the animation for the
     gestures with the left or both hands ("play louder", stop)."""
     from agentsim.animation.timeline import run_duration
@@ -448,10 +448,11 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
             ogg = start_audio(out / "report.html", track, sound)
             write_wav(out / "ensemble.wav", track)
         with say("poses/BVH"):
+            body = None  # the physical body's figures (--physics)
             if physics is None:
                 stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
             else:
-                stream = physical_poses(recording, run.config.conductor.fps, run.seed, physics, out)
+                stream, body = physical_poses(recording, run.config.conductor.fps, run.seed, physics, out)
             timelines = (drawing.enter_context(start_timelines(
                 recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
                 title=f"conductor ({run.strategy_name})")) if plots and pictures else None)
@@ -462,7 +463,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
             write_csv(out / "gestures.csv", gestures)
             write_report(out / "report.html", recording=recording, stream=stream, track=track, gestures=gestures,
                          title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})",
-                         audio=ogg)
+                         audio=ogg, physics=body)
             sound.shutdown(wait=True)  # the report's sound is encoded
         if not plots:
             return out

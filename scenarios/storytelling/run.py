@@ -324,14 +324,15 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
             write_text(out / "story.bml", telling.bml)
             write_feedback(out / "feedback.jsonl", telling.recording.feedback)
             t = stage("feedback", t)
+            body = None  # the physical body's figures (--physics)
             if physics is None:
                 stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene,
                                         folder=scratch)
             else:
                 from agentsim.physics.run import scenario_poses
 
-                stream = scenario_poses(telling.recording, fps, seed, physics, out, scene=telling.story.scene,
-                                        folder=scratch)
+                stream, body = scenario_poses(telling.recording, fps, seed, physics, out,
+                                              scene=telling.story.scene, folder=scratch)
             timelines = (drawing.enter_context(start_window(telling, out / "timeline.png", stream, window))
                          if plots and pictures else None)
             t = stage("poses", t)
@@ -352,7 +353,8 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
             write_csv(out / "gestures.csv", gestures)
             t = stage("textgrid", t)
             write_report(out / "report.html", recording=telling.recording, stream=stream, track=track,
-                         gestures=gestures, title=f"{telling.story.title} (strategy {telling.strategy})", audio=ogg)
+                         gestures=gestures, title=f"{telling.story.title} (strategy {telling.strategy})", audio=ogg,
+                         physics=body)
             sound.shutdown(wait=True)  # the report's sound is encoded
         t = stage("report", t)
         if plots:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import base64
 import json
 
 from tests.test_physics_cli import COLUMNS, channels_of, read_bvh, read_csv, world_positions
@@ -113,3 +114,27 @@ def test_the_storyteller_on_the_physical_body_keeps_its_balance(tmp_path):
     _, _, frames = read_bvh(tmp_path / "story" / "story.bvh")
     assert len(rows) == len(frames) > 2000
     assert rows[:, 10].max() == 0 and rows[:, 8].mean() >= 0.99
+
+
+def _report_points(folder: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The frames and joint positions (frames, points, 3) the report's 3-D view draws, read from poses.js."""
+    text = (folder / "report_files" / "poses.js").read_text()
+    payload = json.loads(text[text.index("= ") + 2:text.rindex(";")])
+    frames = np.frombuffer(base64.b64decode(payload["frames"]), "<u4")
+    q = np.frombuffer(base64.b64decode(payload["xyz"]), "<i2").reshape(payload["count"], payload["points"], 3)
+    return frames, q * float(payload["scale"]) + np.asarray(payload["origin"], dtype=float)
+
+
+def test_the_conductors_report_shows_the_physical_body_and_its_centre_of_mass(conductor):
+    plain, physical = conductor["plain"], conductor["physical"]
+    assert 'src="report_files/physics.svg"' in (physical / "report.html").read_text()
+    assert not (plain / "report_files" / "physics.svg").exists() and "physics" not in (plain / "report.html").read_text()
+    _, rows = read_csv(physical / "physics.csv")
+    svg = (physical / "report_files" / "physics.svg").read_text()
+    assert svg.count('class="com"') == 2 and f"({int((rows[:, 8] == 0).sum())} of {len(rows)})" in svg
+    root = world_positions(physical / "conductor.bvh", ["HumanoidRoot"])["HumanoidRoot"]
+    frames, points = _report_points(physical)
+    assert len(frames) > 100
+    np.testing.assert_allclose(points[:, 0], root[frames], atol=2e-3)  # the 3-D view's root is the BVH's
+    animated = world_positions(plain / "conductor.bvh", ["HumanoidRoot"])["HumanoidRoot"]
+    assert np.abs(root - animated).max() > 0.002  # the simulated root, not the animation's

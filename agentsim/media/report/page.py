@@ -43,7 +43,8 @@ ASSETS = HERE / "assets"
 #: Files of the folder that :func:`write_report` writes or removes (a report written again over an older one).
 #: The sound's files (one of them: :func:`write_audio`).
 AUDIO_FILES = ("audio.ogg", "audio.wav")
-OWN_FILES = ("three.min.js", "LICENSE-three.txt", "report.js", "report.css", "data.js", "poses.js") + AUDIO_FILES
+OWN_FILES = ("three.min.js", "LICENSE-three.txt", "report.js", "report.css", "data.js", "poses.js",
+             "physics.svg") + AUDIO_FILES
 #: Samples handed to the audio encoder at a time.
 AUDIO_BLOCK = 65536
 
@@ -105,7 +106,7 @@ def start_audio(path, track, executor: concurrent.futures.Executor) -> concurren
 
 
 def write_report(path, *, recording, stream=None, track=None, gestures=(), title: str = "", notes=(),
-                 audio: concurrent.futures.Future | None = None) -> Path:
+                 audio: concurrent.futures.Future | None = None, physics=None) -> Path:
     """Write an HTML report of a run that a researcher watches and hears: its audio, a 3D skeleton driven by
     the poses, a timeline of behaviours, words and feedback with a cursor that follows the audio, and the
     per-gesture error table.
@@ -133,6 +134,10 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         ``track``): waited for instead of encoding the track here. The report is then written in place,
         for a report inside a run's folder that is staged whole
         (:func:`~agentsim.written.staged_folder`).
+    physics : PhysicsResult, optional
+        The physical body's figures when the run was simulated (``--physics``): the page then shows
+        ``physics.svg``, the centre of mass against the support polygon
+        (:mod:`~agentsim.media.report.physics`); the 3D skeleton is the ``stream``'s, the physical body's.
 
     Notes
     -----
@@ -154,7 +159,7 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         track = None
     if stream is not None and stream.n_frames == 0:
         stream = None
-    content = (recording, stream, track, list(gestures), title or path.stem, [str(n) for n in notes])
+    content = (recording, stream, track, list(gestures), title or path.stem, [str(n) for n in notes], physics)
     if audio is None:  # the page and its folder staged, swapped in together once whole (staged_page)
         with staged_page(path, folder, marks=OWN_FILES) as (page, staging):
             _write_into(page, staging, folder.name, *content, audio=None)
@@ -170,7 +175,7 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
     return path
 
 
-def _write_into(page: Path, folder: Path, name: str, recording, stream, track, gestures, title, notes,
+def _write_into(page: Path, folder: Path, name: str, recording, stream, track, gestures, title, notes, physics,
                 audio) -> None:
     """Write the report's files into ``folder`` and its HTML into ``page``, which loads them from the folder
     ``name`` beside it."""
@@ -191,7 +196,12 @@ def _write_into(page: Path, folder: Path, name: str, recording, stream, track, g
     write_text(folder / "data.js", js_assignment(
         "REPORT_DATA", data, f"agentsim run report: timeline and tables of {title!r}, see "
         "agentsim.media.report.data"))
-    page.write_text(page_html(name, title, notes, data), encoding="utf-8")
+    picture = None
+    if physics is not None:
+        from agentsim.media.report.physics import write_physics_svg
+
+        picture = write_physics_svg(folder / "physics.svg", physics.rows).name
+    page.write_text(page_html(name, title, notes, data, physics=picture), encoding="utf-8")
 
 
 def _page_data(recording, stream, track, gestures, title, notes, folder: Path) -> dict:
@@ -213,8 +223,9 @@ def _page_data(recording, stream, track, gestures, title, notes, folder: Path) -
     return data
 
 
-def page_html(folder: str, title: str, notes: list[str], data: dict) -> str:
-    """The HTML of a report whose files are in the folder named ``folder`` beside it."""
+def page_html(folder: str, title: str, notes: list[str], data: dict, physics: str | None = None) -> str:
+    """The HTML of a report whose files are in the folder named ``folder`` beside it (``physics``: the name of
+    its picture of the centre of mass, when the body was simulated)."""
     base = quote(folder)
     esc = html.escape
     audio = data["audio"]
@@ -226,6 +237,10 @@ def page_html(folder: str, title: str, notes: list[str], data: dict) -> str:
     note_items = "".join(f"<li>{esc(n)}</li>" for n in notes)
     scripts = ["three.min.js", "data.js"] + (["poses.js"] if data["motion"] is not None else []) + ["report.js"]
     script_tags = "\n".join(f'<script src="{base}/{s}"></script>' for s in scripts)
+    balance = "" if physics is None else (
+        '<section id="physics-section">\n<h2>Centre of mass and support polygon (the physical body)</h2>\n'
+        f'<img id="physics" src="{base}/{quote(physics)}" alt="the centre of mass against the support polygon">'
+        '\n</section>\n')
     return f"""<!DOCTYPE html>
 <html lang="en">
 <head>
@@ -262,7 +277,7 @@ window.addEventListener("unhandledrejection",function(e){{window.reportErrors.pu
 <canvas id="overview"></canvas>
 <div id="hover">&nbsp;</div>
 </section>
-<section id="table-section">
+{balance}<section id="table-section">
 <h2>Gestures pegged to words and beats</h2>
 <p class="hint">Click a row to go to its stroke; click a heading to sort.</p>
 <div id="table-wrap"><table id="gestures"><thead></thead><tbody></tbody></table></div>
