@@ -24,7 +24,7 @@ LEGS = tuple(f"{s}_{j}" for s in ("l", "r") for j in ("hip", "knee", "ankle"))
 BALANCE_JOINTS = ("sacroiliac", *LEGS, "vl5", "vt10")
 #: The joints JointController may name (those the model simulates, but the root).
 JOINTABLE = (*BALANCE_JOINTS, "vc4", "skullbase", *(f"{s}_{j}" for s in ("l", "r")
-                                                   for j in ("sternoclavicular", "shoulder", "elbow", "wrist")))
+                                                   for j in ("shoulder", "elbow", "wrist")))
 
 #: The joints of the spine a BalanceController holds with its own (softer) gains, and those gains' defaults.
 SPINE = ("vl5", "vt10")

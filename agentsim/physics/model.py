@@ -7,7 +7,7 @@ from its parent, turning about three hinges in the BVH channel order (``roll`` a
 world is the BVH's: +Y up (gravity -9.81 m/s^2 along Y), the character facing +Z, +X its left; the floor is
 the plane y = 0 (friction 1).
 
-Not simulated: the fingers and the thumb (each hand is one rigid body on the wrist), the jaw, lips, eyes,
+The clavicles (:data:`WELDED`) have no hinges: they turn as animated. Not simulated: the fingers and the thumb (each hand is one rigid body on the wrist), the jaw, lips, eyes,
 eyelids and brows (part of the head). Those joints stay kinematic whatever happens.
 
 Masses, centres of mass and radii of gyration are de Leva's adjustments of Zatsiorsky and Seluyanov's
@@ -57,6 +57,10 @@ DE_LEVA = {
 TRUNK = ("HumanoidRoot", "sacroiliac", "vl5", "vt10")
 NECK = ("vc4", "skullbase")
 SIDES = ("l", "r")
+#: Joints simulated without hinges: their segment turns as the animation turns it (the simulation sets the
+#: body's orientation a frame at a time) and no controller takes it. The clavicles move little, and their six
+#: hinges would cost a quarter of a step (a step's constraint solver grows with the cube of the hinges).
+WELDED = ("l_sternoclavicular", "r_sternoclavicular")
 #: The foot box: from the heel to the toes (z), its sole on the floor at rest (y), relative to the ankle.
 FOOT_HEEL, FOOT_TOE, FOOT_HALF_WIDTH, FOOT_SOLE = -0.07, 0.18, 0.05, -0.04
 
@@ -171,7 +175,7 @@ def build_xml(body: Body, timestep: float) -> str:
         out.append(f'{pad}  <inertial pos="{_fmt(com)}" mass="{mass:.6g}" diaginertia="{_fmt(inertia)}"/>')
         if j.parent is None:
             out.append(f'{pad}  <freejoint name="{name}"/>')
-        else:
+        elif name not in WELDED:
             for axis, vec in (("roll", "0 0 1"), ("pitch", "1 0 0"), ("yaw", "0 1 0")):
                 lo, hi = j.limit(axis)
                 if lo == hi == 0:

@@ -147,6 +147,9 @@ class Simulation:
         for adr in (self.qadr, self.dadr, self.aadr):
             adr[~self.valid] = 0
         self.qv, self.dv, self.av = self.qadr[self.valid], self.dadr[self.valid], self.aadr[self.valid]
+        #: joints without hinges (the clavicles): their bodies are turned as the animation turns them
+        self.welded = [i for i in range(len(self.joints)) if not self.valid[i].any()]
+        self.welded_body = [self.layout.body_id[self.joints[i]] for i in self.welded]
         self.root_translation = np.array(body.translation_columns, dtype=np.intp)
         self.root_rotation = np.array(body.rotation_columns[body.joints[0].name], dtype=np.intp)
         self.pelvis = self.layout.body_id["sacroiliac"]
@@ -183,6 +186,7 @@ class Simulation:
 
         d.qpos[3:7] = _matrix_quat(euler_matrix(*(pose[[c]] for c in r))[0])
         d.qpos[self.qv] = np.radians(pose[self.columns])[self.valid]
+        self._turn_welded(pose[self.columns])
         d.act[self.av] = d.qpos[self.qv]
         if len(rows) > 1:
             d.qvel[self.dv] = np.radians(_wrapped(rows[1][self.columns] - pose[self.columns]))[self.valid] / self.frame_time
@@ -190,6 +194,15 @@ class Simulation:
         self.standing = float(d.xpos[self.pelvis][1])
         self._configure(time)
         return self._frame(time, pose)
+
+    def _turn_welded(self, angles: np.ndarray) -> None:
+        """Turn the joints without hinges to ``angles`` (degrees, (J, 3): the animation's)."""
+        if self.welded:
+            from agentsim.animation.body import euler_matrix
+
+            turned = euler_matrix(*angles[self.welded].T)
+            for body, matrix in zip(self.welded_body, turned):
+                self.model.body_quat[body] = _matrix_quat(matrix)
 
     def _angles(self, i: int) -> np.ndarray:
         """Joint ``i``'s angles now (rad; 0 about an axis it never turns)."""
@@ -255,6 +268,7 @@ class Simulation:
         coeffs = np.stack([targets[1], h * v1, targets[2], h * v2])[:, moving]  # (4, hinges)
         ka = self.aadr[moving]
         self._servo_targets(time, rows[2])
+        self._turn_welded(np.degrees(targets[2]))
         pushes = [p for p in self.pushes if p.time < time + h and p.time + p.duration > time]
         bounds = self.bounds
         if pushes:  # a push starts and ends at a step: a call of mj_step ends there
@@ -432,8 +446,7 @@ class Stepper:
                         sim.result.unstable_at, sim.result.unstable = float(self.times[k]), self.said[0]
                 self.out(k, pose)
                 self.made += 1
-                for old in [i for i in self.rows if i < self.made - 2]:
-                    del self.rows[old]
+                self.rows.pop(self.made - 3, None)  # no longer needed (frame k needs k - 2 .. k + 1)
         finally:
             mj.set_mju_user_warning(previous)
 
