@@ -62,7 +62,8 @@ MADE = {
          "linear.json", "story.wav", "story.TextGrid"],
         [r"^ ?\d+\.\d{3} s  Welcome$", r'"id": "p:h1:stroke"']),
     "howto/gestures.md": (["mine.toml", "present.bvh"], [r"^PRESENT +gesture form \(MURML\) +mine\.toml$"]),
-    "howto/physics.md": (["talk.xml", "talk.bvh", "talk-physics.csv"], [r'"id": "talk:hang:end"']),
+    "howto/physics.md": (["talk.xml", "talk.bvh", "talk-physics.csv", "conductor-physics/physics.csv"],
+                         [r'"id": "talk:hang:end"']),
     "howto/piper.md": (["hello.xml", "hello.wav", "hello.TextGrid"],
                        [r'"id": "hello:g1:stroke"', r"^\['hello:g1:stroke'\]$"]),
     "howto/praat-blender.md": (
