@@ -269,3 +269,23 @@ def test_every_command_with_physics_refuses_a_malformed_push_before_any_work(tmp
     assert main([*command, "--push", "1:0,0,150:0.2"]) == 2
     assert capsys.readouterr().err.strip() == "agentsim: --push needs --physics"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_live_viewer_shows_the_physical_body_window_after_window():
+    from agentsim.animation.output import records_of
+    from agentsim.live.poses import evaluate_window
+    from agentsim.physics.run import parse_push
+    from agentsim.realizer import Realizer
+
+    realizer = Realizer(tts=None)
+    realizer.submit(BML.format('<head id="h1" lexeme="NOD" start="0.2" end="1.2"/>'))
+    realizer.run()
+    records = list(records_of(realizer.recording()))
+    pushes = [parse_push("0.3:0,0,150:0.2")]  # as serve --physics --push 0.3:0,0,150:0.2 gives them
+    animated = np.vstack([evaluate_window(records, k, k + 14, 30.0, 0)[0] for k in (0, 15, 30)])
+    standing = np.vstack([evaluate_window(records, k, k + 14, 30.0, 0, None, [])[0] for k in (0, 15, 30)])
+    pushed = np.vstack([evaluate_window(records, k, k + 14, 30.0, 0, None, pushes)[0] for k in (0, 15, 30)])
+    assert np.abs(standing[:, 0:3] - animated[:, 0:3]).max() > 1e-3  # the first point drawn: the simulated root
+    forward = pushed[:, 2] - standing[:, 2]
+    assert np.abs(forward[:10]).max() < 1e-9 and forward[15:].max() > 0.01  # pushed forward from 0.3 s on
+    assert np.abs(np.diff(pushed[:, 0:3], axis=0)).max() < 0.01  # no jump from one window to the next

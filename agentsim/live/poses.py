@@ -214,7 +214,7 @@ class Liveliness:
             blink.forced = [float(t) for t in blinks]
 
 
-_EVALUATORS: dict[tuple[float, int, bool], tuple] = {}
+_EVALUATORS: dict[tuple, tuple] = {}
 
 
 def evaluate_window(records, k0: int, k1: int, fps: float, seed: int, lexicon=None,
@@ -226,7 +226,7 @@ def evaluate_window(records, k0: int, k1: int, fps: float, seed: int, lexicon=No
     play as ``lexicon`` (the realizer's; default: the built-in one) has them. ``physics``: the pushes of a
     physical body (:class:`~agentsim.physics.run.LiveBody`, kept from one call to the next, whose root and
     physical joints the frames show); None: the animation's poses."""
-    key = (float(fps), int(seed), physics is not None)
+    key = (float(fps), int(seed), None if physics is None else tuple(physics))
     if key not in _EVALUATORS:
         _EVALUATORS[key] = (Body(), Liveliness(seed), None)
     body, liveliness, live_body = _EVALUATORS[key]
