@@ -48,10 +48,9 @@ from agentsim.physics.model import FOOT_HALF_WIDTH, FOOT_HEEL, FOOT_SOLE, FOOT_T
 
 #: The longest physics step (s).
 MAX_STEP = 0.001
-#: The armature (kg m^2) of a kinematic joint's hinges: the inverse dynamics' torque includes it, so a
-#: kinematic joint follows its prescribed acceleration even though the torque was computed with the physical
-#: part's acceleration of the step before (without it, that one-step lag makes the coupling unstable); the
-#: armature has no reaction on the parent body, so the physical part feels only the true joint torque.
+#: The armature (kg m^2) of a kinematic joint's hinges: every kinematic hinge is as heavy to its servo, so that
+#: one stiffness holds them all on the animation's curve, stable at the step; the armature has no reaction on
+#: the parent body, so the physical part feels only the torque the joint's true motion needs.
 KINEMATIC_ARMATURE = 20.0
 #: The stiffness (N m/rad) and damping (N m s/rad) of the servo that keeps a kinematic joint on the
 #: animation's curve: with the armature, a critically damped servo of 300 rad/s (48 Hz), whose error under
