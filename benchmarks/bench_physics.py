@@ -12,7 +12,8 @@ between 1 and 2 s. Beside them: the strongest 0.2 s forward push of those tried 
 The scenarios (``--scenarios``, or ``--short`` for the conductor's 8 bars and the shortest story): the
 conductor (seed 0) and the storyteller, each run as a command without and with ``--physics``, interleaved,
 the minimum of 2 runs each: the wall-time ratio (target: at most 2 for the conductor as it stands, with its
-pictures; the same runs with ``--no-pictures`` are reported beside it), and the balance figures of the
+pictures; the same runs with ``--no-pictures`` are reported beside it, and the storyteller's ratios with no
+target: its 60 frames a second of a long story are 17 steps a frame), and the balance figures of the
 physical runs: ``fallen`` never 1, ``com_inside`` on at least 99 % of the frames, and for the conductor the
 standard deviation of the ``vl5`` rotation (its channels in the BVH, and their difference from the run
 without physics: what the strokes' reaction adds) above 0.2 degrees.
@@ -137,7 +138,10 @@ def scenario(folder: Path, name: str, args: list[str], bvh: str) -> dict:
         added = float((physical[:, vl5] - plain[:, vl5]).std(axis=0).max())
         out.update(vl5_sd_deg=round(sd, 3), vl5_sd_added_by_physics_deg=round(added, 3),
                    vl5_holds=sd > 0.2 and added > 0.2)
-    out["holds"] = out["ratio_holds"] and out["balance_holds"] and out.get("vl5_holds", True)
+    if name != "conductor":  # the cost target is the conductor's: the storyteller's ratios are reported
+        for key in ("ratio_holds", "ratio_no_pictures_holds"):
+            del out[key]
+    out["holds"] = out.get("ratio_holds", True) and out["balance_holds"] and out.get("vl5_holds", True)
     return out
 
 
