@@ -234,9 +234,12 @@ def _physics_manager(args, realizer):
     """The manager whose poses are the physical body's (``--physics``), or None."""
     if not getattr(args, "physics", False):
         return None
+    from agentsim.animation.output import lexicon_of
     from agentsim.physics.run import PhysicalManager, run_controllers
 
-    return PhysicalManager(run_controllers(realizer.recording()), physics_options(args), fps=args.fps, seed=args.seed)
+    recording = realizer.recording()
+    return PhysicalManager(run_controllers(recording), physics_options(args), fps=args.fps, seed=args.seed,
+                           lexicon=lexicon_of(recording))
 
 
 def _physics_said(args, realizer, result) -> None:
