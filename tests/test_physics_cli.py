@@ -182,7 +182,8 @@ def in_process(tmp: Path, name: str, body: str, capsys, monkeypatch, *extra) -> 
 def test_physics_keeps_every_sync_time_and_the_kinematic_joints_channels(tmp_path, capsys, monkeypatch):
     short = '<head id="h1" lexeme="NOD" start="0.5" end="1.3"/>'
     plain, plain_bvh = in_process(tmp_path, "plain", short, capsys, monkeypatch)
-    phys, phys_bvh = in_process(tmp_path, "phys", short, capsys, monkeypatch, "--physics", "--physics-csv", "p.csv")
+    phys, phys_bvh = in_process(tmp_path, "phys", short, capsys, monkeypatch, "--physics", "--physics-csv", "p.csv",
+                                "--report", "r.html")
     assert phys == plain
     cols = channels_of(plain_bvh)
     _, frame_time, a = read_bvh(plain_bvh)
@@ -200,6 +201,11 @@ def test_physics_keeps_every_sync_time_and_the_kinematic_joints_channels(tmp_pat
     # the BVH's root is the simulated one: the pelvis (sacroiliac) is where the CSV says
     pelvis = world_positions(phys_bvh, ["sacroiliac"])["sacroiliac"]
     np.testing.assert_allclose(pelvis[:, 1], rows[:, 9], atol=2e-5)
+    # the report plots the centre of mass against the support polygon
+    svg = (tmp_path / "r_files" / "physics.svg").read_text()
+    assert 'src="r_files/physics.svg"' in (tmp_path / "r.html").read_text()
+    assert svg.count('class="com"') == 2 and svg.count('class="support"') == 2
+    assert f"({int((rows[:, 8] == 0).sum())} of {len(rows)})" in svg
 
 
 @pytest.mark.system
@@ -250,3 +256,36 @@ def test_a_body_that_falls_is_said_once_and_the_run_completes(tmp_path):
     first = int(np.argmax(rows[:, 10]))
     assert rows[first - 1, 10] == 0 and rows[first:, 10].min() == 1
     assert rows[first, 0] == pytest.approx(fell[0]["globalTime"], abs=1e-6)
+
+
+@pytest.mark.parametrize("command", [["run", "conductor"], ["run", "storytelling"], ["demo"], ["serve", "--port", "0"]])
+def test_every_command_with_physics_refuses_a_malformed_push_before_any_work(tmp_path, command, capsys, monkeypatch):
+    from agentsim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main([*command, "--physics", "--push", "1:0,0:0.2"]) == 2
+    out = capsys.readouterr()
+    assert out.err.strip() == ("agentsim: --push: the force needs three components FX,FY,FZ (newtons), got '0,0'")
+    assert main([*command, "--push", "1:0,0,150:0.2"]) == 2
+    assert capsys.readouterr().err.strip() == "agentsim: --push needs --physics"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_live_viewer_shows_the_physical_body_window_after_window():
+    from agentsim.animation.output import records_of
+    from agentsim.live.poses import evaluate_window
+    from agentsim.physics.run import parse_push
+    from agentsim.realizer import Realizer
+
+    realizer = Realizer(tts=None)
+    realizer.submit(BML.format('<head id="h1" lexeme="NOD" start="0.2" end="1.2"/>'))
+    realizer.run()
+    records = list(records_of(realizer.recording()))
+    pushes = [parse_push("0.3:0,0,150:0.2")]  # as serve --physics --push 0.3:0,0,150:0.2 gives them
+    animated = np.vstack([evaluate_window(records, k, k + 14, 30.0, 0)[0] for k in (0, 15, 30)])
+    standing = np.vstack([evaluate_window(records, k, k + 14, 30.0, 0, None, [])[0] for k in (0, 15, 30)])
+    pushed = np.vstack([evaluate_window(records, k, k + 14, 30.0, 0, None, pushes)[0] for k in (0, 15, 30)])
+    assert np.abs(standing[:, 0:3] - animated[:, 0:3]).max() > 1e-3  # the first point drawn: the simulated root
+    forward = pushed[:, 2] - standing[:, 2]
+    assert np.abs(forward[:10]).max() < 1e-9 and forward[15:].max() > 0.01  # pushed forward from 0.3 s on
+    assert np.abs(np.diff(pushed[:, 0:3], axis=0)).max() < 0.01  # no jump from one window to the next

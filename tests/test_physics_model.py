@@ -17,12 +17,16 @@ from agentsim.physics.simulation import Push, simulate
 BODY = Body()
 
 
-def test_the_model_weighs_the_body_and_has_three_hinges_a_joint():
+def test_the_model_weighs_the_body_and_has_a_hinge_for_every_axis_a_joint_turns():
     model, layout = build_model(BODY, 0.001)
     assert math.isclose(float(np.sum(model.body_mass)), MASS, rel_tol=1e-9)
     joints = simulated_joints(BODY)
     assert len(joints) == 20 and "l_index1" not in joints and "temporomandibular" not in joints
-    assert model.nv == 6 + 3 * (len(joints) - 1)
+    # three hinges a joint, but for the axes the skeleton never turns: the knees' and elbows' roll, the wrists' yaw
+    # and the clavicles, which turn as animated
+    assert model.nv == 6 + 3 * (len(joints) - 1) - 6 - 6
+    assert [layout.qpos[j].count(-1) for j in ("l_knee", "r_elbow", "l_wrist", "l_hip", "r_sternoclavicular")] == [
+        1, 1, 1, 0, 3]
     # de Leva 1996: the thigh is 14.16 % of the body mass, its centre 40.95 % of the way to the knee
     mass, com, _ = inertial(BODY, "l_hip")
     assert math.isclose(mass, 0.1416 * MASS) and math.isclose(com[1], 0.4095 * -0.42)
@@ -41,7 +45,11 @@ def test_the_model_turns_its_joints_as_the_skeleton_does():
     rot = BODY.forward_kinematics(pose[None], ["HumanoidRoot"])["HumanoidRoot"][0][0]
     mujoco.mju_mat2Quat(data.qpos[3:7], rot.ravel())
     for name in joints_of(layout):
-        data.qpos[list(layout.qpos[name])] = np.radians(pose[list(BODY.rotation_columns[name])])
+        for address, col in zip(layout.qpos[name], BODY.rotation_columns[name]):
+            if address < 0:  # an axis the skeleton never turns
+                pose[col] = 0.0
+            else:
+                data.qpos[address] = np.radians(pose[col])
     mujoco.mj_kinematics(model, data)
     fk = BODY.forward_kinematics(pose[None])
     for name in layout.joints:

@@ -123,16 +123,19 @@ def add_outputs(parser: argparse.ArgumentParser) -> None:
                         help="leave the camera, light and music of emotions out of --wav and --report")
 
 
-def add_physics(parser: argparse.ArgumentParser) -> None:
-    """``--physics``, ``--push`` and ``--physics-csv`` (:mod:`agentsim.physics`)."""
+def add_physics(parser: argparse.ArgumentParser, csv: bool = True, where: str = "") -> None:
+    """``--physics``, ``--push`` and (``csv``) ``--physics-csv`` (:mod:`agentsim.physics`); ``where``: what
+    ``--physics`` adds to a scenario's folder."""
     group = parser.add_argument_group("physics (mixed dynamics: a physical body under the animation)")
     group.add_argument("--physics", action="store_true",
                        help="play the motion on a physically simulated body: the pelvis, legs and spine "
                             "physical under a BalanceController, the neck, head, arms and hands as animated; "
-                            "<bmlt:controller> behaviours make parts physical while they are active")
+                            "<bmlt:controller> behaviours make parts physical while they are active" + where)
     group.add_argument("--push", action="append", default=[], metavar="TIME:FX,FY,FZ:DURATION",
                        help="push the pelvis with a force (newtons; +Y up, +Z the way the body faces, +X its "
                             "left) from TIME for DURATION seconds (repeatable; needs --physics)")
+    if not csv:
+        return
     group.add_argument("--physics-csv", metavar="OUT.csv",
                        help="write the centre of mass, support polygon, pelvis height and whether the body has "
                             "fallen, one row a frame (needs --physics)")
@@ -210,7 +213,7 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
         if name:
             sizes[f"{flag} {name}"] = (Path(name), poses[key] + (2 * track.length if key == "report" else 0))
     check_budget(sizes, duration, (scratch, poses["scratch"]) if poses else None)  # before any file is written
-    stream = None
+    stream = manager = None
     if poses:
         from agentsim.animation import evaluate_poses
 
@@ -247,7 +250,8 @@ def _write_run_outputs(args, realizer, title, extra_sources, beat_times, scratch
 
             extra["environment"] = report_environment(environment, stream)
         write_report(args.report, recording=recording, stream=stream, track=track if track.duration > 0 else None,
-                     gestures=gestures, title=title, **extra)
+                     gestures=gestures, title=title,
+                     physics=manager.result if manager is not None else None, **extra)
 
 
 def _music(recording, environment, extra_sources) -> list:
@@ -264,9 +268,12 @@ def _physics_manager(args, realizer):
     """The manager whose poses are the physical body's (``--physics``), or None."""
     if not getattr(args, "physics", False):
         return None
+    from agentsim.animation.output import lexicon_of
     from agentsim.physics.run import PhysicalManager, run_controllers
 
-    return PhysicalManager(run_controllers(realizer.recording()), physics_options(args), fps=args.fps, seed=args.seed)
+    recording = realizer.recording()
+    return PhysicalManager(run_controllers(recording), physics_options(args), fps=args.fps, seed=args.seed,
+                           lexicon=lexicon_of(recording))
 
 
 def _physics_said(args, realizer, result) -> None:

@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 from agentsim.cli import options
+from agentsim.cli.realize import add_physics
 
 #: Where ``agentsim demo`` writes, one folder per scenario inside.
 DEMO_OUT = "out/demo"
@@ -26,6 +27,7 @@ def add_parsers(commands) -> None:
                     "DIR/conductor' and 'agentsim run storytelling --out DIR/storytelling', which write into "
                     "conductor/ and storytelling/ inside --out what their help says.")
     options.add_out(demo, DEMO_OUT, "where to write the results")
+    add_physics(demo, csv=False, where=" (both scenarios; each writes physics.csv)")
     demo.set_defaults(handler=lambda args: demo_handler(commands, args))
 
 
@@ -72,6 +74,7 @@ def add_conductor(scenarios) -> argparse.ArgumentParser:
                         help="--input: the sample rate to record at (default: the configuration's)")
     add_no_pictures(parser)
     add_json(parser)
+    add_physics(parser, csv=False, where=PHYSICS_FILE + "; the left arm hangs while the right conducts alone")
     parser.set_defaults(handler=run_conductor)
     return parser
 
@@ -88,7 +91,21 @@ def add_json(parser: argparse.ArgumentParser) -> None:
                              "stdout, and the table on stderr")
 
 
+#: What ``--physics`` adds to a scenario's folder (said in its help).
+PHYSICS_FILE = "; writes physics.csv (the centre of mass, support polygon, pelvis height, fallen: one row a frame)"
+
+
+def physics(args: argparse.Namespace) -> None:
+    """``args.physics_pushes``: the pushes of ``--push`` under ``--physics``, None without it (a usage error
+    for a malformed push, or a push without --physics)."""
+    from agentsim.cli.realize import physics_options
+
+    pushes = physics_options(args)
+    args.physics_pushes = pushes if getattr(args, "physics", False) else None
+
+
 def run_conductor(args: argparse.Namespace) -> int:
+    physics(args)
     if args.list_configs:
         from scenarios import first_comment
         from scenarios.conductor.config import CONFIGS_DIR, config_names
@@ -144,6 +161,7 @@ def add_storytelling(scenarios) -> argparse.ArgumentParser:
                         help="leave out the camera, light and music of the story's [emotion:...] tags (no "
                              "environment.csv, no music.wav, no music in narration.wav and the report)")
     add_json(parser)
+    add_physics(parser, csv=False, where=PHYSICS_FILE)
     parser.set_defaults(handler=run_storytelling)
     return parser
 
@@ -152,6 +170,7 @@ def run_storytelling(args: argparse.Namespace) -> int:
     from scenarios.storytelling.run import main
 
     options.check_fps(args)
+    physics(args)
     args.delivery = options.delivery(args)
     args.tts = options.tts_name(args.tts)
     return main(args)
@@ -159,10 +178,12 @@ def run_storytelling(args: argparse.Namespace) -> int:
 
 def demo_handler(commands, args: argparse.Namespace) -> int:
     """Run the conductor, then the storyteller, each with its defaults, into ``--out/<scenario>``."""
+    physics(args)
+    extra = (["--physics"] + [f"--push={push}" for push in args.push]) if args.physics else []
     for scenario in ("conductor", "storytelling"):
         out = Path(args.out) / scenario
         parser = commands.choices["run"]
-        scenario_args = parser.parse_args([scenario, "--out", str(out)])
+        scenario_args = parser.parse_args([scenario, "--out", str(out), *extra])
         print(f"== agentsim run {scenario} --out {out}", flush=True)
         status = scenario_args.handler(scenario_args)
         if status:

@@ -64,6 +64,9 @@ def add_parsers(commands) -> None:
     options.add_lexicon(serve)
     serve.add_argument("--strict", action="store_true", help="read pure BML 1.0 only")
     serve.add_argument("--fps", type=float, default=30.0, help="poses per second streamed to viewers (30)")
+    from agentsim.cli.realize import add_physics
+
+    add_physics(serve, csv=False, where=" (the viewer shows the physical body; pushes at the realizer's clock)")
     serve.set_defaults(handler=run_server)
 
 
@@ -96,6 +99,9 @@ def run_server(args: argparse.Namespace) -> int:
     from agentsim.live.limits import Limits
 
     limits = Limits(args.max_speech_chars, args.max_speech_seconds, args.max_block_chars, args.max_block_seconds)
+    from agentsim.cli.realize import physics_options
+
+    pushes = physics_options(args)  # a malformed --push: said before anything starts
     lexicon = options.lexicon(args)  # a file that cannot be used: said before anything starts
     anticipators = options.anticipators(args)  # one that cannot be made: said before anything starts
     try:
@@ -103,7 +109,8 @@ def run_server(args: argparse.Namespace) -> int:
         service = Service(host=args.host, port=args.port, audio=args.audio, tts=tts,
                           strict=args.strict, fps=args.fps, calibrate=args.calibrate,
                           token=args.token, allow_origins=args.allow_origins, media=args.media,
-                          anticipators=anticipators, limits=limits, lexicon=lexicon)
+                          anticipators=anticipators, limits=limits, lexicon=lexicon,
+                          physics=pushes if args.physics else None)
     except NoAudioDevice as exc:  # say which option chooses the device, and how to do without one
         if exc.kind == "input":
             raise Unavailable(f"{exc.problem}. Leave --calibrate out, or {GET_A_DEVICE} and name its input "

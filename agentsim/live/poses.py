@@ -217,19 +217,27 @@ class Liveliness:
             blink.forced = [float(t) for t in blinks]
 
 
-_EVALUATORS: dict[tuple[float, int], tuple[Body, Liveliness]] = {}
+_EVALUATORS: dict[tuple, tuple] = {}
 
 
-def evaluate_window(records, k0: int, k1: int, fps: float, seed: int, lexicon=None) -> tuple[np.ndarray, int]:
+def evaluate_window(records, k0: int, k1: int, fps: float, seed: int, lexicon=None,
+                    physics=None) -> tuple[np.ndarray, int]:
     """Joint positions (frames, points * 3) of frames ``k0`` to ``k1`` of the grid ``k / fps`` given the
     ``records`` of what the body may be doing, and how many frames it took to evaluate them (those before
     the window where a motion takes over a joint, :func:`frames_before`, and the start of a blink under
     way). The body and the background drawn from ``seed`` are kept from one call to the next; the lexemes
-    play as ``lexicon`` (the realizer's; default: the built-in one) has them."""
-    key = (float(fps), int(seed))
+    play as ``lexicon`` (the realizer's; default: the built-in one) has them. ``physics``: the pushes of a
+    physical body (:class:`~agentsim.physics.run.LiveBody`, kept from one call to the next, whose root and
+    physical joints the frames show); None: the animation's poses."""
+    key = (float(fps), int(seed), None if physics is None else tuple(physics))
     if key not in _EVALUATORS:
-        _EVALUATORS[key] = (Body(), Liveliness(seed))
-    body, liveliness = _EVALUATORS[key]
+        _EVALUATORS[key] = (Body(), Liveliness(seed), None)
+    body, liveliness, live_body = _EVALUATORS[key]
+    if physics is not None and live_body is None:
+        from agentsim.physics.run import LiveBody
+
+        live_body = LiveBody(body, fps, physics)
+        _EVALUATORS[key] = (body, liveliness, live_body)
     a, b = k0 / fps, k1 / fps
     chosen = window_records(records, a, b)
     frames = set(range(k0, k1 + 1)) | frames_before(chosen, a, fps)
@@ -240,7 +248,12 @@ def evaluate_window(records, k0: int, k1: int, fps: float, seed: int, lexicon=No
     liveliness.pin(manager, float(times[0]), float(times[-1]) + 1.0)
     stream = evaluate_poses(chosen, fps=fps, manager=manager, times=times)
     first = int(np.searchsorted(frames, k0))
-    points = body_points(body, stream.values[first:])
+    values = stream.values[first:]
+    if live_body is not None:
+        from agentsim.physics.run import run_controllers
+
+        values = live_body.frames(k0, values, run_controllers(chosen))
+    points = body_points(body, values)
     return points.reshape(len(points), -1), len(frames)
 
 
@@ -253,13 +266,15 @@ class LivePoses:
     in the realizer's thread.
     """
 
-    def __init__(self, live: LiveRealizer, fps: float, period: float = PERIOD, seed: int = 0):
+    def __init__(self, live: LiveRealizer, fps: float, period: float = PERIOD, seed: int = 0, physics=None):
         if fps <= 0:
             raise ValueError("fps must be positive")
         self.live = live
         self.fps = float(fps)
         self.period = float(period)
         self.seed = seed
+        #: the pushes of the physical body whose poses are sent (``serve --physics``), or None
+        self.physics = physics
         #: what the lexemes play: the realizer's lexicon
         self.lexicon = live.realizer.lexicon
         self.body = Body()
@@ -434,8 +449,8 @@ class LivePoses:
         the evaluator process if :meth:`start_process` started one, else here."""
         if self.process is not None:
             return self.process.submit(evaluate_window, records, k0, k1, self.fps, self.seed,
-                                       self.lexicon).result()
-        return evaluate_window(records, k0, k1, self.fps, self.seed, self.lexicon)
+                                       self.lexicon, self.physics).result()
+        return evaluate_window(records, k0, k1, self.fps, self.seed, self.lexicon, self.physics)
 
     def start_process(self) -> None:
         """Evaluate in a process of its own from now on (on another core, and not holding this one's

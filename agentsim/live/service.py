@@ -43,11 +43,12 @@ class Service:
     """``agentsim serve``: the live realizer, its reader, its endpoint, its sound (``audio``: a device, or
     ``"none"``) and its viewer (poses at ``fps``). ``limits`` and ``queue_size``: what the reader takes
     (:class:`~agentsim.live.intake.Intake`); ``media`` and realizer options (``tts``, ``strict``,
-    ``speech``, ``anticipators``, ``lexicon``) go to the :class:`~agentsim.live.runtime.LiveRealizer`."""
+    ``speech``, ``anticipators``, ``lexicon``) go to the :class:`~agentsim.live.runtime.LiveRealizer`.
+    ``physics``: the pushes of the physical body the viewer shows (``--physics``), or None."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, audio: str = "none", fps: float = 30.0,
                  calibrate: str | None = None, token: str | None = None, allow_origins=(), limits=None,
-                 queue_size: int = QUEUE, **realizer_options):
+                 queue_size: int = QUEUE, physics=None, **realizer_options):
         device = None
         if audio != "none":
             from agentsim.live.devices import open_device
@@ -69,7 +70,7 @@ class Service:
         if fps > 0:
             from agentsim.live.poses import LivePoses
 
-            self.poses = LivePoses(self.live, fps)
+            self.poses = LivePoses(self.live, fps, physics=physics)
             self.poses.start_process()  # poses are evaluated on another core, never in the realizer's way
             files = self.poses.files()
         try:

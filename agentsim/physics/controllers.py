@@ -24,14 +24,20 @@ LEGS = tuple(f"{s}_{j}" for s in ("l", "r") for j in ("hip", "knee", "ankle"))
 BALANCE_JOINTS = ("sacroiliac", *LEGS, "vl5", "vt10")
 #: The joints JointController may name (those the model simulates, but the root).
 JOINTABLE = (*BALANCE_JOINTS, "vc4", "skullbase", *(f"{s}_{j}" for s in ("l", "r")
-                                                   for j in ("sternoclavicular", "shoulder", "elbow", "wrist")))
+                                                   for j in ("shoulder", "elbow", "wrist")))
+
+#: The joints of the spine a BalanceController holds with its own (softer) gains, and those gains' defaults.
+SPINE = ("vl5", "vt10")
+SPINE_KP, SPINE_KD = 300.0, 30.0
 
 #: Each class's parameters and their defaults (None: required or free-form).
 DEFAULTS = {
-    # kp, kd: the servos' stiffness (N m/rad) and damping (N m s/rad) on the legs and spine; com_kp, com_kd:
-    # degrees of ankle and hip correction per centimetre of centre-of-mass offset and per cm/s of its speed;
-    # pelvis_height: the pelvis's height to hold (m; default: as the animation stands)
-    "BalanceController": {"kp": 1500.0, "kd": 150.0, "com_kp": 0.3, "com_kd": 0.25, "pelvis_height": None},
+    # kp, kd: the servos' stiffness (N m/rad) and damping (N m s/rad) on the pelvis and legs; spine_kp,
+    # spine_kd: those of the lumbar and thoracic spine (vl5, vt10: softer, so that the arms' strokes move the
+    # trunk); com_kp, com_kd: degrees of ankle and hip correction per centimetre of centre-of-mass offset and
+    # per cm/s of its speed; pelvis_height: the pelvis's height to hold (m; default: as the animation stands)
+    "BalanceController": {"kp": 1500.0, "kd": 150.0, "spine_kp": SPINE_KP, "spine_kd": SPINE_KD, "com_kp": 0.3,
+                          "com_kd": 0.25, "pelvis_height": None},
     # damping (N m s/rad) of the hanging joints
     "HangController": {"part": None, "damping": 0.8},
     # kp, kd as the balance's; every other parameter names a DOF ("l_elbow.pitch") and its target (degrees)
@@ -94,7 +100,7 @@ def controller_spec(cls: str, params: dict[str, str]) -> ControllerSpec:
             raise ValueError("JointController needs a target angle, as <bmlt:parameter name=\"l_elbow.pitch\" "
                              "value=\"-90\"/>")
         joints = tuple(dict.fromkeys(n.split(".")[0] for n in targets))
-    for key in ("kp", "kd", "damping", "com_kp", "com_kd"):
+    for key in ("kp", "kd", "spine_kp", "spine_kd", "damping", "com_kp", "com_kd"):
         if key in values and values[key] < 0:
             raise ValueError(f"{cls} parameter {key!r} must not be negative")
     if "pelvis_height" in values and not 0.3 <= values["pelvis_height"] <= 1.2:

@@ -7,7 +7,7 @@ from its parent, turning about three hinges in the BVH channel order (``roll`` a
 world is the BVH's: +Y up (gravity -9.81 m/s^2 along Y), the character facing +Z, +X its left; the floor is
 the plane y = 0 (friction 1).
 
-Not simulated: the fingers and the thumb (each hand is one rigid body on the wrist), the jaw, lips, eyes,
+The clavicles (:data:`WELDED`) have no hinges: they turn as animated. Not simulated: the fingers and the thumb (each hand is one rigid body on the wrist), the jaw, lips, eyes,
 eyelids and brows (part of the head). Those joints stay kinematic whatever happens.
 
 Masses, centres of mass and radii of gyration are de Leva's adjustments of Zatsiorsky and Seluyanov's
@@ -57,6 +57,10 @@ DE_LEVA = {
 TRUNK = ("HumanoidRoot", "sacroiliac", "vl5", "vt10")
 NECK = ("vc4", "skullbase")
 SIDES = ("l", "r")
+#: Joints simulated without hinges: their segment turns as the animation turns it (the simulation sets the
+#: body's orientation a frame at a time) and no controller takes it. The clavicles move little, and their six
+#: hinges would cost a quarter of a step (a step's constraint solver grows with the cube of the hinges).
+WELDED = ("l_sternoclavicular", "r_sternoclavicular")
 #: The foot box: from the heel to the toes (z), its sole on the floor at rest (y), relative to the ankle.
 FOOT_HEEL, FOOT_TOE, FOOT_HALF_WIDTH, FOOT_SOLE = -0.07, 0.18, 0.05, -0.04
 
@@ -101,7 +105,7 @@ def simulated_joints(body: Body) -> list[str]:
 @dataclass
 class Layout:
     """Where each simulated joint's three hinges are in the model: ``qpos``/``qvel`` addresses (roll, pitch,
-    yaw), and the MuJoCo body id of each joint."""
+    yaw; -1 for an axis the skeleton never turns, which has no hinge), and the MuJoCo body id of each joint."""
 
     joints: list[str]
     qpos: dict[str, tuple[int, int, int]]
@@ -141,8 +145,9 @@ def inertial(body: Body, joint: str) -> tuple[float, np.ndarray, np.ndarray]:
 
 
 def build_xml(body: Body, timestep: float) -> str:
-    """The MJCF text of the physical body (every simulated joint with three hinges and a position servo on
-    each hinge, gains zero until a controller sets them)."""
+    """The MJCF text of the physical body (every simulated joint with three hinges and a servo on each
+    hinge, gains zero until the simulation sets them; the servo's target is its activation, which moves at
+    the rate its control says, so that a target can glide within a call of ``mj_step``)."""
     seg = _segments(body)
     names = simulated_joints(body)
     children: dict[str, list[str]] = {}
@@ -177,15 +182,20 @@ def build_xml(body: Body, timestep: float) -> str:
         out.append(f'{pad}  <inertial pos="{_fmt(com)}" mass="{mass:.6g}" diaginertia="{_fmt(inertia)}"/>')
         if j.parent is None:
             out.append(f'{pad}  <freejoint name="{name}"/>')
-        else:
+        elif name not in WELDED:
             for axis, vec in (("roll", "0 0 1"), ("pitch", "1 0 0"), ("yaw", "0 1 0")):
                 lo, hi = j.limit(axis)
+                if lo == hi == 0:
+                    continue  # an axis the skeleton never turns (the knee's and elbow's roll, the wrist's yaw)
                 if hi - lo < 2.0:
                     lo, hi = lo - 2.0, hi + 2.0
-                out.append(f'{pad}  <joint name="{name}.{axis}" type="hinge" axis="{vec}" limited="true" '
-                           f'range="{lo - 3.0:g} {hi + 3.0:g}"/>')
-                actuators.append(f'<general name="{name}.{axis}" joint="{name}.{axis}" gainprm="0" '
-                                 f'biasprm="0 0 0" biastype="affine" ctrllimited="false"/>')
+                if hi - lo >= 360.0:  # a whole turn (the shoulder): no limit, its angle may wrap
+                    out.append(f'{pad}  <joint name="{name}.{axis}" type="hinge" axis="{vec}" limited="false"/>')
+                else:
+                    out.append(f'{pad}  <joint name="{name}.{axis}" type="hinge" axis="{vec}" limited="true" '
+                               f'range="{lo - 3.0:g} {hi + 3.0:g}"/>')
+                actuators.append(f'<general name="{name}.{axis}" joint="{name}.{axis}" dyntype="integrator" '
+                                 f'gainprm="0" biasprm="0 0 0" biastype="affine" ctrllimited="false"/>')
         out.append(f"{pad}  {geom(name)}")
         for c in children.get(name, []):
             visit(c, depth + 1)
@@ -210,6 +220,14 @@ def build_xml(body: Body, timestep: float) -> str:
 """
 
 
+def _id(find, name: str) -> int:
+    """The id of a MuJoCo element by name, -1 if the model has none (an axis a joint never turns)."""
+    try:
+        return int(find(name).id)
+    except KeyError:
+        return -1
+
+
 def build_model(body: Body, timestep: float):
     """The MuJoCo model of ``body`` and its :class:`Layout`."""
     import mujoco
@@ -221,9 +239,9 @@ def build_model(body: Body, timestep: float):
         body_id[name] = model.body(name).id
         if name == names[0]:
             continue
-        ids = [model.joint(f"{name}.{a}").id for a in ("roll", "pitch", "yaw")]
-        qpos[name] = tuple(int(model.jnt_qposadr[i]) for i in ids)
-        dof[name] = tuple(int(model.jnt_dofadr[i]) for i in ids)
-        actuator[name] = tuple(model.actuator(f"{name}.{a}").id for a in ("roll", "pitch", "yaw"))
+        ids = [_id(model.joint, f"{name}.{a}") for a in ("roll", "pitch", "yaw")]
+        qpos[name] = tuple(int(model.jnt_qposadr[i]) if i >= 0 else -1 for i in ids)
+        dof[name] = tuple(int(model.jnt_dofadr[i]) if i >= 0 else -1 for i in ids)
+        actuator[name] = tuple(_id(model.actuator, f"{name}.{a}") for a in ("roll", "pitch", "yaw"))
     feet = frozenset(model.geom(f"{s}_ankle").id for s in SIDES)
     return model, Layout(names, qpos, dof, body_id, feet, model.geom("floor").id, actuator)

@@ -4,6 +4,8 @@
 :class:`PhysicalManager`, given to :func:`~agentsim.animation.evaluate_poses` as its manager, makes the poses
 the physical body's (the root and the physical joints from the simulation, every other channel the
 animation's); :func:`write_physics_csv` writes one row a frame. :func:`parse_push` reads ``--push TIME:FX,FY,FZ:DURATION``.
+:func:`physical_poses` is what the scenarios call in place of :func:`~agentsim.animation.evaluate_poses` under
+``--physics``.
 """
 
 from __future__ import annotations
@@ -108,6 +110,75 @@ class PhysicalManager(DriverManager):
         return None
 
 
+#: The modes of a gesture or pointing that leave the left hand alone.
+RIGHT_ONLY = ("RIGHT_HAND", "RIGHT")
+
+
+def hanging_left_arm(source, end: float) -> list[ControllerSpec]:
+    """HangControllers on the left arm whenever no gesture or pointing of ``source`` (a recording, or
+    records) uses it, up to ``end`` (s): it hangs while the right hand gestures alone, and is given back
+    to the animation :data:`~agentsim.physics.simulation.RELEASE` seconds before a gesture with the left or
+    both hands starts (so that the transition back has ended when the gesture begins), and taken again
+    when that gesture ends."""
+    from agentsim.physics.simulation import RELEASE
+
+    busy = []
+    for record in records_of(source):
+        b = record.behaviour
+        if b.type not in ("gesture", "pointing") or not record.times or record.times[0] is None:
+            continue
+        if b.attributes.get("mode", "").upper() in RIGHT_ONLY:
+            continue
+        last = record.stopped if record.stopped is not None else record.times[-1]
+        busy.append((float(record.times[0]) - RELEASE, float(last if last is not None else end)))
+    specs, free_from = [], 0.0
+    for start, stop in sorted(busy) + [(end, end)]:
+        if start > free_from + 1e-9:
+            spec = controller_spec("HangController", {"part": "left_arm"})
+            spec.start, spec.end, spec.name = free_from, start, "hanging left arm"
+            specs.append(spec)
+        free_from = max(free_from, stop)
+    return specs
+
+
+def physical_poses(recording, fps: float, seed: int, pushes=(), controllers=(), scene=None, folder=None):
+    """The poses of a finished run on the physical body (as :func:`~agentsim.animation.evaluate_poses` gives
+    the animation's), with the run's controllers under the default balance, ``controllers`` added (e.g. a
+    scenario's HangControllers) and the ``pushes``; returns the stream and the :class:`PhysicsResult`."""
+    from agentsim.animation import evaluate_poses
+    from agentsim.animation.output import lexicon_of
+
+    manager = PhysicalManager([*run_controllers(recording), *controllers], list(pushes), fps=fps, seed=seed,
+                              scene=scene, lexicon=lexicon_of(recording))
+    stream = evaluate_poses(recording, fps=fps, seed=seed, folder=folder, manager=manager)
+    return stream, manager.result
+
+
+def scenario_poses(recording, fps: float, seed: int, pushes, out: Path, controllers=(), scene=None, folder=None):
+    """:func:`physical_poses` for a scenario's folder ``out``: its ``physics.csv`` written there, a fall or an
+    unstable simulation said on one line of stderr (the scenario's feedback is its realizer's); the stream and
+    the :class:`PhysicsResult`."""
+    import sys
+
+    stream, result = physical_poses(recording, fps, seed, pushes, controllers, scene, folder)
+    write_physics_csv(Path(out) / "physics.csv", result)
+    line = fell_line(result)
+    if line:
+        print(f"agentsim: {line}", file=sys.stderr)
+    return stream, result
+
+
+def fell_line(result: PhysicsResult) -> str | None:
+    """The line that says a run's body fell or its simulation became unstable (None: neither)."""
+    said = []
+    if result.fell_at is not None:
+        said.append(f"the physical body fell at {result.fell_at:.3f} s")
+    if result.unstable_at is not None:
+        said.append(f"the physical body's simulation became unstable at {result.unstable_at:.3f} s and started "
+                    f"again from its rest pose (MuJoCo: {result.unstable})")
+    return "; ".join(said) or None
+
+
 def write_physics_csv(path: str | Path, result: PhysicsResult) -> Path:
     """One row a frame: ``time`` (s), the centre of mass, the support polygon's bounding box (m, the BVH's
     frame), ``com_inside`` (1: the centre of mass's ground projection is in that box), ``pelvis_height``
@@ -119,3 +190,51 @@ def write_physics_csv(path: str | Path, result: PhysicsResult) -> Path:
             f.write(",".join([f"{row[0]:.6f}", *(f"{v:.6f}" for v in row[1:8]), str(int(row[8])),
                               f"{row[9]:.6f}", str(int(row[10]))]) + "\n")
     return path
+
+
+class LiveBody:
+    """The physical body of a live run (``agentsim serve --physics``): the animation's frames come a window
+    at a time (:meth:`frames`), in order, and the physical body's frames of the same window go out at once.
+    A window's last frame has no next one yet: its velocity is taken as the window's last step's (the
+    Hermite curve of that frame is then a straight line), which the next window's first step corrects. A
+    window that does not follow the one before (frames skipped) starts the body again from its pose."""
+
+    def __init__(self, body, fps: float, pushes=()):
+        self.body, self.fps, self.pushes = body, float(fps), list(pushes)
+        self.sim = None
+        self.next = -1
+        self.history: list[np.ndarray] = []
+
+    def frames(self, k0: int, values: np.ndarray, controllers: list[ControllerSpec]) -> np.ndarray:
+        """The physical body's poses of frames ``k0 .. k0 + len(values) - 1`` (``values``: the animation's),
+        under ``controllers`` (those of the run so far, with their times)."""
+        from agentsim.physics.simulation import Simulation
+
+        values = np.asarray(values, dtype=float)
+        n = len(values)
+        out = np.empty_like(values)
+        said: list[str] = []
+        if self.sim is None or k0 != self.next:
+            self.sim = Simulation(self.body, self.fps, controllers, self.pushes)
+            self.history = []
+        self.sim.controllers = sorted(controllers, key=lambda c: c.start)
+        mj = self.sim.mj
+        previous = mj.get_mju_user_warning()
+        mj.set_mju_user_warning(said.append)
+        try:
+            for i in range(n):
+                row, after = values[i], values[min(i + 1, n - 1)]
+                if i == n - 1 and n > 1:
+                    after = row + (row - values[i - 1])  # the window's last step goes on
+                if not self.history:
+                    out[i] = self.sim.start((k0 + i) / self.fps, np.stack([row, after]))
+                else:
+                    before = self.history[-2] if len(self.history) > 1 else self.history[-1]
+                    out[i] = self.sim.advance((k0 + i - 1) / self.fps, np.stack([before, self.history[-1], row, after]))
+                self.history = [*self.history[-1:], row]
+        finally:
+            mj.set_mju_user_warning(previous)
+        self.next = k0 + n
+        if said:  # unstable: start again from the animation's pose at the next window
+            self.sim = None
+        return out

@@ -1,29 +1,38 @@
 """Mixed dynamics: the physical body stepped frame by frame under the procedural animation.
 
-At every physics step the kinematic joints (those no active controller holds: the neck, head, arms and
-hands by default) take exactly the animation's angles, angular velocities and accelerations; inverse
-dynamics (MuJoCo's ``mj_inverse``) gives the torques that motion needs at those joints, and they are applied
-there, so that the physical part (the root, and the joints of the active controllers) feels the reaction of
-the kinematic parts' motion through their common joints, as well as gravity, the floor's contacts, the
-pushes and its controllers' servos. Physics never changes a kinematic joint's angle nor any behaviour's
-timing: it only moves the root and the physical joints.
+The kinematic joints (those no active controller holds: the neck, head, arms and hands by default) follow
+the animation's angles inside the simulation, held there by stiff servos (:data:`KINEMATIC_KP`,
+:data:`KINEMATIC_KV`, on a large armature :data:`KINEMATIC_ARMATURE` that makes every kinematic hinge as
+heavy to the servo and has no reaction on the parent body): the torques the servos exert are those the
+motion needs, the inverse dynamics of the prescribed motion, computed by MuJoCo's implicit step rather than
+by ``mj_inverse``, and the physical part (the root, and the joints of the active controllers) feels their
+reaction through the common joints, as well as gravity, the floor's contacts, the pushes and its
+controllers' servos. Physics never changes a kinematic joint's angle in the poses nor any behaviour's
+timing: the poses show the animation's angles for those joints, and the simulation's only for the root and
+the physical joints.
 
 The clock: the physics runs on the animation's frame times, inside the loop that evaluates the poses
 (:class:`Stepper` takes the frames as the drivers make them, :class:`~agentsim.physics.run.PhysicalManager`
 puts it in :func:`~agentsim.animation.evaluate_poses`), ``substeps`` steps of ``1 / (fps * substeps)`` s
 between two frames, with ``substeps`` the smallest number that makes a step 1 ms or shorter (17 steps of
-0.98 ms at 60 frames per second). What this costs in accuracy: the kinematic motion is known at the frames
-only, so between two frames it is the cubic Hermite curve through them with the frames' central-difference
-velocities (its angles are exact at every frame, its velocities and accelerations those of that curve); the
-controllers' targets and the balance's corrections are set once a frame (a 17 ms control period, shorter than
-a human's fastest postural reflexes); the inverse dynamics of a step takes the physical part's acceleration
-of the step before (a 1 ms lag, which :data:`KINEMATIC_ARMATURE` keeps stable). The servos themselves run
-inside MuJoCo at every step, with implicit damping. Per step Python only assigns the kinematic joints' rows
-(computed for the whole frame at once) and calls ``mj_inverse`` and ``mj_step``; a profile of a standing body
-gives about half of the time to ``mj_step``, a fifth to ``mj_inverse`` and the rest to Python's per-step and
-per-frame work, 0.2 to 0.35 ms a step on a busy two-core machine, two to four times faster than real time
-(``benchmarks/bench_physics.py``). Several steps a call (``mj_step``'s ``nstep``) were not chosen: the
-kinematic joints' torques would be held over those steps, for a saving the profile shows to be small.
+0.98 ms at 60 frames per second, 34 at 30).
+
+Python is kept out of the per-step loop: a frame is :data:`CALLS` calls of ``mj_step`` with ``nstep``
+(a push's start and end add a call each). The kinematic motion is set once a frame: the cubic Hermite curve
+through the frame and the next with their central-difference velocities; each servo's target is its
+actuator's activation, which MuJoCo integrates at the rate the control gives (``dyntype="integrator"``), so
+the target glides straight from the curve's value at one call's start to the next call's, with that slope
+as the target velocity. What this costs in accuracy: the target is the Hermite curve at the calls' ends and
+straight between them (within a few thousandths of a degree of the curve for a conductor's strokes); the
+servo lags the target by a few hundredths of a degree under a stroke's torque (the reaction the trunk
+feels is that of the motion the servo makes); the controllers' targets and the balance's corrections are
+set once a frame (a 17 to 33 ms control period, shorter than a human's fastest postural reflexes), while
+the servos themselves run inside MuJoCo at every step, with implicit damping; the balance reads the frame's
+state with ``mj_kinematics``, ``mj_comPos``, ``mj_comVel`` and ``mj_rne`` rather than a whole
+``mj_forward``, and the contacts of the frame's last step. A hinge is made only for the axes the skeleton
+turns (not the knees' and elbows' roll nor the wrists' yaw). A profile of a standing body gives about 80 %
+of the time to ``mj_step`` (40 to 50 us a step on a busy two-core machine) and the rest to the per-frame
+work; ``benchmarks/bench_physics.py`` measures it and what physics adds to the scenarios.
 """
 
 from __future__ import annotations
@@ -34,16 +43,23 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agentsim.animation.body import Body, matrix_euler
-from agentsim.physics.controllers import LEGS, ControllerSpec
+from agentsim.physics.controllers import LEGS, SPINE, ControllerSpec
 from agentsim.physics.model import FOOT_HALF_WIDTH, FOOT_HEEL, FOOT_SOLE, FOOT_TOE, build_model
 
 #: The longest physics step (s).
 MAX_STEP = 0.001
-#: The armature (kg m^2) of a kinematic joint's hinges: the inverse dynamics' torque includes it, so a
-#: kinematic joint follows its prescribed acceleration even though the torque was computed with the physical
-#: part's acceleration of the step before (without it, that one-step lag makes the coupling unstable); the
-#: armature has no reaction on the parent body, so the physical part feels only the true joint torque.
+#: The armature (kg m^2) of a kinematic joint's hinges: every kinematic hinge is as heavy to its servo, so that
+#: one stiffness holds them all on the animation's curve, stable at the step; the armature has no reaction on
+#: the parent body, so the physical part feels only the torque the joint's true motion needs.
 KINEMATIC_ARMATURE = 20.0
+#: The stiffness (N m/rad) and damping (N m s/rad) of the servo that keeps a kinematic joint on the
+#: animation's curve: with the armature, a critically damped servo of 300 rad/s (48 Hz), whose error under
+#: a stroke's torque is a few hundredths of a degree (inside the simulation; the pose shows the animation's).
+KINEMATIC_KP = KINEMATIC_ARMATURE * 300.0 ** 2
+KINEMATIC_KV = 2.0 * KINEMATIC_ARMATURE * 300.0
+#: How many calls of mj_step make a frame: the kinematic targets glide straight between the Hermite curve's
+#: values at the calls' ends.
+CALLS = 4
 #: The armature of a physical joint's hinges (that of the model).
 PHYSICAL_ARMATURE = 0.02
 #: How long a part given back to the animation takes to reach it, and a joint's servo target takes to go
@@ -77,14 +93,11 @@ class PhysicsResult:
     unstable: str = ""
 
 
-def _hermite(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cubic Hermite basis (value, first, second derivative in u) at u = s / n for the n steps of a frame."""
-    u = np.arange(n) / n
+def _hermite_at(u: np.ndarray) -> np.ndarray:
+    """The cubic Hermite basis at the fractions ``u`` of a frame, (len(u), 4): times the frame's coefficients
+    (its angle, its velocity times the frame time, the next frame's angle and velocity) gives the curve."""
     u2, u3 = u * u, u * u * u
-    value = np.stack([2 * u3 - 3 * u2 + 1, u3 - 2 * u2 + u, -2 * u3 + 3 * u2, u3 - u2], axis=1)
-    first = np.stack([6 * u2 - 6 * u, 3 * u2 - 4 * u + 1, -6 * u2 + 6 * u, 3 * u2 - 2 * u], axis=1)
-    second = np.stack([12 * u - 6, 6 * u - 4, -12 * u + 6, 6 * u - 2], axis=1)
-    return value, first, second
+    return np.stack([2 * u3 - 3 * u2 + 1, u3 - 2 * u2 + u, -2 * u3 + 3 * u2, u3 - u2], axis=1)
 
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:
@@ -128,16 +141,28 @@ class Simulation:
         self.qadr = np.array([self.layout.qpos[j] for j in self.joints], dtype=np.intp)
         self.dadr = np.array([self.layout.dof[j] for j in self.joints], dtype=np.intp)
         self.aadr = np.array([self.layout.actuator[j] for j in self.joints], dtype=np.intp)
+        #: the axes that have a hinge (the others, never turned, are read as 0 through address 0, masked)
+        self.valid = self.qadr >= 0
+        for adr in (self.qadr, self.dadr, self.aadr):
+            adr[~self.valid] = 0
+        self.qv, self.dv, self.av = self.qadr[self.valid], self.dadr[self.valid], self.aadr[self.valid]
+        #: joints without hinges (the clavicles): their bodies are turned as the animation turns them
+        self.welded = [i for i in range(len(self.joints)) if not self.valid[i].any()]
+        self.welded_body = [self.layout.body_id[self.joints[i]] for i in self.welded]
         self.root_translation = np.array(body.translation_columns, dtype=np.intp)
         self.root_rotation = np.array(body.rotation_columns[body.joints[0].name], dtype=np.intp)
         self.pelvis = self.layout.body_id["sacroiliac"]
-        self.basis = _hermite(self.substeps)
+        #: the steps of a frame at which a call of mj_step ends (the kinematic targets' knots)
+        self.bounds = sorted({round(k * self.substeps / CALLS) for k in range(CALLS + 1)})
         self.physical = np.zeros(len(self.joints), dtype=bool)
         self.release: dict[int, tuple[float, np.ndarray]] = {}  # joint -> (time given back, angle offsets)
         self.taken: dict[int, np.ndarray] = {}  # joint -> its angles (rad) when a JointController took it
         self.handover: dict[int, tuple[float, np.ndarray]] = {}  # joint -> (time taken, its angles then)
         self.owner: list[ControllerSpec | None] = [None] * len(self.joints)
-        self.model.dof_armature[self.dadr.ravel()] = KINEMATIC_ARMATURE
+        self.model.dof_armature[self.dv] = KINEMATIC_ARMATURE
+        self.model.actuator_gainprm[self.av, 0] = KINEMATIC_KP
+        self.model.actuator_biasprm[self.av, 1] = -KINEMATIC_KP
+        self.model.actuator_biasprm[self.av, 2] = -KINEMATIC_KV
         self.result = PhysicsResult()
         self.standing: float | None = None
         self.balance_target: np.ndarray | None = None
@@ -145,6 +170,8 @@ class Simulation:
                                for z in (FOOT_HEEL, FOOT_TOE)])
         self._feet = [self.layout.body_id[f"{s}_ankle"] for s in ("l", "r")]
         self._ids = {name: self.index[name] for name in LEGS}
+        self._spine = [self.index[name] for name in SPINE]
+        self._bias = np.zeros(self.model.nv)
 
     # ------------------------------------------------------------------ state and configuration
     def start(self, time: float, rows: np.ndarray) -> np.ndarray:
@@ -157,13 +184,28 @@ class Simulation:
         from agentsim.animation.body import euler_matrix
 
         d.qpos[3:7] = _matrix_quat(euler_matrix(*(pose[[c]] for c in r))[0])
-        d.qpos[self.qadr] = np.radians(pose[self.columns])
+        d.qpos[self.qv] = np.radians(pose[self.columns])[self.valid]
+        self._turn_welded(pose[self.columns])
+        d.act[self.av] = d.qpos[self.qv]
         if len(rows) > 1:
-            d.qvel[self.dadr] = np.radians(_wrapped(rows[1][self.columns] - pose[self.columns])) / self.frame_time
+            d.qvel[self.dv] = np.radians(_wrapped(rows[1][self.columns] - pose[self.columns]))[self.valid] / self.frame_time
         self.mj.mj_forward(self.model, d)
         self.standing = float(d.xpos[self.pelvis][1])
         self._configure(time)
         return self._frame(time, pose)
+
+    def _turn_welded(self, angles: np.ndarray) -> None:
+        """Turn the joints without hinges to ``angles`` (degrees, (J, 3): the animation's)."""
+        if self.welded:
+            from agentsim.animation.body import euler_matrix
+
+            turned = euler_matrix(*angles[self.welded].T)
+            for body, matrix in zip(self.welded_body, turned):
+                self.model.body_quat[body] = _matrix_quat(matrix)
+
+    def _angles(self, i: int) -> np.ndarray:
+        """Joint ``i``'s angles now (rad; 0 about an axis it never turns)."""
+        return np.where(self.valid[i], self.data.qpos[self.qadr[i]], 0.0)
 
     def _active(self, time: float) -> list[ControllerSpec]:
         return [c for c in self.controllers if c.start <= time + 1e-9 < c.end]
@@ -180,23 +222,28 @@ class Simulation:
             if old is new:
                 continue
             if new is None:  # given back: reach the animation from where it is
-                self.release[i] = (time, d.qpos[self.qadr[i]].copy())
+                self.release[i] = (time, self._angles(i))
             else:  # taken over: its servo's target goes from where it is to the controller's in a transition
                 self.release.pop(i, None)
-                self.handover[i] = (time, d.qpos[self.qadr[i]].copy())
+                self.handover[i] = (time, self._angles(i))
                 if new.kind == "JointController":
-                    self.taken[i] = d.qpos[self.qadr[i]].copy()
+                    self.taken[i] = self._angles(i)
             if new is None:
-                kp = kd = 0.0
+                kp, kd = KINEMATIC_KP, KINEMATIC_KV
             elif new.kind == "HangController":
                 kp, kd = 0.0, new.params["damping"]
+            elif new.kind == "BalanceController" and self.joints[i] in SPINE:
+                kp, kd = new.params["spine_kp"], new.params["spine_kd"]
             else:
                 kp, kd = new.params["kp"], new.params["kd"]
-            m.dof_armature[self.dadr[i]] = KINEMATIC_ARMATURE if new is None else PHYSICAL_ARMATURE
-            a = self.aadr[i]
+            m.dof_armature[self.dadr[i][self.valid[i]]] = KINEMATIC_ARMATURE if new is None else PHYSICAL_ARMATURE
+            a = self.aadr[i][self.valid[i]]
             m.actuator_gainprm[a, 0] = kp
             m.actuator_biasprm[a, 1] = -kp
             m.actuator_biasprm[a, 2] = -kd
+            if new is not None:
+                m.actuator_biasprm[a, 0] = 0.0
+                d.ctrl[a] = 0.0
         self.owner = owner
         self.physical = np.array([o is not None for o in owner])
 
@@ -216,32 +263,38 @@ class Simulation:
         h = self.frame_time
         v1 = (targets[2] - targets[0]) / (2 * h)
         v2 = (targets[3] - targets[1]) / (2 * h)
-        coeffs = np.stack([targets[1], h * v1, targets[2], h * v2])  # (4, J, 3)
-        kq, kd_ = self.qadr[kin].ravel(), self.dadr[kin].ravel()
-        c = coeffs[:, kin].reshape(4, -1)
-        value, first, second = self.basis
-        q_path, v_path, a_path = value @ c, (first @ c) / h, (second @ c) / (h * h)
+        moving = kin[:, None] & self.valid  # the kinematic joints' hinges
+        coeffs = np.stack([targets[1], h * v1, targets[2], h * v2])[:, moving]  # (4, hinges)
+        ka = self.aadr[moving]
         self._servo_targets(time, rows[2])
-        d.qfrc_applied[:] = 0.0  # a physical joint feels no torque left from its kinematic time
+        self._turn_welded(np.degrees(targets[2]))
         pushes = [p for p in self.pushes if p.time < time + h and p.time + p.duration > time]
-        for s in range(self.substeps):
+        bounds = self.bounds
+        if pushes:  # a push starts and ends at a step: a call of mj_step ends there
+            edges = [round((t - time) / self.step) for p in pushes for t in (p.time, p.time + p.duration)]
+            bounds = sorted({*bounds, *(e for e in edges if 0 < e < self.substeps)})
+        u = np.asarray(bounds, dtype=float) / self.substeps
+        knots = _hermite_at(u) @ coeffs  # (chunks + 1, kinematic DOFs): the curve at the calls' ends
+        hinges = self.qadr[moving]
+        turns = np.round((d.qpos[hinges] - knots[0]) / (2 * math.pi))
+        if turns.any():  # an angle of the animation wrapped through +-180 degrees: so does the joint's (same pose)
+            d.qpos[hinges] -= 2 * math.pi * turns
+        for j in range(len(bounds) - 1):
+            n = bounds[j + 1] - bounds[j]
+            slope = (knots[j + 1] - knots[j]) / (n * self.step)
+            d.act[ka] = knots[j]
+            d.ctrl[ka] = slope
+            m.actuator_biasprm[ka, 0] = KINEMATIC_KV * slope
             if pushes:
-                t = time + s * self.step
+                t = time + bounds[j] * self.step
                 force = np.zeros(3)
                 for p in pushes:
-                    if p.time - 1e-12 <= t < p.time + p.duration - 1e-12:
+                    if p.time - 1e-12 <= t + 0.5 * self.step < p.time + p.duration - 1e-12:
                         force += p.force
                 d.xfrc_applied[self.pelvis, :3] = force
-            d.qpos[kq] = q_path[s]
-            d.qvel[kd_] = v_path[s]
-            d.qacc[kd_] = a_path[s]
-            mj.mj_inverse(m, d)
-            d.qfrc_applied[kd_] = d.qfrc_inverse[kd_]
-            mj.mj_step(m, d)
+            mj.mj_step(m, d, nstep=n)
         if pushes:
             d.xfrc_applied[self.pelvis, :3] = 0.0
-        d.qpos[kq] = coeffs[2][kin].ravel()
-        d.qvel[kd_] = v2[kin].ravel()
         return self._frame(time + h, rows[2])
 
     def _kinematic(self, time: float, row: np.ndarray) -> np.ndarray:
@@ -276,15 +329,16 @@ class Simulation:
                 continue
             w = u * u * (3 - 2 * u)
             ctrl[i] = start + w * _wrapped_rad(ctrl[i] - start)
-        d.ctrl[self.aadr.ravel()] = ctrl.ravel()
+        physical = self.physical[:, None] & self.valid
+        d.act[self.aadr[physical]] = ctrl[physical]
 
     def _balance(self, spec: ControllerSpec, ctrl: np.ndarray) -> None:
         """Ankle and hip corrections that bring the centre of mass over the middle of the feet."""
         m, d, mj = self.model, self.data, self.mj
-        qacc = d.qacc.copy()
-        mj.mj_forward(m, d)
+        # the frame's positions are there (_frame); its velocities and the forces a zero acceleration needs
+        mj.mj_comVel(m, d)
         mj.mj_subtreeVel(m, d)
-        d.qacc[:] = qacc
+        mj.mj_rne(m, d, 0, self._bias)
         com, vel = d.subtree_com[0], d.subtree_linvel[0]
         corners = self._corners(self._feet)
         centre = (corners.min(axis=0) + corners.max(axis=0)) / 2
@@ -298,6 +352,10 @@ class Simulation:
         if height is not None and self.standing is not None and height < self.standing:
             leg = 0.81
             squat = math.acos(max(0.2, min(1.0, (leg - (self.standing - height)) / leg)))
+        spine_kp = spec.params["spine_kp"]
+        if spine_kp > 0:  # the soft spine holds the body above it against gravity (the torque that keeps it still)
+            for i in self._spine:
+                ctrl[i] += self._bias[self.dadr[i]] / spine_kp  # (every axis of the spine turns)
         for side in ("l", "r"):
             hip, knee, ankle = (self._ids[f"{side}_{j}"] for j in ("hip", "knee", "ankle"))
             ctrl[ankle, 1] += -lean_forward - squat
@@ -315,27 +373,21 @@ class Simulation:
         """The pose the frame at ``time`` shows (the animation's, with the root and the physical joints from
         the simulation) and its CSV row."""
         m, d, mj = self.model, self.data, self.mj
-        qacc = d.qacc.copy()
-        mj.mj_forward(m, d)
-        d.qacc[:] = qacc
+        mj.mj_kinematics(m, d)  # the positions at the frame (the contacts are the last step's)
+        mj.mj_comPos(m, d)
         pose = np.array(row, dtype=float)
         pose[self.root_translation] = d.qpos[0:3]
         roll, pitch, yaw = matrix_euler(_quat_matrix(d.qpos[3:7]))
         pose[self.root_rotation] = (roll, pitch, yaw)
         angles = self._kinematic(time, row)
-        angles[self.physical] = np.degrees(d.qpos[self.qadr[self.physical]])
+        physical = self.physical[:, None] & self.valid
+        angles[physical] = np.degrees(d.qpos[self.qadr[physical]])
         pose[self.columns] = angles
-        touching, other = set(), False
-        for k in range(d.ncon):
-            contact = d.contact[k]
-            geoms = {int(contact.geom1), int(contact.geom2)}
-            if self.layout.floor_geom in geoms:
-                g = (geoms - {self.layout.floor_geom}).pop()
-                body = int(m.geom_bodyid[g])
-                if body in self._feet:
-                    touching.add(body)
-                else:
-                    other = True
+        pairs = d.contact.geom[:d.ncon]
+        floor = self.layout.floor_geom
+        on = pairs[(pairs == floor).any(axis=1)]
+        bodies = set(m.geom_bodyid[np.where(on[:, 0] == floor, on[:, 1], on[:, 0])].tolist())
+        touching, other = bodies & set(self._feet), bool(bodies - set(self._feet))
         com = d.subtree_com[0].copy()
         feet = [b for b in self._feet if b in touching] or self._feet
         corners = self._corners(feet)
@@ -393,8 +445,7 @@ class Stepper:
                         sim.result.unstable_at, sim.result.unstable = float(self.times[k]), self.said[0]
                 self.out(k, pose)
                 self.made += 1
-                for old in [i for i in self.rows if i < self.made - 2]:
-                    del self.rows[old]
+                self.rows.pop(self.made - 3, None)  # no longer needed (frame k needs k - 2 .. k + 1)
         finally:
             mj.set_mju_user_warning(previous)
 

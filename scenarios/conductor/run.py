@@ -97,7 +97,7 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
         started = time.perf_counter()
         run = listen_live(config, args.strategy, args.seconds, device)
         metrics = collect_metrics(run)
-        write_outputs(run, metrics, out)
+        write_outputs(run, metrics, out, physics=getattr(args, "physics_pushes", None))
         _report(metrics, shown, time.perf_counter() - started, table)
         if as_json:
             print(json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}))  # as metrics.json
@@ -121,7 +121,8 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
         with stages("measuring"):
             metrics = collect_metrics(run)
         folder = out / name if args.compare else out
-        write_outputs(run, metrics, folder, pictures=not args.compare, plots=pictures, stages=stages)
+        write_outputs(run, metrics, folder, pictures=not args.compare, plots=pictures, stages=stages,
+                      physics=getattr(args, "physics_pushes", None))
         rows.append(metrics)
         if not args.compare:
             _report(metrics, shown, time.perf_counter() - started, table)

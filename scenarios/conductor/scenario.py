@@ -406,11 +406,23 @@ def tempo_figure_arguments(run: Run, metrics: dict) -> tuple:
             run.extra["first_index"], run.extra["onsets"])
 
 
+def physical_poses(recording, fps: float, seed: int, pushes: list, out: Path):
+    """The run's poses on the physical body and its figures, its ``physics.csv`` written in ``out``: the left arm hangs
+    (a HangController) while the right hand conducts alone, and is taken back by the animation for the
+    gestures with the left or both hands ("play louder", stop)."""
+    from agentsim.animation.timeline import run_duration
+    from agentsim.physics.run import hanging_left_arm, scenario_poses
+
+    hang = hanging_left_arm(recording, run_duration(recording) + 2.0)
+    return scenario_poses(recording, fps, seed, pushes, out, controllers=hang)
+
+
 def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True,
-                  stages: Stages | None = None) -> Path:
+                  stages: Stages | None = None, physics: list | None = None) -> Path:
     """Write the run's files into the folder ``out`` (created if needed); ``pictures``: the timeline
     pictures too, ``plots``: any picture at all (``tempo.png`` and the timeline). ``stages``: where to say
-    on a terminal which stage is under way."""
+    on a terminal which stage is under way. ``physics``: the pushes of a run on the physical body (its
+    poses the physical body's, and ``physics.csv``); None: the animation's poses."""
     import concurrent.futures
     import contextlib
 
@@ -438,7 +450,11 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     # are known, and waited for at the end
     with contextlib.ExitStack() as drawing, concurrent.futures.ThreadPoolExecutor(1) as sound:
         with say("poses/BVH"):  # first: the pictures, the longest to make, begin as soon as the poses are known
-            stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
+            body = None  # the physical body's figures (--physics)
+            if physics is None:
+                stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
+            else:
+                stream, body = physical_poses(recording, run.config.conductor.fps, run.seed, physics, out)
             # the tempo figure is drawn by the pictures' processes too (this one never imports matplotlib's figures)
             from scenarios.conductor.metrics import tempo_figure
 
@@ -460,7 +476,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
             write_csv(out / "gestures.csv", gestures)
             write_report(out / "report.html", recording=recording, stream=stream, track=track, gestures=gestures,
                          title=f"{run.config.piece.title}: conductor ({run.strategy_name}, seed {run.seed})",
-                         audio=ogg)
+                         audio=ogg, physics=body)
             sound.shutdown(wait=True)  # the report's sound is encoded
         if not plots:
             return out

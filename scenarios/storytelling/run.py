@@ -167,7 +167,7 @@ def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: P
         telling = tell(story, strategy=strategy, delivery=delivery, seed=args.seed, voice=voice, anchor=args.anchor,
                        timing=args.timing, stages=stages)
         stages_seconds = write_outputs(telling, staging, fps=args.fps, window=args.window, seed=args.seed,
-                                       plots=plots, stages=stages,
+                                       plots=plots, stages=stages, physics=getattr(args, "physics_pushes", None),
                                        environment=not getattr(args, "no_environment", False))
         wall = time.perf_counter() - started - voice.backend.synthesis_seconds
         metrics = _metrics(telling, args, voice, stages_seconds, wall)
@@ -187,7 +187,8 @@ def _run(args: argparse.Namespace, story: Story, strategy: str, delivery, out: P
                                   anchor=args.anchor, timing=args.timing, stages=stages)
         stages_seconds = write_outputs(t, staging / name, fps=args.fps, window=args.window, seed=args.seed,
                                        plots=plots, pictures=False, stages=stages,
-                                       environment=not getattr(args, "no_environment", False))
+                                       environment=not getattr(args, "no_environment", False),
+                                       physics=getattr(args, "physics_pushes", None))
         every[name] = _metrics(t, args, voice, stages_seconds,
                                time.perf_counter() - begun - (voice.backend.synthesis_seconds - synthesis))
     wall = time.perf_counter() - started - voice.backend.synthesis_seconds
@@ -279,21 +280,25 @@ def _clean(value):
 
 def write_outputs(telling: Telling, out: Path, fps: float = 60.0, window: float = 30.0,
                   seed: int = 0, plots: bool = True, pictures: bool = True,
-                  stages: Stages | None = None, environment: bool = True) -> "OrderedDict[str, float]":
+                  stages: Stages | None = None, environment: bool = True,
+                  physics: list | None = None) -> "OrderedDict[str, float]":
     """Write a telling's files (all but ``metrics.json``) to ``out``; returns the wall seconds of each
     stage. ``plots``: draw the timeline and sync-error pictures too; ``pictures``: the timeline pictures
     among them. ``stages``: where to say on a terminal which stage is under way. ``environment``: show the
-    story's emotions through camera, light and music (``environment.csv``, ``music.wav``)."""
+    story's emotions through camera, light and music (``environment.csv``, ``music.wav``). ``physics``: the
+    pushes of a run on the physical body (its poses the physical body's, and ``physics.csv``); None: the
+    animation's."""
     out.mkdir(parents=True, exist_ok=True)
     # the poses are evaluated into files of a scratch folder (removed at the end) and read back a window
     # of frames at a time by everything that uses them: a long story's poses are never held whole
     with tempfile.TemporaryDirectory(dir=out, prefix=".poses-") as scratch:
         return _write_outputs(telling, out, Path(scratch), fps, window, seed, plots, pictures,
-                              stages or Stages.off(), environment)
+                              stages or Stages.off(), environment, physics)
 
 
 def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, window: float, seed: int,
-                   plots: bool, pictures: bool, say: Stages, environment: bool = True) -> "OrderedDict[str, float]":
+                   plots: bool, pictures: bool, say: Stages, environment: bool = True,
+                   physics: list | None = None) -> "OrderedDict[str, float]":
     from agentsim.animation import evaluate_poses, write_bvh
     from agentsim.media.audio import run_track_stream
     from agentsim.media.files import write_feedback, write_wav
@@ -329,8 +334,15 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
             write_text(out / "story.bml", telling.bml)
             write_feedback(out / "feedback.jsonl", telling.recording.feedback)
             t = stage("feedback", t)
-            stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene,
-                                    folder=scratch)
+            body = None  # the physical body's figures (--physics)
+            if physics is None:
+                stream = evaluate_poses(telling.recording, fps=fps, seed=seed, scene=telling.story.scene,
+                                        folder=scratch)
+            else:
+                from agentsim.physics.run import scenario_poses
+
+                stream, body = scenario_poses(telling.recording, fps, seed, physics, out,
+                                              scene=telling.story.scene, folder=scratch)
             timelines = (drawing.enter_context(start_window(telling, out / "timeline.png", stream, window))
                          if plots and pictures else None)
             t = stage("poses", t)
@@ -357,7 +369,7 @@ def _write_outputs(telling: Telling, out: Path, scratch: Path, fps: float, windo
                 extra["environment"] = report_environment(rows, stream)
             write_report(out / "report.html", recording=telling.recording, stream=stream, track=track,
                          gestures=gestures, title=f"{telling.story.title} (strategy {telling.strategy})", audio=ogg,
-                         **extra)
+                         physics=body, **extra)
             sound.shutdown(wait=True)  # the report's sound is encoded
         t = stage("report", t)
         if plots:

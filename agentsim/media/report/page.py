@@ -44,7 +44,7 @@ ASSETS = HERE / "assets"
 #: The sound's files (one of them: :func:`write_audio`).
 AUDIO_FILES = ("audio.ogg", "audio.wav")
 OWN_FILES = ("three.min.js", "LICENSE-three.txt", "report.js", "report.css", "data.js", "poses.js",
-             "stage.js") + AUDIO_FILES
+             "stage.js", "physics.svg") + AUDIO_FILES
 #: Samples handed to the audio encoder at a time.
 AUDIO_BLOCK = 65536
 
@@ -106,7 +106,8 @@ def start_audio(path, track, executor: concurrent.futures.Executor) -> concurren
 
 
 def write_report(path, *, recording, stream=None, track=None, gestures=(), title: str = "", notes=(),
-                 audio: concurrent.futures.Future | None = None, environment: dict | None = None) -> Path:
+                 audio: concurrent.futures.Future | None = None, environment: dict | None = None,
+                 physics=None) -> Path:
     """Write an HTML report of a run that a researcher watches and hears: its audio, a 3D skeleton driven by
     the poses, a timeline of behaviours, words and feedback with a cursor that follows the audio, and the
     per-gesture error table.
@@ -138,6 +139,10 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         The camera, lights and music of the run's emotions and the body's segments
         (:func:`~agentsim.media.environment.report_environment`): the 3D view then draws the body as solid
         segments under three-point lighting, filmed as the rows say (``stage.js``).
+    physics : PhysicsResult, optional
+        The physical body's figures when the run was simulated (``--physics``): the page then shows
+        ``physics.svg``, the centre of mass against the support polygon
+        (:mod:`~agentsim.media.report.physics`); the 3D skeleton is the ``stream``'s, the physical body's.
 
     Notes
     -----
@@ -159,7 +164,8 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
         track = None
     if stream is not None and stream.n_frames == 0:
         stream = None
-    content = (recording, stream, track, list(gestures), title or path.stem, [str(n) for n in notes], environment)
+    content = (recording, stream, track, list(gestures), title or path.stem, [str(n) for n in notes], environment,
+               physics)
     if audio is None:  # the page and its folder staged, swapped in together once whole (staged_page)
         with staged_page(path, folder, marks=OWN_FILES) as (page, staging):
             _write_into(page, staging, folder.name, *content, audio=None)
@@ -176,7 +182,7 @@ def write_report(path, *, recording, stream=None, track=None, gestures=(), title
 
 
 def _write_into(page: Path, folder: Path, name: str, recording, stream, track, gestures, title, notes,
-                environment, audio) -> None:
+                environment, physics, audio) -> None:
     """Write the report's files into ``folder`` and its HTML into ``page``, which loads them from the folder
     ``name`` beside it."""
     for source in (VENDOR / "three.min.js", VENDOR / "LICENSE-three.txt", ASSETS / "report.js",
@@ -198,7 +204,12 @@ def _write_into(page: Path, folder: Path, name: str, recording, stream, track, g
     write_text(folder / "data.js", js_assignment(
         "REPORT_DATA", data, f"agentsim run report: timeline and tables of {title!r}, see "
         "agentsim.media.report.data"))
-    page.write_text(page_html(name, title, notes, data), encoding="utf-8")
+    picture = None
+    if physics is not None:
+        from agentsim.media.report.physics import write_physics_svg
+
+        picture = write_physics_svg(folder / "physics.svg", physics.rows).name
+    page.write_text(page_html(name, title, notes, data, physics=picture), encoding="utf-8")
 
 
 def _page_data(recording, stream, track, gestures, title, notes, folder: Path) -> dict:
@@ -220,8 +231,9 @@ def _page_data(recording, stream, track, gestures, title, notes, folder: Path) -
     return data
 
 
-def page_html(folder: str, title: str, notes: list[str], data: dict) -> str:
-    """The HTML of a report whose files are in the folder named ``folder`` beside it."""
+def page_html(folder: str, title: str, notes: list[str], data: dict, physics: str | None = None) -> str:
+    """The HTML of a report whose files are in the folder named ``folder`` beside it (``physics``: the name of
+    its picture of the centre of mass, when the body was simulated)."""
     base = quote(folder)
     esc = html.escape
     audio = data["audio"]
@@ -234,6 +246,10 @@ def page_html(folder: str, title: str, notes: list[str], data: dict) -> str:
     scripts = ["three.min.js", "data.js"] + (["poses.js"] if data["motion"] is not None else [])
     scripts += (["stage.js"] if data.get("environment") else []) + ["report.js"]
     script_tags = "\n".join(f'<script src="{base}/{s}"></script>' for s in scripts)
+    balance = "" if physics is None else (
+        '<section id="physics-section">\n<h2>Centre of mass and support polygon (the physical body)</h2>\n'
+        f'<img id="physics" src="{base}/{quote(physics)}" alt="the centre of mass against the support polygon">'
+        '\n</section>\n')
     return f"""<!DOCTYPE html>
 <html lang="en">
 <head>
@@ -270,7 +286,7 @@ window.addEventListener("unhandledrejection",function(e){{window.reportErrors.pu
 <canvas id="overview"></canvas>
 <div id="hover">&nbsp;</div>
 </section>
-<section id="table-section">
+{balance}<section id="table-section">
 <h2>Gestures pegged to words and beats</h2>
 <p class="hint">Click a row to go to its stroke; click a heading to sort.</p>
 <div id="table-wrap"><table id="gestures"><thead></thead><tbody></tbody></table></div>
