@@ -8,7 +8,7 @@ upward acceleration is largest, or the coordinate smallest.
 
 Pegs: ``repN`` at the N-th repetition's key point (as found once it has passed, as predicted before), and a
 rolling window ``next1``, ``next2``, ... of the upcoming ones. Nothing is predicted before the second
-repetition; from then on it commits however unsure. The tempo is the median of the last three intervals
+repetition; from then on it commits however unsure. The tempo is the mean of the last three intervals
 between repetitions, so two repetitions at a new tempo re-lock it; a pause (no repetition for well past the
 predicted one) keeps the next prediction just ahead of the clock until the person restarts.
 """
@@ -31,7 +31,7 @@ _NEXT = re.compile(r"^next(\d{1,4})$")
 #: Sample rates accepted (Hz), with 2 % of slack for a sensor's jitter.
 MIN_RATE, MAX_RATE = 10.0, 200.0
 #: Cut-off of the smoothing the detection looks at (Hz) and the slow baseline's time constant (s).
-SMOOTH_HZ, BASELINE_S, GRAVITY_S = 1.6, 2.5, 4.0
+SMOOTH_HZ, BASELINE_S, GRAVITY_S = 1.6, 2.5, 30.0
 #: Shortest interval between two repetitions (s) and the share of the period that two may not be closer than.
 MIN_INTERVAL, MIN_SHARE = 0.35, 0.45
 #: An interval longer than this many periods is a pause: it does not count towards the tempo.
@@ -82,11 +82,8 @@ class RepetitionTracker:
     def _value(self, t: float, sample: np.ndarray, dt: float) -> float:
         """The signal whose maxima are key points: upward acceleration, or the coordinate turned over."""
         if sample.size == 3:
-            if self._gravity_n < GRAVITY_S * 10:  # the mean of the first samples, then a slow average
-                self._gravity_n += 1
-                self._gravity += (sample - self._gravity) / self._gravity_n
-            else:
-                self._gravity += (sample - self._gravity) * min(1.0, dt / GRAVITY_S)
+            self._gravity_n += 1  # the mean of the first samples, then a slow average
+            self._gravity += (sample - self._gravity) * max(1.0 / self._gravity_n, min(1.0, dt / GRAVITY_S))
             g = float(np.linalg.norm(self._gravity))
             return float(sample @ self._gravity) / g - g if g > 0 else 0.0
         return -float(sample[0])
@@ -121,11 +118,14 @@ class RepetitionTracker:
         while self._recent and self._recent[0][0] < t - 4.0:
             self._recent.popleft()
         hysteresis = max(0.35 * self._amplitude, 0.6 * math.sqrt(self._power), self._floor, 1e-12)
+        if t < self._warm_until:  # the averages settle: no extreme counts yet, and a trough comes first
+            self._seeking_peak, self._extreme, self._extreme_t = False, y, t
+            return
         if self._seeking_peak:
             if y > self._extreme:
                 self._extreme, self._extreme_t = y, t
             elif y < self._extreme - hysteresis:
-                if t >= self._warm_until and self._extreme > 0.2 * self._amplitude:
+                if self._extreme > 0.2 * self._amplitude:
                     self._peak(self._extreme, self._extreme_t, t)
                 self._seeking_peak, self._extreme, self._extreme_t = False, y, t
         else:
@@ -177,11 +177,11 @@ class RepetitionTracker:
     # ------------------------------------------------------------------ predictions
     @property
     def period(self) -> float | None:
-        """The tempo as seconds between repetitions: the median of the last three intervals (None before two
+        """The tempo as seconds between repetitions: the mean of the last three intervals (None before two
         repetitions)."""
         if not self.intervals:
             return None
-        return float(np.median(self.intervals[-3:]))
+        return float(np.mean(self.intervals[-3:]))
 
     @property
     def tempo_per_minute(self) -> float | None:
@@ -195,11 +195,11 @@ class RepetitionTracker:
         period = self.period
         if period is None:
             return []
-        recent = self.repetitions[max(self._segment, len(self.repetitions) - 3):][::-1]  # the last key points, each carried on by the period
-        weights = (0.5, 0.3, 0.2)[: len(recent)]
+        recent = self.repetitions[max(self._segment, len(self.repetitions) - 2):][::-1]  # the last key points, each carried on by the period
+        weights = (0.6, 0.4)[: len(recent)]
         first = sum(w * (r + (j + 1) * period) for j, (w, r) in enumerate(zip(weights, recent))) / sum(weights)
         if self._held is not None:
-            first = max(first, self._held)
+            first = self._held
         return [first + i * period for i in range(self.horizon)]
 
     def _announce(self, now: float) -> None:
@@ -209,12 +209,12 @@ class RepetitionTracker:
             self.updates.append((now, list(predicted)))
 
     def _hold(self) -> None:
-        """While the person pauses, keep the next key point just ahead of the clock."""
+        """While the person pauses (no repetition by :data:`PAUSE_PERIODS` periods after the last), keep the
+        next key point just ahead of the clock."""
         period = self.period
         if period is None or not self._predicted:
             return
-        overdue = self.repetitions[-1] + period * PAUSE_PERIODS
-        if self.time > overdue:
+        if self.time > self.repetitions[-1] + period * PAUSE_PERIODS:
             self._held = self.time + HOLD_LEAD
             self._announce(self.time)
 

@@ -51,7 +51,7 @@ def height(t: np.ndarray, keys: list[float], depth: float) -> np.ndarray:
 
 
 def acceleration(t: np.ndarray, keys: list[float], exercise: str, rng: np.random.Generator,
-                 noise: float = 0.25, tilt: tuple[float, float] = (0.3, 0.2)) -> np.ndarray:
+                 noise: float = 0.1, tilt: tuple[float, float] = (0.3, 0.2)) -> np.ndarray:
     """Acceleration with gravity (m/s², shape (n, 3)) as a tilted phone reports it, with noise ``noise``."""
     t = np.asarray(t, float)
     dt = 1e-3
