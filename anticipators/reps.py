@@ -16,6 +16,7 @@ predicted one) keeps the next prediction just ahead of the clock until the perso
 from __future__ import annotations
 
 import math
+import queue
 import re
 from collections import deque
 from pathlib import Path
@@ -37,7 +38,7 @@ MIN_INTERVAL, MIN_SHARE = 0.35, 0.45
 #: An interval longer than this many periods is a pause: it does not count towards the tempo.
 PAUSE_PERIODS = 1.6
 #: Seconds of signal heard before the first repetition may be found (the averages settle).
-WARM_UP = 1.0
+WARM_UP = 0.4
 #: How far ahead of the clock the next prediction is held while the person pauses (s).
 HOLD_LEAD = 0.1
 
@@ -260,6 +261,12 @@ class RepetitionAnticipator(Anticipator):
         self.start = float(start)
         self.recording = read_motion(source, column or None) if source else None
         self.confidence = 0.0
+        self.inbox: queue.SimpleQueue = queue.SimpleQueue()  # (samples, arrived at) from other threads
+        self.client_offset: float | None = None  # the realizer's clock less the client's, least delayed seen
+        self.last_client_time = -math.inf
+        #: the first value and time of a signal that has not varied yet (None: nothing yet; False: it has varied,
+        #: or the warning was given)
+        self.still: tuple | bool | None = None
 
     @property
     def horizon(self) -> int:
@@ -301,7 +308,64 @@ class RepetitionAnticipator(Anticipator):
             peg.set(time)
 
     def run(self):
+        if self.input == "ws":
+            return self._hear_clients()
         return None if self.recording is None else self._hear()
+
+    def offer(self, samples, now: float) -> str | None:
+        """Samples from a live client (any thread): ``[[t, ax, ay, az], ...]`` (or ``[[t, x], ...]``), its own
+        times in seconds, received at ``now`` on the realizer's clock. None if taken, else why not (one line,
+        for a warning to the sender): not rows of numbers, times going back, a sample rate out of range, a
+        signal of one constant value."""
+        if not isinstance(samples, list) or not samples or not all(isinstance(row, list) for row in samples):
+            return 'motion must be a list of samples [[t, ax, ay, az], ...] (t in seconds, m/s² with gravity)'
+        width = len(samples[0])
+        if width not in (2, 4) or any(len(row) != width for row in samples):
+            return "each motion sample must be [t, ax, ay, az] (or [t, x]), all of one length"
+        try:
+            rows = np.array(samples, dtype=float)
+        except (TypeError, ValueError):
+            return "motion samples must hold numbers only"
+        if not np.isfinite(rows).all():
+            return "motion samples must hold finite numbers"
+        times = rows[:, 0]
+        if times[0] <= self.last_client_time or (np.diff(times) <= 0).any():
+            return "motion samples' times must increase, from one message to the next too"
+        if len(times) >= 3:
+            rate = 1.0 / float(np.median(np.diff(times)))
+            if not MIN_RATE * 0.98 <= rate <= MAX_RATE * 1.02:
+                return f"motion sampled at {rate:.3g} Hz; the repetition anticipator takes {MIN_RATE:g}-{MAX_RATE:g} Hz"
+        self.last_client_time = float(times[-1])
+        values = rows[:, 1:]
+        if self.still is None:
+            self.still = (values[0].copy(), float(times[0]))
+        if self.still is not False:
+            if (values == self.still[0]).all():
+                if times[-1] - self.still[1] >= 2.0:
+                    self.still = False
+                    return "the motion signal has been one constant value for 2 s: is the sensor working?"
+            else:
+                self.still = False
+        self.inbox.put((rows, now))
+        return None
+
+    def _hear_clients(self):
+        """Every 50 ms, what clients sent, its times put on the realizer's clock (the least delayed arrival
+        seen decides where the client's time 0 lies)."""
+        env = self.env
+        while True:
+            yield env.timeout(0.05)
+            while True:
+                try:
+                    rows, arrived = self.inbox.get_nowait()
+                except queue.Empty:
+                    break
+                offset = arrived - float(rows[-1, 0])
+                self.client_offset = offset if self.client_offset is None else min(self.client_offset, offset)
+                times = rows[:, 0] + self.client_offset
+                keep = times > self.tracker.time
+                if keep.any():
+                    self.push(times[keep], rows[keep, 1:])
 
     def _hear(self):
         env = self.env

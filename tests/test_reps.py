@@ -56,7 +56,7 @@ def test_a_coordinate_counts_its_lowest_points():
     t = np.arange(0, 20.0, 0.04)
     height = np.cos(2 * np.pi * (t - 1.0) / 2.0 + np.pi)  # lowest at 1, 3, 5, ... s
     found = track(t, height[:, None])
-    assert found["count"] == 9 and abs(found["repetitions"][0] - 3.0) < 0.05  # the first within the warm-up
+    assert found["count"] == 10 and abs(found["repetitions"][0] - 1.0) < 0.05
 
 
 def test_the_pegs_follow_the_signal_pushed_in_a_realizer():
@@ -104,4 +104,19 @@ def test_column_names_one_coordinate(tmp_path, capsys):
     path = tmp_path / "height.csv"
     np.savetxt(path, np.column_stack([t, np.cos(np.pi * t)]), delimiter=",", header="time,hip_y", comments="")
     assert main(["anticipate", "reps", str(path), "--column", "hip_y", "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["count"] == 5  # lowest at 1, 3, ... 11 s, the first within the warm-up
+    assert json.loads(capsys.readouterr().out)["count"] == 6  # lowest at 1, 3, ... 11 s
+
+
+def test_live_motion_is_taken_or_refused_in_one_line():
+    reps = RepetitionAnticipator("reps", input="ws")
+    assert reps.offer("x", 0.0).startswith("motion must be a list of samples")
+    assert reps.offer([[0, 1, 2], [1, 2, 3]], 0.0).startswith("each motion sample must be [t, ax, ay, az]")
+    assert reps.offer([[0, 1, 1, "a"]], 0.0) == "motion samples must hold numbers only"
+    assert reps.offer([[0, 1, 1, 1], [0.001, 1, 1, 2], [0.002, 1, 1, 1]], 0.0).startswith("motion sampled at 1e+03")
+    still = [[k * 0.02, 0.0, 0.0, 9.81] for k in range(50)]
+    assert reps.offer(still[:25], 1.0) is None
+    assert reps.offer(still[25:], 1.5) is None  # 0.98 s of one value: not yet
+    later = [[1.0 + k * 0.02, 0.0, 0.0, 9.81] for k in range(60)]
+    assert reps.offer(later, 2.7).startswith("the motion signal has been one constant value for 2 s")
+    assert reps.offer([[0.5, 0.0, 0.0, 9.8]], 3.0).startswith("motion samples' times must increase")
+    assert reps.inbox.qsize() == 2
