@@ -32,6 +32,9 @@ def add_trainer(scenarios) -> argparse.ArgumentParser:
                              "(fixed), or all three on the same seed with a table")
     options.add_seed(parser, "the simulated user")
     options.add_out(parser, DEFAULT_OUT)
+    parser.add_argument("--physics", action="store_true",
+                        help="play the trainer's motion through a physical body (mixed dynamics: balance under the "
+                             "animation); writes physics.csv and adds physics to metrics.json")
     parser.add_argument("--no-pictures", action="store_true", help="write every file but signal.png")
     parser.add_argument("--json", action="store_true",
                         help="also print metrics.json (compare.json with --strategy all) on stdout, the table on "

@@ -16,6 +16,9 @@ import numpy as np
 
 from scenarios.trainer.scenario import Run, count_times, user_keys
 
+#: Frames a second of the BVH (and of the physical body's simulation).
+FPS = 30.0
+
 
 def repetition_rows(run: Run) -> list[dict]:
     """One row per repetition of the user: key points, count, differences (ms)."""
@@ -73,8 +76,11 @@ def signal_figure(run: Run, metrics: dict):
     return fig
 
 
-def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True) -> Path:
-    """Write the run's files into ``out`` (created if needed); ``pictures``: ``signal.png`` too."""
+def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, physics: bool = False) -> Path:
+    """Write the run's files into ``out`` (created if needed); ``pictures``: ``signal.png`` too; ``physics``: the
+    trainer's motion played through the physical body (mixed dynamics), ``physics.csv`` written and its figures
+    added to ``metrics`` (``physics``: fallen, when, and the share of frames whose centre of mass is over the
+    support) before ``metrics.json`` is."""
     import concurrent.futures
 
     from agentsim.animation import evaluate_poses, write_bvh
@@ -88,8 +94,24 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    write_text(out / "metrics.json", json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}, indent=2) + "\n")
     recording = run.realizer.recording()
+    manager = None
+    if physics:
+        from agentsim.physics.run import PhysicalManager, run_controllers
+
+        manager = PhysicalManager(run_controllers(recording), [], fps=FPS, seed=run.seed, lexicon=recording.lexicon)
+        stream = evaluate_poses(recording, fps=FPS, seed=run.seed, manager=manager)
+        result = manager.result
+        rows = np.array([row[8] for row in result.rows], dtype=float)
+        metrics["physics"] = {"fallen": result.fell_at is not None, "fell_at": result.fell_at,
+                              "com_inside": round(float(rows.mean()), 4) if rows.size else None,
+                              "frames": int(rows.size)}
+        from agentsim.physics.run import write_physics_csv
+
+        write_physics_csv(out / "physics.csv", result)
+    else:
+        stream = None
+    write_text(out / "metrics.json", json.dumps({**metrics, "time_axis": AXIS, "glossary": GLOSSARY}, indent=2) + "\n")
     write_feedback(out / "feedback.jsonl", recording.feedback)
     times, samples = run.signal
     columns = ["ax", "ay", "az"] if samples.ndim == 2 and samples.shape[1] == 3 else ["value"]
@@ -110,7 +132,8 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
         track = run_track(recording)
         ogg = start_audio(out / "report.html", track, sound)
         write_wav(out / "narration.wav", track)
-        stream = evaluate_poses(recording, fps=30.0, seed=run.seed)
+        if stream is None:
+            stream = evaluate_poses(recording, fps=FPS, seed=run.seed)
         write_bvh(out / "trainer.bvh", stream)
         gestures = gesture_rows(recording, lookup)
         write_csv(out / "gestures.csv", gestures)

@@ -64,14 +64,18 @@ def _run(args, recording, shown: Path, out: Path, as_json: bool, table) -> int:
     rows = []
     for name in strategies:
         started = time.perf_counter()
-        run = simulate(args.exercise, name, target, args.seed, recording=recording,
-                       physics=getattr(args, "physics", False))
+        run = simulate(args.exercise, name, target, args.seed, recording=recording)
         metrics = collect_metrics(run)
-        write_outputs(run, metrics, out / name if every else out, pictures=not getattr(args, "no_pictures", False))
+        write_outputs(run, metrics, out / name if every else out, pictures=not getattr(args, "no_pictures", False),
+                      physics=getattr(args, "physics", False))
         rows.append(metrics)
         if not every:
             print(TABLE_HEADER, file=table)
             print(_row(metrics), file=table)
+            if "physics" in metrics:
+                body = metrics["physics"]
+                print(f"physical body: {'fell at %.2f s' % body['fell_at'] if body['fallen'] else 'never fell'}, centre "
+                      f"of mass over the support on {100 * (body['com_inside'] or 0):.1f} % of frames", file=table)
             print(f"written to {shown} in {time.perf_counter() - started:.1f} s", file=table)
     if every:
         from agentsim.media.files import write_text

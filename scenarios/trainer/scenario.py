@@ -64,7 +64,7 @@ class Spoken(dict):
 
 
 def simulate(exercise: str = "squat", strategy: str = "follow", target_tempo: float | None = None, seed: int = 0,
-             recording: tuple | None = None, physics: bool = False) -> Run:
+             recording: tuple | None = None) -> Run:
     """The trainer and the user, as fast as the computer allows. ``recording``: ``(times, samples)`` of a
     user's phone played instead of the simulated user (from time 0)."""
     from agentsim.core.clock import make_environment, run_until

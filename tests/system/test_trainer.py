@@ -1,5 +1,5 @@
 """``agentsim run trainer`` end to end: every strategy on one seed of the simulated user, the files of each, the
-table, and the targets of follow and lead; a recording played as the user."""
+table, and the targets of follow and lead; a recording played as the user, with the physical body squatting."""
 
 from __future__ import annotations
 
@@ -55,7 +55,7 @@ def test_the_report_shows_the_users_key_points_beside_the_trainers(compared):
     assert "signal.png" in (out / "follow" / "report.html").read_text()
 
 
-def test_a_recording_plays_as_the_user(tmp_path):
+def test_a_recording_plays_as_the_user_and_the_physical_body_squats_without_falling(tmp_path):
     from scenarios.trainer.signal import acceleration
 
     t = np.arange(0, 24.0, 0.02)
@@ -64,7 +64,12 @@ def test_a_recording_plays_as_the_user(tmp_path):
     np.savetxt(path, np.column_stack([t, acceleration(t, keys, "squat", np.random.default_rng(1))]), delimiter=",",
                header="time,ax,ay,az", comments="", fmt="%.5f")
     out = tmp_path / "out"
-    assert main(["run", "trainer", "--user", str(path), "--out", str(out), "--no-pictures"]) == 0
+    assert main(["run", "trainer", "--user", str(path), "--out", str(out), "--no-pictures", "--physics"]) == 0
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["user"] == "recording" and metrics["user_repetitions"] == 9
     assert metrics["missed_counts"] == 0 and not Path(out / "signal.png").exists()
+    assert metrics["physics"]["fallen"] is False and metrics["physics"]["com_inside"] >= 0.99
+    rows = (out / "physics.csv").read_text().splitlines()
+    assert rows[0].split(",")[-3:] == ["com_inside", "pelvis_height", "fallen"]
+    heights = [float(row.split(",")[-2]) for row in rows[1:]]
+    assert min(heights) < 0.7 < 0.85 < max(heights)  # it squats: the pelvis goes down about 0.28 m and up again
