@@ -9,6 +9,8 @@
 * Costs: ``anticipate reps`` over a one-minute recording (50 Hz) in at most 2 s (CPU time of the command in a
   process of its own, its start-up included); a default ``agentsim run trainer`` in at most 30 s (wall time of the
   whole command, on a machine shared with others: a bound, not a rate).
+* ``run trainer --physics``: the squats on the physical body never fall, the centre of mass over the support on
+  at least 99 % of frames, ``physics.csv`` written.
 * Real recordings: wrist-worn MetaWear accelerometers during barbell sets (the MetaMotion data of "tracking
   barbell exercises", 12.5 Hz; heavy sets of 5, medium sets of 10 as the file names say), counted within one of
   the true count on at least 90 % of the sets. The recordings are for measuring only and never shipped: give
@@ -99,6 +101,16 @@ def default_run_wall() -> float:
         return time.perf_counter() - started
 
 
+def physics_run() -> dict:
+    """A default run with ``--physics``: its metrics' ``physics`` (fallen, com_inside) and whether physics.csv
+    was written."""
+    with tempfile.TemporaryDirectory() as folder:
+        subprocess.run([sys.executable, "-m", "agentsim", "run", "trainer", "--physics", "--no-pictures", "--out",
+                        folder], env=child_env(), check=True, capture_output=True)
+        metrics = json.loads((Path(folder) / "metrics.json").read_text())
+        return {**metrics["physics"], "csv": (Path(folder) / "physics.csv").stat().st_size > 0}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=10)
@@ -134,6 +146,10 @@ def main() -> int:
     wall = default_run_wall()
     targets.append({"target": "a default run trainer <= 30 s (wall, shared machine)", "value": round(wall, 2),
                     "holds": wall <= 30.0})
+    body = physics_run()
+    targets.append({"target": "run trainer --physics: never fallen, centre of mass over the support on >= 99 % of "
+                              "frames, physics.csv written", "value": body,
+                    "holds": not body["fallen"] and body["com_inside"] >= 0.99 and body["csv"]})
     folder = Path(args.metamotion) if args.metamotion else None
     if folder is None or not folder.is_dir():
         targets.append({"target": "real barbell sets counted within one on >= 90 % of sets", "value": None,
