@@ -34,7 +34,7 @@ MIN_RATE, MAX_RATE = 10.0, 200.0
 #: Cut-off of the smoothing the detection looks at (Hz) and the slow baseline's time constant (s).
 SMOOTH_HZ, BASELINE_S, GRAVITY_S = 1.6, 2.5, 30.0
 #: Shortest interval between two repetitions (s) and the share of the period that two may not be closer than.
-MIN_INTERVAL, MIN_SHARE = 0.35, 0.45
+MIN_INTERVAL, MIN_SHARE = 0.6, 0.45
 #: An interval longer than this many periods is a pause: it does not count towards the tempo.
 PAUSE_PERIODS = 1.6
 #: Seconds of signal heard before the first repetition may be found (the averages settle).
