@@ -67,7 +67,7 @@ def test_conductor_configurations_are_listed_and_found_by_short_name(tmp_path):
 def test_sweep_specs_are_listed_and_found_by_short_name(tmp_path):
     listed = run([*AGENTSIM, "sweep", "--list-specs"], tmp_path)
     assert listed.returncode == 0, listed.stderr
-    assert [line.split()[0] for line in listed.stdout.splitlines()] == ["conductor", "speech_sync"]
+    assert [line.split()[0] for line in listed.stdout.splitlines()] == ["conductor", "speech_sync", "trainer"]
     from agentsim.cli.sweep import spec
     from agentsim.cli.sweep.spec import load
 

@@ -141,7 +141,7 @@ def test_a_point_that_fails_is_a_row_with_its_error_and_the_sweep_finishes(tmp_p
 
 BAD_SPECS = [
     ('command = ["eval", "nope"]', ("unknown command 'eval nope'; a sweep runs one of: anticipate beats, "
-                                    "eval speech-sync, run conductor, run storytelling")),
+                                    "anticipate reps, eval speech-sync, run conductor, run storytelling, run trainer")),
     ('command = ["realize"]', "'agentsim realize' prints no --json"),
     ('command = ["eval"]', "unknown command 'eval'"),
     ('command = ["eval", "speech-sync"]\n[grid]\njiter = [0.1]', "unknown option 'jiter' of 'agentsim eval speech-sync'"),

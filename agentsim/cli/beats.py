@@ -38,6 +38,9 @@ def add_parsers(commands) -> None:
     beats.add_argument("--seconds", type=float, default=10.0, help="how long to listen with --input")
     beats.add_argument("--sample-rate", type=int, default=44100, help="sample rate for --input")
     beats.set_defaults(handler=track_beats)
+    from agentsim.cli import reps
+
+    reps.add_parser(kinds)
 
 
 def track_beats(args: argparse.Namespace) -> int:

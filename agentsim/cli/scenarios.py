@@ -14,12 +14,15 @@ DEMO_OUT = "out/demo"
 
 
 def add_parsers(commands) -> None:
-    run = commands.add_parser("run", help="run a scenario (conductor, storytelling)",
+    run = commands.add_parser("run", help="run a scenario (conductor, storytelling, trainer)",
                               description="Run a scenario end to end in simulated time and write its results: "
-                                          "'run conductor', 'run storytelling' (each with its own --help).")
+                                          "'run conductor', 'run storytelling', 'run trainer' (each with its own --help).")
     scenarios = run.add_subparsers(dest="scenario", required=True)
     add_conductor(scenarios)
     add_storytelling(scenarios)
+    from agentsim.cli.trainer import add_trainer
+
+    add_trainer(scenarios)
     demo = commands.add_parser(
         "demo", help="the conductor and the storyteller, end to end in simulated time",
         description="The virtual conductor leading a dragging ensemble back to tempo, then the virtual storyteller "

@@ -294,6 +294,9 @@ class Server:
         if isinstance(message, dict) and list(message) == ["status"] and message["status"] is True:  # (not 1)
             self.routing.send_json(client, self.status())
             return
+        if isinstance(message, dict) and list(message) == ["motion"]:
+            self.motion(client, message["motion"])
+            return
         if not isinstance(message, dict) or set(message) != {"subscribe"}:
             self.warn(client, f"message refused: not a control message this server knows; {usage}")
             return
@@ -305,6 +308,20 @@ class Server:
             return
         for hello in self.routing.subscribe(client, set(wanted)):
             self.routing.send_json(client, hello)
+
+    def motion(self, client, samples) -> None:
+        """``{"motion": [[t, ax, ay, az], ...]}``: a phone's motion for the anticipators that take it
+        (``--anticipator reps,input=ws``); what cannot be taken is one warning to the sender."""
+        takers = [a for a in self.live.realizer.scheduler.anticipators.values() if hasattr(a, "offer")
+                  and getattr(a, "input", "") == "ws"]
+        if not takers:
+            self.warn(client, "motion refused: no anticipator here takes motion (serve --anticipator reps,input=ws)")
+            return
+        for anticipator in takers:
+            why = anticipator.offer(samples, self.live.now())
+            if why is not None:
+                self.warn(client, f"motion refused: {why}")
+                return
 
     def status(self) -> dict:
         """The reply to ``{"status": true}``: clients, messages sent, and what was refused, dropped or failed."""

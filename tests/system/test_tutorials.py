@@ -41,6 +41,11 @@ MADE = {
         ["keeper.story", "out/keeper/metrics.json", "out/keeper/narration.wav", "out/keeper/story.TextGrid",
          "out/wind/compare.json", "out/wind/best/metrics.json", "out/again/metrics.json", "linear.json"],
         [r"^8 gestures on 23 words", r"^best +p95 +\d+\.\d\d ms  snaps +0 "]),
+    "tutorials/trainer.md": (
+        ["out/trainer/metrics.json", "out/trainer/report.html", "out/trainer/trainer.bvh", "out/trainer/narration.wav",
+         "out/trainer/repetitions.csv", "out/all/compare.json", "out/all/lead/metrics.json", "reps.json"],
+        [r"^repetition 3: person \d+\.\d\d s, trainer \d+\.\d\d s, count \d+\.\d\d s$", r"^fixed .* never ",
+         r"^count 20 tempo "]),
     "tutorials/live-service.md": (
         ["serve.log", "examples/live/client.py"],
         [r"^skeleton of \d+ points at 30\.0 frames a second$", r"hello:g1:stroke$", r"hello:end$",
