@@ -13,7 +13,7 @@ of synthesis per second of speech, each text synthesised once in a process that 
 seconds of this process, which other work on the machine does not inflate, for Piper, which synthesises in it) and
 first-synthesis latency (wall seconds from the import of the backend to the end of its first sentence, in a new
 process: what a user waits for before the first word);
-``--storyteller`` adds each backend's storyteller runs (both shipped stories, ``best``). Errors of all
+``--storyteller`` adds each backend's storyteller runs (every shipped story, ``best``). Errors of all
 texts are pooled before the percentiles are taken; snaps and stall time are summed over the texts.
 
 All conditions share a nominal latency of 80 ms with an unknown extra 0-40 ms and an audio clock

@@ -4,9 +4,9 @@
 
 Each table the script owns sits in its page between ``<!-- figures:NAME -->`` and ``<!-- /figures:NAME -->``.
 ``python scripts/readme_figures.py`` runs what each table reports and writes the tables into the pages;
-``--check`` writes nothing and exits 1, printing the difference, when a table differs from a fresh run (CI's
-system tests run it); ``--only NAME`` does one table. Columns of wall or CPU time (:data:`MEASURED`), which
-another run on a machine shared with other work does not repeat to the digit, are written but not checked.
+``--check`` writes nothing and exits 1, printing the difference, when a table differs from a fresh run (CI runs
+it after the documentation's build, ``.ci/run``); ``--only NAME`` does one table. Columns of wall or CPU time
+(:data:`MEASURED`), which another run on a machine shared with other work does not repeat to the digit, are written but not checked.
 
 Tables:
 
@@ -20,7 +20,7 @@ Tables:
 ``voices`` (in ``docs/howto/voices.md``)
     ``benchmarks/bench_speech_sync.py --tts espeak,festival,piper --storyteller``: espeak-ng, Festival and Piper
     on the three bundled texts, every strategy side by side; each backend's speaking rate, synthesis real-time
-    factor and first-synthesis latency; the storyteller with each backend on both shipped stories.
+    factor and first-synthesis latency; the storyteller with each backend on every shipped story.
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
-"""The result tables of ``docs/measured.md`` match a fresh run (``scripts/readme_figures.py --check``): a change
-that moves a figure fails here until the page says the new one."""
+"""The check that the documentation's result tables match a fresh run (``scripts/readme_figures.py --check``)
+fails on a stale figure and passes over measured times. The check itself, four minutes of fresh runs on
+two cores (its four tables side by side), is a step of CI of its own after the documentation's build (``.ci/run``), not a test of the
+system run."""
 
 from __future__ import annotations
 
-import subprocess
 import sys
 from pathlib import Path
 
@@ -12,13 +13,6 @@ import pytest
 pytestmark = pytest.mark.system
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def test_the_measured_tables_match_a_fresh_run():
-    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "readme_figures.py"), "--check"],
-                          capture_output=True, text=True, timeout=1800)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert proc.stderr.strip() == "readme_figures: every table matches a fresh run"
 
 
 def test_the_check_fails_on_a_stale_figure(tmp_path, monkeypatch):
