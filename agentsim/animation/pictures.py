@@ -7,6 +7,7 @@ function                 what it does
 =======================  ==========================================================================================
 ``plot_timelines``       a short run as one picture; a long one as an overview plus one picture per window
 ``start_timelines``      the same pictures begun, to be waited for later (a ``TimelineDrawing``)
+``start_figures``        pictures of the caller's own begun in a process of their own
 ``warm_workers``         the server the drawing processes are forked from, started early
 =======================  ==========================================================================================
 """
@@ -154,17 +155,19 @@ class TimelineDrawing:
         start, or died).
     """
 
-    def __init__(self, jobs: list[tuple], png: Path, recording, panel: PosePanel | None, workers: int) -> None:
+    def __init__(self, jobs: list[tuple], png: Path | None, recording, panel: PosePanel | None, workers: int,
+                 aside: bool = False) -> None:
         self._jobs, self._png, self._recording, self._panel = jobs, png, recording, panel
         self._written: list[Path] | None = None
         self._pool = None
         self._futures: list = []
         self._starting: threading.Thread | None = None
         self.workers = 0
-        context = warm_workers() if workers > 1 else None
+        context = warm_workers() if workers > 1 or aside and workers == 1 else None
         if context is not None:
             try:
-                payload = pickle.dumps((_portable(recording), panel, _changed_rc()), protocol=pickle.HIGHEST_PROTOCOL)
+                run = _portable(recording) if recording is not None else None
+                payload = pickle.dumps((run, panel, _changed_rc()), protocol=pickle.HIGHEST_PROTOCOL)
             except (pickle.PicklingError, TypeError, AttributeError):  # a run that cannot pass is drawn here
                 return
             self.workers = workers
@@ -209,7 +212,7 @@ class TimelineDrawing:
             finally:
                 self.close()
             png = self._png
-            for old in png.parent.glob(f"{glob.escape(png.stem)}_*s{glob.escape(png.suffix)}"):
+            for old in png.parent.glob(f"{glob.escape(png.stem)}_*s{glob.escape(png.suffix)}") if png else ():
                 if _WINDOW_FILE.fullmatch(old.name[len(png.stem):-len(png.suffix)]) and old not in written:
                     old.unlink()
             self._written = written
@@ -284,6 +287,15 @@ def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | No
         n = 1
     jobs = [("figure", Path(file), function, tuple(arguments)) for file, function, arguments in figures] + jobs
     return TimelineDrawing(jobs, png, recording, panel, n)
+
+
+def start_figures(figures: list[tuple]) -> TimelineDrawing:
+    """Begin drawing pictures of the caller's own, ``(file, function, arguments)`` as :func:`start_timelines`
+    takes them, in a process of their own (:func:`warm_workers`; where none can start, in this one when
+    :meth:`TimelineDrawing.result` asks for them): for what can be drawn while this process does other work
+    (the poses, before the timeline pictures can begin)."""
+    jobs = [("figure", Path(file), function, tuple(arguments)) for file, function, arguments in figures]
+    return TimelineDrawing(jobs, None, None, None, 1 if jobs else 0, aside=True)
 
 
 def plot_timelines(source, out: str | Path, stream: PoseStream | PosePanel | None = None, window: float = WINDOW,

@@ -427,7 +427,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     import contextlib
 
     from agentsim.animation import evaluate_poses, write_bvh
-    from agentsim.animation.pictures import start_timelines, warm_workers
+    from agentsim.animation.pictures import start_figures, start_timelines, warm_workers
     from agentsim.media.audio import run_track
     from agentsim.media.files import write_feedback, write_text, write_wav
     from agentsim.media.report import write_report
@@ -450,19 +450,21 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     # are known, and waited for at the end
     with contextlib.ExitStack() as drawing, concurrent.futures.ThreadPoolExecutor(1) as sound:
         with say("poses/BVH"):  # first: the pictures, the longest to make, begin as soon as the poses are known
+            # the tempo figure, which needs no poses, is begun first, in a process of its own (this one never
+            # imports matplotlib's figures)
+            from scenarios.conductor.metrics import tempo_figure
+
+            tempo = (drawing.enter_context(start_figures(
+                [(out / "tempo.png", tempo_figure, tempo_figure_arguments(run, metrics))]))
+                if plots and pictures else None)
             body = None  # the physical body's figures (--physics)
             if physics is None:
                 stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
             else:
                 stream, body = physical_poses(recording, run.config.conductor.fps, run.seed, physics, out)
-            # the tempo figure is drawn by the pictures' processes too (this one never imports matplotlib's figures)
-            from scenarios.conductor.metrics import tempo_figure
-
             timelines = (drawing.enter_context(start_timelines(
                 recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
-                title=f"conductor ({run.strategy_name})",
-                figures=[(out / "tempo.png", tempo_figure, tempo_figure_arguments(run, metrics))]))
-                if plots and pictures else None)
+                title=f"conductor ({run.strategy_name})")) if plots and pictures else None)
             write_bvh(out / "conductor.bvh", stream)
         with say("audio"):
             # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the
@@ -481,6 +483,8 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
         if not plots:
             return out
         with say("pictures"):
+            if tempo is not None:
+                tempo.result()
             if timelines is not None:
                 timelines.result()
             else:
