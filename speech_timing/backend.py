@@ -209,6 +209,12 @@ class Spoken:
                 self._kept.move_to_end(speech)
             return spoken
 
+    def said(self, speech: SpeechText, synthesize) -> "Utterance":
+        """What ``speech`` was: the utterance kept for it, or ``synthesize(speech)``, kept (synthesised outside
+        this lock: a speech already kept is answered without waiting for the synthesiser)."""
+        spoken = self.get(speech)
+        return spoken if spoken is not None else self.keep(speech, synthesize(speech))
+
     def keep(self, speech: SpeechText, utterance: "Utterance") -> "Utterance":
         """Keep ``utterance`` as what ``speech`` was; returns what is kept (one kept before wins)."""
         with self._lock:

@@ -367,8 +367,7 @@ class FestivalBackend:
     def synthesize(self, speech: SpeechText) -> Utterance:
         """Speak ``speech``: its audio (float32 mono in [-1, 1]) with word, phoneme, mark and sentence times
         in seconds from the audio's first sample (a speech asked for again: as it was said)."""
-        spoken = self._spoken.get(speech)
-        return spoken if spoken is not None else self._spoken.keep(speech, self._synthesize(speech))
+        return self._spoken.said(speech, self._synthesize)
 
     def forget(self, speech: SpeechText) -> None:
         """Stop remembering what ``speech`` was; asked for again, it is synthesised again."""

@@ -78,10 +78,9 @@ class EspeakBackend:
             asked for again gets the same utterance (the last :data:`REMEMBERED` are kept, up to
             :data:`REMEMBERED_BYTES` of audio).
         """
-        spoken = self._spoken.get(speech)  # what it said is looked up without waiting for the engine
-        if spoken is not None:
-            return spoken
-        return self._spoken.keep(speech, self._synthesize(speech))  # under the engine's lock: one for all threads
+        # (what it said is looked up without waiting for the engine; _synthesize holds the engine's lock, one
+        # for all threads)
+        return self._spoken.said(speech, self._synthesize)
 
     @property
     def remembered_bytes(self) -> int:

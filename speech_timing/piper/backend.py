@@ -114,10 +114,7 @@ class PiperBackend:
             each a sum of the samples Piper made for the phonemes before it. The same ``speech`` asked for again
             gets the same utterance.
         """
-        spoken = self._spoken.get(speech)
-        if spoken is not None:
-            return spoken
-        return self._spoken.keep(speech, self._synthesize(speech))
+        return self._spoken.said(speech, self._synthesize)
 
     def forget(self, speech: SpeechText) -> None:
         """Stop remembering what ``speech`` was; asked for again, it is synthesised again."""
