@@ -229,7 +229,7 @@ def save_figure(fig, path: str | Path, **options) -> Path:
     if kind == "png" and "pil_kwargs" not in options:  # zlib's level 3: three times faster than its default
         options["pil_kwargs"] = {"compress_level": PNG_COMPRESSION}  # for a fifth more bytes, the same pixels
     with written(path) as tmp:
-        fig.savefig(tmp, format=path.suffix.lstrip(".") or None, **options)
+        fig.savefig(tmp, format=kind, **options)
     return path
 
 

@@ -192,8 +192,8 @@ class TimelineDrawing:
             self._starting = None
 
     def result(self) -> list[Path]:
-        """Wait for the pictures (or draw them) and return their files: the caller's figures, then the overview
-        (or the one picture), then the windows; window files of an earlier, longer run left in the folder are removed. Raises what drawing
+        """Wait for the pictures (or draw them) and return their files, the overview (or the one picture)
+        first; window files of an earlier, longer run left in the folder are removed. Raises what drawing
         one of them raised. A picture whose worker died (killed, or unable to start) is drawn here."""
         from concurrent.futures import BrokenExecutor
 
@@ -234,7 +234,7 @@ class TimelineDrawing:
 
 def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | None = None, window: float = WINDOW,
                     threshold: float | None = None, title: str | None = None, width: float = 16.0,
-                    workers: int | None = None, figures: list[tuple] = ()) -> TimelineDrawing:
+                    workers: int | None = None) -> TimelineDrawing:
     """Begin drawing the pictures of :func:`plot_timelines`; the caller writes its other files meanwhile
     and asks :meth:`TimelineDrawing.result` for these when it needs them.
 
@@ -255,11 +255,6 @@ def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | No
     workers : int, optional
         How many processes draw side by side (default :data:`WORKERS`; at most one per core this process
         may run on, and one per picture).
-    figures : list of (file, function, arguments)
-        Other pictures of the run drawn by the same processes, first: ``function(*arguments)`` (a function a
-        worker can import by name, arguments it can be handed) makes a matplotlib figure saved to ``file``;
-        so the caller never imports matplotlib's figures itself. Their files come first in
-        :meth:`TimelineDrawing.result`.
 
     Returns
     -------
@@ -285,13 +280,14 @@ def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | No
     n = min(WORKERS if workers is None else workers, _cores(), len(jobs))
     if len(jobs) < 3:  # one window at most: nothing to draw side by side
         n = 1
-    jobs = [("figure", Path(file), function, tuple(arguments)) for file, function, arguments in figures] + jobs
     return TimelineDrawing(jobs, png, recording, panel, n)
 
 
 def start_figures(figures: list[tuple]) -> TimelineDrawing:
-    """Begin drawing pictures of the caller's own, ``(file, function, arguments)`` as :func:`start_timelines`
-    takes them, in a process of their own (:func:`warm_workers`; where none can start, in this one when
+    """Begin drawing pictures of the caller's own, ``(file, function, arguments)``: ``function(*arguments)`` (a
+    function a worker can import by name, arguments it can be handed) makes a matplotlib figure saved to
+    ``file``, so that the caller never imports matplotlib's figures itself. They are drawn in a process of
+    their own (:func:`warm_workers`; where none can start, in this one when
     :meth:`TimelineDrawing.result` asks for them): for what can be drawn while this process does other work
     (the poses, before the timeline pictures can begin)."""
     jobs = [("figure", Path(file), function, tuple(arguments)) for file, function, arguments in figures]

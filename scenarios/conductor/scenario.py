@@ -485,8 +485,8 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
         with say("pictures"):
             if tempo is not None:
                 tempo.result()
+            else:  # (no timeline pictures: no process is started for this one)
+                save_figure(run_tempo_figure(run, metrics), out / "tempo.png")
             if timelines is not None:
                 timelines.result()
-            else:
-                save_figure(run_tempo_figure(run, metrics), out / "tempo.png")
     return out
