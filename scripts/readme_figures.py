@@ -6,7 +6,8 @@ Each table the script owns sits in its page between ``<!-- figures:NAME -->`` an
 ``python scripts/readme_figures.py`` runs what each table reports and writes the tables into the pages;
 ``--check`` writes nothing and exits 1, printing the difference, when a table differs from a fresh run (CI runs
 it after the documentation's build, ``.ci/run``); ``--only NAME`` does one table. Columns of wall or CPU time
-(:data:`MEASURED`), which another run on a machine shared with other work does not repeat to the digit, are written but not checked.
+(:data:`MEASURED`), which another run on a machine shared with other work does not repeat to the digit, are
+written but not checked.
 
 Tables:
 
@@ -108,33 +109,36 @@ def _cells(line: str) -> list[str]:
     return [cell.strip() for cell in line.strip().strip("|").split("|")]
 
 
+#: The first cells of the header rows of the tables the script writes.
+HEADS = ("backend", "timing", "strategy", "story")
+
+
+def _table_rows(text: str):
+    """Each line of ``text`` with the header (cells) of the table it is in, and its own cells: None for a
+    header, a rule or a line outside a table."""
+    header = None
+    for line in text.splitlines():
+        cells = None
+        if line.startswith("|") and not line.startswith("|---"):
+            cells = _cells(line)
+            if header is None or cells[0] in HEADS:
+                header, cells = cells, None
+        elif not line.strip():
+            header = None
+        yield line, header, cells
+
+
 def keep_measured(old: str, new: str) -> str:
     """``new`` with the cells of :data:`MEASURED` columns taken from ``old`` (the same table as written before),
     row by row, where both have the row's first cell and the same header."""
-    before = {}
-    header = None
-    for line in old.splitlines():
-        if line.startswith("|") and not line.startswith("|---"):
-            cells = _cells(line)
-            if header is None or cells[0] in ("backend", "timing", "strategy", "story"):
-                header = cells
-            else:
-                before[(tuple(header), tuple(cells[:2]))] = cells
-        elif not line.strip():
-            header = None
-    lines, header = [], None
-    for line in new.splitlines():
-        if line.startswith("|") and not line.startswith("|---"):
-            cells = _cells(line)
-            if header is None or cells[0] in ("backend", "timing", "strategy", "story"):
-                header = cells
-            else:
-                was = before.get((tuple(header), tuple(cells[:2])))
-                if was is not None and len(was) == len(cells):
-                    cells = [w if h in MEASURED else c for h, c, w in zip(header, cells, was)]
-                    line = "| " + " | ".join(cells) + " |"
-        elif not line.strip():
-            header = None
+    before = {(tuple(header), tuple(cells[:2])): cells for _, header, cells in _table_rows(old) if cells is not None}
+    lines = []
+    for line, header, cells in _table_rows(new):
+        if cells is not None:
+            was = before.get((tuple(header), tuple(cells[:2])))
+            if was is not None and len(was) == len(cells):
+                cells = [w if h in MEASURED else c for h, c, w in zip(header, cells, was)]
+                line = "| " + " | ".join(cells) + " |"
         lines.append(line)
     return "\n".join(lines)
 
