@@ -218,6 +218,12 @@ def clear_scratch(prefix: str) -> list[Path]:
     return removed
 
 
+def user_cache(name: str) -> Path:
+    """The folder ``name`` of agentsim's cache of this user: ``$XDG_CACHE_HOME/agentsim/NAME``
+    (``~/.cache/agentsim/NAME`` where that is not set)."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "agentsim" / name
+
+
 #: zlib's compression level of the PNG pictures :func:`save_figure` writes.
 PNG_COMPRESSION = 3
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import hashlib
 import io
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -131,8 +130,9 @@ def midi_bytes(piece: Piece) -> bytes:
 
 def cache_dir() -> Path:
     """Where rendered pieces are kept: ``~/.cache/agentsim/music`` (under ``$XDG_CACHE_HOME`` if set)."""
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return base / "agentsim" / "music"
+    from agentsim.written import user_cache
+
+    return user_cache("music")
 
 
 def rendered(piece: Piece, rate: int, folder: Path | None = None) -> np.ndarray:

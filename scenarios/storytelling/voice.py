@@ -43,7 +43,7 @@ import numpy as np
 
 from speech_timing.backend import Mark, Phoneme, SpeechText, Utterance, Word
 from speech_timing.samples import BLOCK, Pcm16, PcmFile
-from agentsim.written import written
+from agentsim.written import user_cache, written
 
 #: 16-bit samples read from (and written to) a cache file at a time.
 READ_BLOCK = BLOCK
@@ -63,8 +63,7 @@ def default_cache_dir() -> Path:
     (``~/.cache/agentsim/tts``)."""
     if os.environ.get("AGENTSIM_CACHE"):
         return Path(os.environ["AGENTSIM_CACHE"]).expanduser()
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return base / "agentsim" / "tts"
+    return user_cache("tts")
 
 
 # ----------------------------------------------------------------------------------------------------
