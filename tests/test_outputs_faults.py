@@ -349,8 +349,11 @@ def test_a_lost_worker_is_said_on_stderr_and_counted_in_the_attempts(tmp_path, m
     mark = tmp_path / "died-once"
 
     def dies_once(argv, out_at, keep, path=str(mark)):
-        if not os.path.exists(path):
-            Path(path).write_text("x")
+        try:  # created at once or not at all: of two tasks that start together, only one dies
+            os.close(os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            pass
+        else:
             os._exit(1)  # the worker's process dies under the task
         from agentsim.cli.sweep.point import run_point
 

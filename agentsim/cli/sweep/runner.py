@@ -28,6 +28,8 @@ takes its points with it, and the scheduler runs them on another worker (up to D
 ``distributed.scheduler.allowed-failures`` deaths per point; beyond that the point fails); the sweep says
 on stderr how many points were run again so, and the ``attempts`` column of the results counts the runs
 of each point (1 where no worker was lost under it; a point from the cache keeps the count of its run).
+The local cluster gives a worker one point at a time (Dask's ``worker-saturation`` 1.0; its default sends
+a second one to wait there): a worker that dies loses only the point it was running, and the count stays true.
 
 The local cluster (``--workers``) talks TLS with credentials made for it alone
 (``distributed.Security.temporary()``: a certificate and key held in memory, never written): another user of
@@ -101,6 +103,8 @@ def connect(workers: int | None, scheduler: str | None):
     """A Dask client: on a new ``LocalCluster`` of ``workers`` processes with one thread each, or on the
     scheduler at ``scheduler`` (``tcp://host:port``) once a worker has joined it."""
     dd = distributed()
+    import dask  # installed with distributed
+
     with contextlib.ExitStack() as stack:
         if scheduler:
             try:
@@ -114,6 +118,9 @@ def connect(workers: int | None, scheduler: str | None):
                                     f"{CONNECT_TIMEOUT:g} s: start some with 'dask worker {scheduler} "
                                     f"--nthreads 1'") from None
         else:
+            # one task on a worker at a time (Dask's default sends a second one to wait there): a worker
+            # that dies then loses only the point it was running, and the attempts counted stay true
+            stack.enter_context(dask.config.set({"distributed.scheduler.worker-saturation": 1.0}))
             cluster = stack.enter_context(dd.LocalCluster(
                 n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
                 security=dd.Security.temporary(), protocol="tls://", host="127.0.0.1",
