@@ -165,15 +165,27 @@ def test_the_physics_runs_inside_the_frame_loop_the_same_in_memory_and_in_files(
     realizer.run()
     pushes = [Push(0.3, (0.0, 0.0, 150.0), 0.2)]
 
-    def physical(folder):
-        manager = PhysicalManager(run_controllers(realizer), pushes, fps=60.0, seed=0)
+    told = []  # what the progress of an in-memory run was told: the frames made so far, each time
+
+    def physical(folder, progress=None):
+        manager = PhysicalManager(run_controllers(realizer), pushes, fps=60.0, seed=0, progress=progress)
         stream = evaluate_poses(realizer, fps=60.0, manager=manager, folder=folder)
         return stream, manager.result
 
     memory, result = physical(None)
     files, _ = physical(tmp_path / "poses")
+    followed, _ = physical(None, lambda body, times, values: told.append((body, times.copy(), values.copy())))
     plain = evaluate_poses(realizer, fps=60.0)
     np.testing.assert_array_equal(np.asarray(files.values), memory.values)
+    np.testing.assert_array_equal(followed.values, memory.values)  # told or not, the same poses
+    from agentsim.physics.run import PROGRESS_FRAMES
+
+    assert len(told) == math.ceil(memory.n_frames / PROGRESS_FRAMES) >= 2
+    for k, (body, times, values) in enumerate(told):  # each time every frame the animation's allowed so far
+        fed = min(memory.n_frames, (k + 1) * PROGRESS_FRAMES)
+        assert body is followed.body and len(times) == fed - 1  # (a frame is made once the one after it has come)
+        np.testing.assert_array_equal(times, memory.times[:len(times)])
+        np.testing.assert_array_equal(values, memory.values[:len(times)])
     def named(stream):  # driver uids count on from run to run: compare the drivers' names
         names = {**stream.driver_names, -1: ""}
         return np.vectorize(names.get)(np.asarray(stream.writers))

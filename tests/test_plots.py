@@ -251,6 +251,40 @@ def test_windows_drawn_by_worker_processes_are_the_files_drawn_here(tmp_path, mo
         assert a.read_bytes() == b.read_bytes(), a.name
 
 
+def test_windows_whose_poses_come_later_begin_when_theirs_have_come_and_are_the_same_files(tmp_path, monkeypatch):
+    from agentsim.animation import evaluate_poses, pictures
+    from agentsim.animation.timeline import PosePanel
+
+    monkeypatch.setattr(pictures, "_cores", lambda: 2)
+    recording = long_run(40.0)  # an overview and three windows
+    stream = evaluate_poses(recording, fps=30, seed=0)
+    here = plot_timelines(recording, tmp_path / "here", stream=stream, window=15.0, threshold=15.0, width=8.0,
+                          workers=1)
+    windows = ["timeline_0000-0015s.png", "timeline_0015-0030s.png", "timeline_0030-0045s.png"]
+    with start_timelines(recording, tmp_path / "later", window=15.0, threshold=15.0, width=8.0, workers=2,
+                         poses_later=True) as drawing:
+        waiting = lambda: [p.name for p in drawing.waiting]  # noqa: E731
+        assert waiting() == windows  # the overview shows no poses: begun at once
+        with pytest.raises(RuntimeError, match="poses_until"):
+            drawing.result()
+        progress = drawing.follow()
+        upto = int(np.searchsorted(stream.times, 15.5, side="right"))  # a window shows its poses 0.5 s beyond it
+        progress(stream.body, stream.times[:upto], stream.values[:upto])
+        assert waiting() == windows
+        progress(stream.body, stream.times[:upto + 1], stream.values[:upto + 1])
+        assert waiting() == windows[1:]
+        upto = int(np.searchsorted(stream.times, 40.0))
+        progress(stream.body, stream.times[:upto], stream.values[:upto])
+        assert waiting() == windows[2:]
+        drawing.poses_until(PosePanel.of(stream), complete=True)
+        assert waiting() == []
+        later = drawing.result()
+    assert drawing.workers == 2
+    assert [p.name for p in here] == [p.name for p in later] == ["timeline.png", *windows]
+    for a, b in zip(here, later):  # byte for byte
+        assert a.read_bytes() == b.read_bytes(), a.name
+
+
 # ------------------------------------------------------------------------------------------- tempo
 def ramp():
     """An ensemble at 108 BPM for 8 beats that reaches 120 BPM, conducted from beat 5."""

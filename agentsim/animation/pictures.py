@@ -15,6 +15,7 @@ function                 what it does
 from __future__ import annotations
 
 import glob
+import math
 import os
 import pickle
 import re
@@ -23,8 +24,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from agentsim.animation.timeline import (DPI, LONG_RUN, WINDOW, PosePanel, recording_of, overview_figure,
-                                         plot_timeline, run_duration, time_windows, window_path)
+from agentsim.animation.timeline import (DPI, LONG_RUN, PANEL_MARGIN, WINDOW, PosePanel, recording_of,
+                                         overview_figure, plot_timeline, run_duration, time_windows, window_path)
 from agentsim.written import save_figure
 
 if TYPE_CHECKING:  # the poses' module (the body, the drivers) is not loaded to draw a run that has them
@@ -124,13 +125,17 @@ def _draw(job: tuple, recording=None, panel=None) -> Path:
     """Draw one picture of :func:`plot_timelines` of the run given or, in a worker process, of its run;
     ``job``: ``("whole", file, title, width)``, ``("overview", file, title, width, window)``,
     ``("window", file, title, width, start, end)`` or ``("figure", file, function, arguments)`` (a module-level
-    function making a matplotlib figure from the arguments, saved to the file). Returns the file."""
+    function making a matplotlib figure from the arguments, saved to the file); a whole run's or a window's
+    job may end with the :class:`PosePanel` it draws (poses that came after the workers started). Returns
+    the file."""
     if job[0] == "figure":  # ("figure", file, function, arguments): a figure of the caller's own
         _, path, function, arguments = job
         return save_figure(function(*arguments), path)
     if recording is None:
         recording, panel = _WORKER["run"]
     kind, path, title, width, *span = job
+    if span and isinstance(span[-1], PosePanel):
+        *span, panel = span
     if kind == "overview":
         save_figure(overview_figure(recording, title=title, width=width, window=span[0]), path, dpi=DPI)
         return path
@@ -147,6 +152,9 @@ class TimelineDrawing:
     them. Use it as a context manager, or call :meth:`close`, so that the workers are let go if the files
     are never asked for.
 
+    With poses that come later (:func:`start_timelines` ``poses_later``), the pictures that need none begin
+    at once and each of the others when :meth:`poses_until` has brought the poses it shows.
+
     Attributes
     ----------
     workers : int
@@ -156,11 +164,15 @@ class TimelineDrawing:
     """
 
     def __init__(self, jobs: list[tuple], png: Path | None, recording, panel: PosePanel | None, workers: int,
-                 aside: bool = False) -> None:
+                 aside: bool = False, poses_later: bool = False) -> None:
         self._jobs, self._png, self._recording, self._panel = jobs, png, recording, panel
         self._written: list[Path] | None = None
         self._pool = None
-        self._futures: list = []
+        self._futures: dict = {}  # job index -> its future, once handed to a worker
+        #: the jobs that wait for poses, and those ready but not yet handed to a worker (the pool is starting)
+        self._waiting = {k for k, job in enumerate(jobs) if poses_later and job[0] in ("window", "whole")}
+        self._ready = [k for k in range(len(jobs)) if k not in self._waiting]
+        self._lock = threading.Lock()
         self._starting: threading.Thread | None = None
         self.workers = 0
         context = warm_workers() if workers > 1 or aside and workers == 1 else None
@@ -180,16 +192,64 @@ class TimelineDrawing:
         import concurrent.futures
 
         try:
-            self._pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_take_run,
-                                                                initargs=(payload,))
-            self._futures = [self._pool.submit(_draw, job) for job in self._jobs]
+            pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_take_run,
+                                                          initargs=(payload,))
+            with self._lock:
+                self._pool = pool
+                self._hand_ready()
         except (OSError, RuntimeError, concurrent.futures.BrokenExecutor):
-            self._futures = []
+            self._futures = {}
+
+    def _hand_ready(self) -> None:
+        """Hand the jobs ready to the workers (under the lock, once the pool is there)."""
+        for k in self._ready:
+            self._futures[k] = self._pool.submit(_draw, self._jobs[k])
+        self._ready = []
+
+    def poses_until(self, panel: PosePanel, complete: bool = False) -> None:
+        """The run's poses from its start to the last frame of ``panel`` have come (``complete``: all of
+        them): the pictures that show none later begin."""
+        with self._lock:
+            if complete:
+                self._panel = panel
+            last = float(panel.times[-1]) if len(panel.times) else -math.inf
+            for k in sorted(self._waiting):
+                kind, *rest = self._jobs[k]
+                if kind == "window" and (complete or last > rest[4] + PANEL_MARGIN):
+                    self._jobs[k] = (kind, *rest, panel.around(rest[3], rest[4]))
+                elif complete:
+                    self._jobs[k] = (kind, *rest, panel)
+                else:
+                    continue
+                self._waiting.discard(k)
+                self._ready.append(k)
+            if self._pool is not None:
+                self._hand_ready()
 
     def _started(self) -> None:
         if self._starting is not None:
             self._starting.join()
             self._starting = None
+
+    @property
+    def waiting(self) -> list[Path]:
+        """The files of the pictures that wait for poses (:meth:`poses_until`), in order."""
+        with self._lock:
+            return [self._jobs[k][1] for k in sorted(self._waiting)]
+
+    def follow(self):
+        """A ``progress(body, times, values)`` for poses of ``body`` made a stretch at a time (the frames made so
+        far, from the run's start, as arrays), which brings each new stretch to :meth:`poses_until`."""
+        parts: list[PosePanel] = []
+        seen = [0]
+
+        def progress(body, times, values) -> None:
+            if len(times) > seen[0]:
+                parts.append(PosePanel.of_poses(body, times[seen[0]:], values[seen[0]:]))
+                seen[0] = len(times)
+                self.poses_until(PosePanel.joined(parts))
+
+        return progress
 
     def result(self) -> list[Path]:
         """Wait for the pictures (or draw them) and return their files, the overview (or the one picture)
@@ -198,12 +258,14 @@ class TimelineDrawing:
         from concurrent.futures import BrokenExecutor
 
         if self._written is None:
+            if self._waiting:
+                raise RuntimeError("the pictures wait for poses: call poses_until(panel, complete=True) first")
             self._started()
             try:
                 written = []
                 for k, job in enumerate(self._jobs):
                     try:
-                        written.append(self._futures[k].result() if self._futures else None)
+                        written.append(self._futures[k].result() if k in self._futures else None)
                     except BrokenExecutor:
                         written.append(None)
                     if written[-1] is None:
@@ -234,7 +296,7 @@ class TimelineDrawing:
 
 def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | None = None, window: float = WINDOW,
                     threshold: float | None = None, title: str | None = None, width: float = 16.0,
-                    workers: int | None = None) -> TimelineDrawing:
+                    workers: int | None = None, poses_later: bool = False) -> TimelineDrawing:
     """Begin drawing the pictures of :func:`plot_timelines`; the caller writes its other files meanwhile
     and asks :meth:`TimelineDrawing.result` for these when it needs them.
 
@@ -255,6 +317,11 @@ def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | No
     workers : int, optional
         How many processes draw side by side (default :data:`WORKERS`; at most one per core this process
         may run on, and one per picture).
+    poses_later : bool
+        The poses come later, a stretch at a time, each from the run's start (``stream`` then None): the
+        pictures that show none (a long run's overview) begin at once, each window as soon as
+        :meth:`TimelineDrawing.poses_until` has brought the poses it shows, a short run's one picture when
+        it has brought them all. For poses that take long to make (the physical body's).
 
     Returns
     -------
@@ -280,7 +347,7 @@ def start_timelines(source, out: str | Path, stream: PoseStream | PosePanel | No
     n = min(WORKERS if workers is None else workers, _cores(), len(jobs))
     if len(jobs) < 3:  # one window at most: nothing to draw side by side
         n = 1
-    return TimelineDrawing(jobs, png, recording, panel, n)
+    return TimelineDrawing(jobs, png, recording, panel, n, poses_later=poses_later)
 
 
 def start_figures(figures: list[tuple]) -> TimelineDrawing:

@@ -78,6 +78,10 @@ class HeardWord:
     end: float
 
 
+#: How far beyond a window's ends its pose panel draws the poses (s).
+PANEL_MARGIN = 0.5
+
+
 @dataclass(frozen=True, eq=False)
 class PosePanel:
     """What the panel under a timeline draws of a run's poses, for every frame: its time (s), the heights
@@ -101,6 +105,28 @@ class PosePanel:
         fwd = stream.forward("skullbase")
         return cls(np.array(stream.times), np.array(stream.position("l_wrist")[:, 1]),
                    np.array(stream.position("r_wrist")[:, 1]), -np.degrees(np.arcsin(np.clip(fwd[:, 1], -1, 1))))
+
+    @classmethod
+    def of_poses(cls, body, times: np.ndarray, values: np.ndarray) -> PosePanel:
+        """The panel of some frames of poses (``values``, a row a frame, at ``times``) of ``body``: the same
+        numbers as those frames' rows of the panel of a stream of them all."""
+        fk = body.forward_kinematics(np.atleast_2d(np.asarray(values, dtype=float)), ["l_wrist", "r_wrist",
+                                                                                      "skullbase"])
+        fwd = fk["skullbase"][0][:, :, 2]
+        return cls(np.array(times, dtype=float), np.array(fk["l_wrist"][1][:, 1]), np.array(fk["r_wrist"][1][:, 1]),
+                   -np.degrees(np.arcsin(np.clip(fwd[:, 1], -1, 1))))
+
+    @classmethod
+    def joined(cls, parts: list[PosePanel]) -> PosePanel:
+        """The panels of consecutive stretches of frames as one."""
+        return cls(*(np.concatenate([getattr(p, name) for p in parts])
+                     for name in ("times", "l_wrist", "r_wrist", "head_pitch")))
+
+    def around(self, start: float, end: float) -> PosePanel:
+        """The frames a window from ``start`` to ``end`` draws (:data:`PANEL_MARGIN` seconds beyond either
+        end)."""
+        sel = (self.times >= start - PANEL_MARGIN) & (self.times <= end + PANEL_MARGIN)
+        return PosePanel(self.times[sel], self.l_wrist[sel], self.r_wrist[sel], self.head_pitch[sel])
 
 
 def recording_of(source):
@@ -438,7 +464,7 @@ def timeline_figure(source, stream: PoseStream | PosePanel | None = None, title:
     if panel is not None:
         bx = axes[1]
         times = panel.times
-        sel = slice(None) if not window else (times >= lo - 0.5) & (times <= hi + 0.5)
+        sel = slice(None) if not window else (times >= lo - PANEL_MARGIN) & (times <= hi + PANEL_MARGIN)
         for joint, heights, colour in (("l_wrist", panel.l_wrist, "#31a354"), ("r_wrist", panel.r_wrist, "#e6550d")):
             bx.plot(times[sel], heights[sel], color=colour, linewidth=0.9, label=f"{joint} height (m)")
         bx.set_ylabel("height (m)", fontsize=7)

@@ -71,11 +71,15 @@ class PhysicalManager(DriverManager):
     window of frames the drivers evaluate goes to the simulation as it comes, and the physical body's frames
     go on to the pose files (or the arrays) in order, two frames behind the drivers (a frame's velocities
     need the next one). :attr:`result` is the :class:`PhysicsResult` once the frames are evaluated.
+    ``progress(body, times, values)``, if given, is called with the physical frames made so far (arrays) every
+    :data:`PROGRESS_FRAMES` frames of the animation, so that what needs them can begin.
     """
 
-    def __init__(self, controllers: list[ControllerSpec], pushes: list[Push] = (), fps: float = 60.0, **kwargs):
+    def __init__(self, controllers: list[ControllerSpec], pushes: list[Push] = (), fps: float = 60.0,
+                 progress=None, **kwargs):
         super().__init__(**kwargs)
         self.controllers, self.pushes, self.fps = list(controllers), list(pushes), float(fps)
+        self.progress = progress
         self.result: PhysicsResult | None = None
 
     def evaluate(self, times, sink=None, window: int = 16384):
@@ -83,8 +87,18 @@ class PhysicalManager(DriverManager):
         if sink is None:
             values, writers = super().evaluate(times)
             out = np.empty_like(values)
-            stepper = Stepper(self.body, self.fps, times, self.controllers, self.pushes, out.__setitem__)
-            stepper.feed(values)
+            made = [0]
+
+            def put(k: int, pose: np.ndarray) -> None:
+                out[k] = pose
+                made[0] = k + 1
+
+            stepper = Stepper(self.body, self.fps, times, self.controllers, self.pushes, put)
+            step = PROGRESS_FRAMES if self.progress is not None else max(1, len(values))
+            for a in range(0, len(values), step):
+                stepper.feed(values[a:a + step])
+                if self.progress is not None:
+                    self.progress(self.body, times[:made[0]], out[:made[0]])
             self.result = stepper.finish()
             return out, writers
         made: list[np.ndarray] = []  # physical frames not yet handed on
@@ -108,6 +122,10 @@ class PhysicalManager(DriverManager):
         self.result = stepper.finish()
         send()
         return None
+
+
+#: How many of the animation's frames :class:`PhysicalManager` simulates between two calls of its ``progress``.
+PROGRESS_FRAMES = 64
 
 
 #: The modes of a gesture or pointing that leave the left hand alone.
@@ -141,26 +159,29 @@ def hanging_left_arm(source, end: float) -> list[ControllerSpec]:
     return specs
 
 
-def physical_poses(recording, fps: float, seed: int, pushes=(), controllers=(), scene=None, folder=None):
+def physical_poses(recording, fps: float, seed: int, pushes=(), controllers=(), scene=None, folder=None,
+                   progress=None):
     """The poses of a finished run on the physical body (as :func:`~agentsim.animation.evaluate_poses` gives
     the animation's), with the run's controllers under the default balance, ``controllers`` added (e.g. a
-    scenario's HangControllers) and the ``pushes``; returns the stream and the :class:`PhysicsResult`."""
+    scenario's HangControllers) and the ``pushes``; returns the stream and the :class:`PhysicsResult`.
+    ``progress``: as :class:`PhysicalManager` takes it (poses held in memory, no ``folder``)."""
     from agentsim.animation import evaluate_poses
     from agentsim.animation.output import lexicon_of
 
     manager = PhysicalManager([*run_controllers(recording), *controllers], list(pushes), fps=fps, seed=seed,
-                              scene=scene, lexicon=lexicon_of(recording))
+                              scene=scene, lexicon=lexicon_of(recording), progress=progress)
     stream = evaluate_poses(recording, fps=fps, seed=seed, folder=folder, manager=manager)
     return stream, manager.result
 
 
-def scenario_poses(recording, fps: float, seed: int, pushes, out: Path, controllers=(), scene=None, folder=None):
+def scenario_poses(recording, fps: float, seed: int, pushes, out: Path, controllers=(), scene=None, folder=None,
+                   progress=None):
     """:func:`physical_poses` for a scenario's folder ``out``: its ``physics.csv`` written there, a fall or an
     unstable simulation said on one line of stderr (the scenario's feedback is its realizer's); the stream and
     the :class:`PhysicsResult`."""
     import sys
 
-    stream, result = physical_poses(recording, fps, seed, pushes, controllers, scene, folder)
+    stream, result = physical_poses(recording, fps, seed, pushes, controllers, scene, folder, progress)
     write_physics_csv(Path(out) / "physics.csv", result)
     line = fell_line(result)
     if line:

@@ -406,7 +406,7 @@ def tempo_figure_arguments(run: Run, metrics: dict) -> tuple:
             run.extra["first_index"], run.extra["onsets"])
 
 
-def physical_poses(recording, fps: float, seed: int, pushes: list, out: Path):
+def physical_poses(recording, fps: float, seed: int, pushes: list, out: Path, progress=None):
     """The run's poses on the physical body and its figures, its ``physics.csv`` written in ``out``: the left arm hangs
     (a HangController) while the right hand conducts alone, and is taken back by the animation for the
     gestures with the left or both hands ("play louder", stop)."""
@@ -414,7 +414,7 @@ def physical_poses(recording, fps: float, seed: int, pushes: list, out: Path):
     from agentsim.physics.run import hanging_left_arm, scenario_poses
 
     hang = hanging_left_arm(recording, run_duration(recording) + 2.0)
-    return scenario_poses(recording, fps, seed, pushes, out, controllers=hang)
+    return scenario_poses(recording, fps, seed, pushes, out, controllers=hang, progress=progress)
 
 
 def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True,
@@ -458,13 +458,23 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
                 [(out / "tempo.png", tempo_figure, tempo_figure_arguments(run, metrics))]))
                 if plots and pictures else None)
             body = None  # the physical body's figures (--physics)
+
+            def timeline_pictures(stream=None, poses_later=False):
+                return drawing.enter_context(start_timelines(
+                    recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
+                    title=f"conductor ({run.strategy_name})", poses_later=poses_later))
+
             if physics is None:
                 stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
-            else:
-                stream, body = physical_poses(recording, run.config.conductor.fps, run.seed, physics, out)
-            timelines = (drawing.enter_context(start_timelines(
-                recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
-                title=f"conductor ({run.strategy_name})")) if plots and pictures else None)
+                timelines = timeline_pictures(stream) if plots and pictures else None
+            else:  # the physical body's poses take long: each window is drawn as soon as its poses are made
+                from agentsim.animation.timeline import PosePanel
+
+                timelines = timeline_pictures(poses_later=True) if plots and pictures else None
+                stream, body = physical_poses(recording, run.config.conductor.fps, run.seed, physics, out,
+                                              progress=timelines and timelines.follow())
+                if timelines is not None:
+                    timelines.poses_until(PosePanel.of(stream), complete=True)
             write_bvh(out / "conductor.bvh", stream)
         with say("audio"):
             # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the
