@@ -446,10 +446,10 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     recording = run.realizer.recording()
     write_feedback(out / "feedback.jsonl", recording.feedback)
     # the report's sound is encoded on a thread of its own (libsndfile does not hold the interpreter) while
-    # the poses and the rest are made; the timeline pictures are drawn by worker processes from when the poses
-    # are known, and waited for at the end
+    # the poses and the rest are made; the pictures are drawn by worker processes meanwhile, and waited for at
+    # the end
     with contextlib.ExitStack() as drawing, concurrent.futures.ThreadPoolExecutor(1) as sound:
-        with say("poses/BVH"):  # first: the pictures, the longest to make, begin as soon as the poses are known
+        with say("poses/BVH"):  # first: the pictures, the longest to make, begin before the poses
             # the tempo figure, which needs no poses, is begun first, in a process of its own (this one never
             # imports matplotlib's figures)
             from scenarios.conductor.metrics import tempo_figure
@@ -457,24 +457,21 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
             tempo = (drawing.enter_context(start_figures(
                 [(out / "tempo.png", tempo_figure, tempo_figure_arguments(run, metrics))]))
                 if plots and pictures else None)
+            # the timeline pictures begin before the poses: the overview, which shows none, at once, and each
+            # window as soon as its poses are made (the physical body's come a stretch at a time)
+            timelines = (drawing.enter_context(start_timelines(
+                recording, out / "timeline.png", window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
+                title=f"conductor ({run.strategy_name})", poses_later=True)) if plots and pictures else None)
             body = None  # the physical body's figures (--physics)
-
-            def timeline_pictures(stream=None, poses_later=False):
-                return drawing.enter_context(start_timelines(
-                    recording, out / "timeline.png", stream=stream, window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
-                    title=f"conductor ({run.strategy_name})", poses_later=poses_later))
-
             if physics is None:
                 stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
-                timelines = timeline_pictures(stream) if plots and pictures else None
-            else:  # the physical body's poses take long: each window is drawn as soon as its poses are made
-                from agentsim.animation.timeline import PosePanel
-
-                timelines = timeline_pictures(poses_later=True) if plots and pictures else None
+            else:
                 stream, body = physical_poses(recording, run.config.conductor.fps, run.seed, physics, out,
                                               progress=timelines and timelines.follow())
-                if timelines is not None:
-                    timelines.poses_until(PosePanel.of(stream), complete=True)
+            if timelines is not None:
+                from agentsim.animation.timeline import PosePanel
+
+                timelines.poses_until(PosePanel.of(stream), complete=True)
             write_bvh(out / "conductor.bvh", stream)
         with say("audio"):
             # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the
