@@ -4,7 +4,10 @@ It listens causally to three-axis acceleration with gravity included, as a phone
 reports it (``DeviceMotionEvent.accelerationIncludingGravity``: at rest it reads gravity's reaction, pointing
 up), or to one coordinate of a tracked point (its height), at 10-200 Hz. A repetition's *key point* is the
 lowest point of the movement along the recording's mean gravity direction (the bottom of a squat): where the
-upward acceleration is largest, or the coordinate smallest.
+upward acceleration is largest, or the coordinate smallest. Between two lowest points the body must rise and
+come down again, so the acceleration turns downward between them; a dip that stays at rest (the still bottom
+between lowering the weight and lifting it again, which makes two upward bumps of one repetition) does not
+part two repetitions: of the bumps it joins, the key point is the largest.
 
 Pegs: ``repN`` at the N-th repetition's key point (as found once it has passed, as predicted before), and a
 rolling window ``next1``, ``next2``, ... of the upcoming ones. Nothing is predicted before the second
@@ -39,6 +42,11 @@ MIN_INTERVAL, MIN_SHARE = 0.6, 0.45
 PAUSE_PERIODS = 1.6
 #: Seconds of signal heard before the first repetition may be found (the averages settle).
 WARM_UP = 0.4
+#: The share of the swing a key point must lie above rest (the baseline), and a top of the movement below it.
+#: A way of the movement taking r times as long as the other accelerates 1/r² as hard (a raised cosine of depth d
+#: over T s peaks at d(π/T)²/2), so a top lies at least 1/(1 + r²) of the swing below rest: a fifth when the
+#: slower way takes twice as long as the quicker, as strength training's slow lowering does.
+TOP_SHARE = 0.2
 #: How far ahead of the clock the next prediction is held while the person pauses (s).
 HOLD_LEAD = 0.1
 
@@ -73,6 +81,9 @@ class RepetitionTracker:
         self._power = 0.0
         self._amplitude = 0.0
         self._seeking_peak = True
+        self._topped = True  # a top of the movement since the last key point (else the next bump is of its repetition)
+        self._peak_value = -math.inf  # the last key point's value in the smoothed signal
+        self._undo: tuple[int, bool] = (0, False)  # before the last key point: the segment, and whether it added an interval
         self._extreme = -math.inf
         self._extreme_t = t
         self._last_t = t
@@ -126,20 +137,27 @@ class RepetitionTracker:
             if y > self._extreme:
                 self._extreme, self._extreme_t = y, t
             elif y < self._extreme - hysteresis:
-                if self._extreme > 0.2 * self._amplitude:
+                if self._extreme > TOP_SHARE * self._amplitude:
                     self._peak(self._extreme, self._extreme_t, t)
                 self._seeking_peak, self._extreme, self._extreme_t = False, y, t
         else:
             if y < self._extreme:
                 self._extreme, self._extreme_t = y, t
             elif y > self._extreme + hysteresis:
-                self._trough = self._extreme
+                # a top of the movement lies well below rest (TOP_SHARE); a shallower dip, a pause at the bottom,
+                # joins the bumps on either side into one repetition
+                if self._extreme <= -TOP_SHARE * self._amplitude:
+                    self._trough, self._topped = self._extreme, True
                 self._seeking_peak, self._extreme, self._extreme_t = True, y, t
 
     def _peak(self, value: float, t_smooth: float, now: float) -> None:
-        """A maximum of the smoothed signal confirmed at ``now``: time it on the signal itself, and keep it."""
+        """A maximum of the smoothed signal confirmed at ``now``: time it on the signal itself, and keep it (or,
+        when no top of the movement parts it from the last key point, keep the larger of the two)."""
+        joined = not self._topped and bool(self.repetitions)
+        if joined and value <= self._peak_value:
+            return
         trough = getattr(self, "_trough", None)
-        if trough is not None:
+        if trough is not None and not joined:
             swing = value - trough
             self._amplitude = swing if self._amplitude == 0 else self._amplitude + 0.3 * (swing - self._amplitude)
         delay = 2.0 / (2.0 * math.pi * SMOOTH_HZ)  # the two averages' delay at low frequencies
@@ -162,15 +180,25 @@ class RepetitionTracker:
                 if a < 0:
                     t_key = top + float(np.clip(-b / (2 * a), -reach, reach))
         t_key = min(t_key, now)
+        if joined:  # the same repetition's larger bump: it replaces the key point found
+            self._segment, counted = self._undo
+            self.repetitions.pop()
+            if counted:
+                self.intervals.pop()
+            period = self.period
+        undo = (self._segment, False)
         if self.repetitions:
             gap = t_key - self.repetitions[-1]
             shortest = max(MIN_INTERVAL, MIN_SHARE * period) if period else MIN_INTERVAL
-            if gap < shortest:
+            if gap < shortest and not joined:
+                self._topped = True  # a second bump by its timing: the next one is timed afresh
                 return  # a second bump of the same repetition
             if period is None or gap <= PAUSE_PERIODS * period:
                 self.intervals.append(gap)
+                undo = (self._segment, True)
             else:
                 self._segment = len(self.repetitions)  # a restart: the phase is carried from here on
+        self._undo, self._peak_value, self._topped = undo, value, False
         self.repetitions.append(t_key)
         self._held = None
         self._announce(now)

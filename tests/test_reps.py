@@ -120,3 +120,26 @@ def test_live_motion_is_taken_or_refused_in_one_line():
     assert reps.offer(later, 2.7).startswith("the motion signal has been one constant value for 2 s")
     assert reps.offer([[0.5, 0.0, 0.0, 9.8]], 3.0).startswith("motion samples' times must increase")
     assert reps.inbox.qsize() == 2
+
+
+def test_a_pause_at_the_bottom_joins_its_two_bumps_into_one_repetition(tmp_path, capsys):
+    # pause squats: 0.9 s down, 0.6 s still at the bottom, 0.9 s up, 0.6 s still at the top; the upward
+    # acceleration has two bumps per repetition (stopping the descent, starting the rise) with rest between
+    rate, move, period, count = 12.5, 0.9, 3.0, 8
+    t = np.arange(0, 2.0 + count * period, 1 / rate)
+    up = np.zeros_like(t)
+    for k in range(count):
+        for begin, sign in ((1.0 + k * period, -1.0), (1.0 + k * period + 1.5, 1.0)):
+            s = (t - begin) / move
+            inside = (s >= 0) & (s < 1)
+            up[inside] += sign * 0.4 * (np.pi / move) ** 2 / 2 * np.cos(np.pi * s[inside])
+    a = np.column_stack([np.zeros_like(t), 0.3 * (9.81 + up), 0.95 * (9.81 + up)])
+    a += np.random.default_rng(6).normal(0.0, 0.15, a.shape)
+    path = tmp_path / "pause-squats.csv"
+    np.savetxt(path, np.column_stack([t, a]), delimiter=",", header="time,ax,ay,az", comments="", fmt="%.5f")
+    assert main(["anticipate", "reps", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["count"] == count  # each bottom once, not once per bump
+    bottoms = 1.0 + move + period * np.arange(count)  # the still bottom spans 0.6 s from here
+    assert (np.array(out["repetitions"]) > bottoms - 0.3).all() and (np.array(out["repetitions"]) < bottoms + 0.9).all()
+    assert abs(out["tempo_per_minute"] - 20.0) < 0.5

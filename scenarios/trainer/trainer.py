@@ -38,6 +38,8 @@ REMARKS = {
 }
 #: Silence kept between a remark and the next count, seconds.
 MARGIN = 0.25
+#: How soon after it is submitted a hurried move starts (s; its sync points are written to the millisecond).
+SOON = 0.02
 #: How far (in periods) ``lead``'s key points are at most ahead of (or behind) the user's predicted ones, and
 #: from how far off the target tempo (a share) they are that far.
 LEAD_AHEAD, LEAD_FULL = 0.18, 0.1
@@ -140,14 +142,14 @@ class Trainer:
             self.plan.update(now, self.moved + 1)
             while self.moved < self.repetitions and self.plan.keys.get(self.moved + 1, now) < now + 2 * self.plan.target:
                 self.moved += 1
-                self.submit_move(self.moved, self.plan.target)
+                self.submit_move(self.moved, self.plan.target, now)
                 self.plan.update(now, self.moved + 1)
         else:
             if self.plan is not None:
                 self.plan.update(now, last)
             while self.moved < last:
                 self.moved += 1
-                self.submit_move(self.moved, period)
+                self.submit_move(self.moved, period, now)
         while self.count_planned < last:
             self.count_planned += 1
             self.submit_count(self.count_planned)
@@ -162,9 +164,17 @@ class Trainer:
             self.remarked.add(found)
             self.remark(found, now)
 
-    def submit_move(self, n: int, period: float) -> None:
+    def submit_move(self, n: int, period: float, now: float) -> None:
+        """The ``n``-th move, its sync points ``period`` s apart as :data:`MOVES` places them; a move whose start
+        would already have passed (the first, when the user's second repetition is found late in a quick tempo)
+        is hurried into its key point from now."""
         key = self.key_ref(n)
-        syncs = " ".join(f'{name}="{key}{self.places[name] * period:+.3f}"' for name in self.places)
+        at = self.plan.keys.get(n) if self.plan is not None else self.reps.tracker.key_point(n)
+        before = -min(self.places.values()) * period  # how long the move takes before its key point
+        room = (at - now - SOON) if at is not None else before
+        hurry = min(1.0, room / before) if before > 0 and room > 0 else 1.0
+        syncs = " ".join(f'{name}="{key}{self.places[name] * period * (hurry if self.places[name] < 0 else 1):+.3f}"'
+                         for name in self.places)
         self.realizer.submit(f'<bml {NS} id="rep{n}"><posture id="move" lexeme="{self.lexeme}" {syncs}/></bml>')
 
     def submit_count(self, n: int) -> None:

@@ -73,3 +73,13 @@ def test_a_recording_plays_as_the_user_and_the_physical_body_squats_without_fall
     assert rows[0].split(",")[-3:] == ["com_inside", "pelvis_height", "fallen"]
     heights = [float(row.split(",")[-2]) for row in rows[1:]]
     assert min(heights) < 0.7 < 0.85 < max(heights)  # it squats: the pelvis goes down about 0.28 m and up again
+
+
+def test_a_quick_users_third_repetition_has_the_trainers_move_hurried_into_it(tmp_path):
+    # an arm raise begins 0.85 periods before its key point: when the user's second repetition is found, the
+    # third's move would have begun already; it is hurried, not dropped
+    out = tmp_path / "out"
+    assert main(["run", "trainer", "--exercise", "arm-raise", "--seed", "3", "--no-pictures", "--out", str(out)]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["trainer_repetitions"] == 18 and metrics["warnings"] == 0  # a move on the 3rd to the 20th
+    assert abs(metrics["asynchrony_ms"]["mean"]) <= 40 and metrics["asynchrony_ms"]["sd"] <= 60
