@@ -237,6 +237,42 @@ def test_a_track_written_stretch_by_stretch_is_the_track_written_whole(run, tmp_
     a, _ = soundfile.read(tmp_path / "whole_files" / "audio.ogg", dtype="float32")
     b, _ = soundfile.read(tmp_path / "stream_files" / "audio.ogg", dtype="float32")
     assert len(a) == whole.length and np.array_equal(a, b)
+    assert (tmp_path / "whole_files" / "audio.ogg").read_bytes() == (tmp_path / "stream_files" / "audio.ogg").read_bytes()
+
+
+def ogg_pages(data: bytes) -> list[bytes]:
+    pages, at = [], 0
+    while at < len(data):
+        assert data[at:at + 4] == b"OggS"
+        n = data[at + 26]
+        end = at + 27 + n + sum(data[at + 27:at + 27 + n])
+        pages.append(data[at:end])
+        at = end
+    return pages
+
+
+def test_the_reports_sound_is_the_same_bytes_every_time_and_its_pages_check(tmp_path):
+    """libsndfile numbers an Ogg stream from the clock: the report's sound gets a fixed serial number, and each
+    page the CRC Ogg's own (the one libsndfile writes) for it, so that one track is always the same file."""
+    track = Track(np.random.default_rng(3).uniform(-0.5, 0.5, 60000).astype(np.float32), 16000)
+    soundfile.write(tmp_path / "plain.ogg", track.samples, 16000, format="OGG", subtype="VORBIS")
+    plain = ogg_pages((tmp_path / "plain.ogg").read_bytes())
+    for page in plain:  # the CRC libsndfile wrote is the one computed here
+        assert report_page.ogg_page_crc(page[:22] + bytes(4) + page[26:]) == int.from_bytes(page[22:26], "little")
+    files = []
+    for k in range(2):
+        (tmp_path / str(k)).mkdir()
+        assert report_page.write_audio(tmp_path / str(k), track) == "audio.ogg"
+        files.append((tmp_path / str(k) / "audio.ogg").read_bytes())
+    assert files[0] == files[1]
+    pages = ogg_pages(files[0])
+    assert len(pages) == len(plain) >= 3
+    for page, before in zip(pages, plain):  # only the serial number and the CRC differ from libsndfile's
+        assert int.from_bytes(page[14:18], "little") == report_page.OGG_SERIAL
+        assert page[:14] + page[18:22] + page[26:] == before[:14] + before[18:22] + before[26:]
+        assert report_page.ogg_page_crc(page[:22] + bytes(4) + page[26:]) == int.from_bytes(page[22:26], "little")
+    heard, rate = soundfile.read(tmp_path / "0" / "audio.ogg", dtype="float32")
+    assert rate == 16000 and np.array_equal(heard, soundfile.read(tmp_path / "plain.ogg", dtype="float32")[0])
 
 
 def test_frames_sent_are_at_most_30_per_second():

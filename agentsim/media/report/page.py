@@ -24,6 +24,7 @@ from __future__ import annotations
 import concurrent.futures
 import html
 import shutil
+import zlib
 from pathlib import Path
 from urllib.parse import quote
 
@@ -66,10 +67,11 @@ def write_audio(folder: Path, track) -> str:
     try:
         if not soundfile.check_format("OGG", "VORBIS"):
             raise ValueError("this libsndfile writes no Ogg Vorbis")
-        with written(folder / "audio.ogg") as tmp, soundfile.SoundFile(tmp, "w", int(track.rate), 1, format="OGG",
-                                                                      subtype="VORBIS") as out:
-            for block in blocks():
-                out.write(block)
+        with written(folder / "audio.ogg") as tmp:
+            with soundfile.SoundFile(tmp, "w", int(track.rate), 1, format="OGG", subtype="VORBIS") as out:
+                for block in blocks():
+                    out.write(block)
+            steady_ogg_serial(tmp)
         return "audio.ogg"
     except (RuntimeError, ValueError, TypeError):  # libsndfile without Vorbis
         (folder / "audio.ogg").unlink(missing_ok=True)
@@ -78,6 +80,40 @@ def write_audio(folder: Path, track) -> str:
             for block in blocks():
                 out.write(block)
         return "audio.wav"
+
+
+#: The serial number of the Ogg stream of a report's sound (libsndfile draws one from the clock).
+OGG_SERIAL = 0x61677374
+#: Each byte with its bits in reverse order (Ogg's CRC works from the high bit, zlib's from the low one).
+_REVERSED_BITS = bytes(int(f"{k:08b}"[::-1], 2) for k in range(256))
+
+
+def ogg_page_crc(page: bytes) -> int:
+    """The CRC of an Ogg page (its CRC field zero): the CRC-32 of polynomial 0x04C11DB7, from the high bit,
+    with no initial or final inversion, by zlib's CRC-32 (the same polynomial from the low bit) over the
+    bytes with their bits reversed."""
+    low = zlib.crc32(page.translate(_REVERSED_BITS), 0xFFFFFFFF) ^ 0xFFFFFFFF
+    return int(f"{low:032b}"[::-1], 2)
+
+
+def steady_ogg_serial(path: Path, serial: int = OGG_SERIAL) -> None:
+    """Give the Ogg stream in the file at ``path`` the serial number ``serial`` (and each page its CRC anew):
+    libsndfile numbers a stream from the clock, so that the same sound encoded twice would differ in these
+    bytes alone. ValueError if the file is not a sequence of whole Ogg pages."""
+    data = bytearray(Path(path).read_bytes())
+    at = 0
+    while at < len(data):
+        if data[at:at + 4] != b"OggS" or at + 27 > len(data):
+            raise ValueError(f"{path}: no Ogg page at byte {at}")
+        segments = data[at + 26]
+        end = at + 27 + segments + sum(data[at + 27:at + 27 + segments])
+        if end > len(data):
+            raise ValueError(f"{path}: the Ogg page at byte {at} is cut short")
+        data[at + 14:at + 18] = serial.to_bytes(4, "little")
+        data[at + 22:at + 26] = bytes(4)
+        data[at + 22:at + 26] = ogg_page_crc(bytes(data[at:end])).to_bytes(4, "little")
+        at = end
+    Path(path).write_bytes(bytes(data))
 
 
 def report_paths(path) -> tuple[Path, Path]:
