@@ -13,7 +13,9 @@ Pegs: ``repN`` at the N-th repetition's key point (as found once it has passed, 
 rolling window ``next1``, ``next2``, ... of the upcoming ones. Nothing is predicted before the second
 repetition; from then on it commits however unsure. The tempo is the mean of the last three intervals
 between repetitions, so two repetitions at a new tempo re-lock it; a pause (no repetition for well past the
-predicted one) keeps the next prediction just ahead of the clock until the person restarts.
+predicted one) keeps the next prediction just ahead of the clock until the person restarts. The restart is
+sensed before its key point is found: the first bump after the pause that rises as far above rest as a key
+point must (:data:`TOP_SHARE` of the swing) is the body slowing into the bottom of a repetition.
 """
 
 from __future__ import annotations
@@ -56,7 +58,8 @@ class RepetitionTracker:
 
     ``push(times, samples)`` takes samples of shape (n, 3) (acceleration) or (n,) / (n, 1) (a coordinate);
     :attr:`repetitions` are the key points found, :meth:`predict` the next ones, :attr:`updates` every change
-    of the predictions as ``(t, [next1, next2, ...])``.
+    of the predictions as ``(t, [next1, next2, ...])``, :attr:`restart` when a person who paused was sensed
+    slowing into the bottom of a repetition again (None until then, and again once that repetition is found).
     """
 
     def __init__(self, horizon: int = 8):
@@ -70,6 +73,7 @@ class RepetitionTracker:
         self._held: float | None = None  # the next prediction while a pause holds it ahead of the clock
         self._predicted: list[float] = []
         self._segment = 0  # the first repetition after the last pause
+        self.restart: float | None = None  # when the bottom of the first repetition after a pause was sensed
 
     # ------------------------------------------------------------------ the signal
     def _start(self, t: float, sample: np.ndarray) -> None:
@@ -130,6 +134,8 @@ class RepetitionTracker:
         while self._recent and self._recent[0][0] < t - 4.0:
             self._recent.popleft()
         hysteresis = max(0.35 * self._amplitude, 0.6 * math.sqrt(self._power), self._floor, 1e-12)
+        if self._held is not None and self.restart is None and y > TOP_SHARE * self._amplitude:
+            self.restart = t  # paused, and slowing into a bottom again: the key point is at hand
         if t < self._warm_until:  # the averages settle: no extreme counts yet, and a trough comes first
             self._seeking_peak, self._extreme, self._extreme_t = False, y, t
             return
@@ -201,6 +207,7 @@ class RepetitionTracker:
         self._undo, self._peak_value, self._topped = undo, value, False
         self.repetitions.append(t_key)
         self._held = None
+        self.restart = None
         self._announce(now)
 
     # ------------------------------------------------------------------ predictions

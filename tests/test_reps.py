@@ -52,6 +52,25 @@ def test_nothing_is_predicted_before_the_second_repetition():
     assert len(early.repetitions) == 1 and early.predict() == [] and early.key_point(2) is None
 
 
+def test_a_restart_after_a_pause_is_sensed_before_its_key_point_is_found():
+    # jumping jacks a second apart, a pause of four seconds, and four more: the tracker senses the person slowing
+    # into the first bottom after the pause before that key point, well before it can find it
+    keys = [2.0 + k for k in range(8)] + [13.0 + k for k in range(4)]
+    t = np.arange(0, 17.5, 0.02)
+    a = acceleration(t, keys, "jumping-jack", np.random.default_rng(6))
+    tracker = RepetitionTracker()
+    sensed, found, seen = None, None, set()
+    for i in range(0, len(t), 3):
+        tracker.push(t[i:i + 3], a[i:i + 3])
+        if len(tracker.repetitions) == 8:
+            seen.add(tracker.restart)
+            sensed = tracker.restart
+        elif len(tracker.repetitions) == 9 and found is None:
+            found, after = tracker.time, tracker.restart
+    assert seen == {None, sensed} and 12.9 < sensed <= 13.0 and found > 13.3 and after is None
+    assert len(tracker.repetitions) == 12 and abs(tracker.repetitions[8] - 13.0) < 0.05
+
+
 def test_a_coordinate_counts_its_lowest_points():
     t = np.arange(0, 20.0, 0.04)
     height = np.cos(2 * np.pi * (t - 1.0) / 2.0 + np.pi)  # lowest at 1, 3, 5, ... s

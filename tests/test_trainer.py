@@ -1,7 +1,10 @@
 """The trainer scenario's parts that need no realizer run: the simulated user, the fixed plan, and the
-command's one-line errors (whole runs are in tests/system/test_trainer.py)."""
+command's one-line errors; and two short jumping-jack runs through the pause (whole runs of every strategy are in
+tests/system/test_trainer_runs.py)."""
 
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pytest
@@ -46,3 +49,19 @@ def test_a_recording_without_time_is_refused_before_anything_runs(tmp_path, caps
     path.write_text("t,ax,ay,az\n0,0,0,9.8\n0.02,0,0,9.9\n0.04,0,0,9.7\n")
     assert main(["run", "trainer", "--user", str(path), "--out", str(tmp_path / "out")]) == 2
     assert "no 'time' column" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_jumping_jacks_are_followed_and_counted_through_the_pause(tmp_path, capsys, seed):
+    # seed 0: a person slower than the target, seed 1 a quicker one; each pauses once and hops again (as quickly
+    # as before: a jump's ways take as long whatever the tempo), and the trainer counts that hop on it
+    out = tmp_path / "out"
+    assert main(["run", "trainer", "--exercise", "jumping-jack", "--seed", str(seed), "--no-pictures", "--json",
+                 "--out", str(out)]) == 0
+    metrics = json.loads(capsys.readouterr().out)
+    assert metrics["user_repetitions"] == 20 and metrics["missed_counts"] == 0
+    assert abs(metrics["asynchrony_ms"]["mean"]) <= 40 and metrics["asynchrony_ms"]["sd"] <= 60
+    assert metrics["count_error_ms"]["p95"] <= 80
+    [restart] = metrics["left_out_of_timing"]
+    row = (out / "repetitions.csv").read_text().splitlines()[restart].split(",")
+    assert 0 < float(row[5]) < 300  # the count on the hop after the pause, its stressed syllable in 0.3 s

@@ -114,7 +114,7 @@ class Trainer:
         self.lexeme = lexeme
         self.key_points: dict[int, float] = {}  # move -> the trainer's key point as it played
         self.counted: dict[int, float] = {}  # repetition -> when its count word started
-        self.recounted: list[int] = []  # repetitions counted again, late, after a pause
+        self.recounted: list[int] = []  # repetitions counted again after a pause
         realizer.feedback.listen(self.see)
 
     def see(self, feedback) -> None:
@@ -153,13 +153,18 @@ class Trainer:
         while self.count_planned < last:
             self.count_planned += 1
             self.submit_count(self.count_planned)
-        started = self.counted.get(found)
-        if found >= 3 and found not in self.recounted and started is not None \
-                and started < tracker.repetitions[-1] - 0.5 * period:
-            # the count went to a repetition that did not come (the person paused): say it on the one that did
-            self.recounted.append(found)
-            self.realizer.submit(f'<bml {NS} id="recount{found}"><speech id="count" start="0.02">'
-                                 f'<text>{number(found)}</text></speech></bml>')
+        # a count that went to a repetition that did not come (the person paused) is said again on the one that
+        # did: as soon as the tracker senses the person slowing into its bottom (a count said once the
+        # repetition is found comes a third of a second and more after it, late for a quick tempo), or else
+        # once it is found
+        restart = tracker.restart
+        for n, at in ((found + 1, restart), (found, tracker.repetitions[-1])):
+            started = self.counted.get(n)
+            if 3 <= n <= self.repetitions and n not in self.recounted and at is not None and started is not None \
+                    and started < at - 0.5 * period:
+                self.recounted.append(n)
+                self.realizer.submit(f'<bml {NS} id="recount{n}"><speech id="count" start="0.02">'
+                                     f'<text>{number(n)}</text></speech></bml>')
         if found >= 3 and found not in self.remarked:
             self.remarked.add(found)
             self.remark(found, now)
