@@ -42,13 +42,13 @@ from pathlib import Path
 import numpy as np
 
 from speech_timing.backend import Mark, Phoneme, SpeechText, Utterance, Word
-from speech_timing.samples import BLOCK, Pcm16, PcmFile
+from speech_timing.samples import BLOCK, Pcm, Pcm16, PcmFile
 from agentsim.written import user_cache, written
 
 #: 16-bit samples read from (and written to) a cache file at a time.
 READ_BLOCK = BLOCK
 
-__all__ = ["CachedBackend", "PhonemeMarks", "default_cache_dir", "word_after", "stressed_onset",
+__all__ = ["CachedBackend", "WholeSpeechCache", "PhonemeMarks", "default_cache_dir", "word_after", "stressed_onset",
            "mark_event", "place_mark", "CACHE_FORMAT"]
 
 #: Version of the cache files; bump it when their layout or the meaning of their contents changes.
@@ -217,7 +217,11 @@ class CachedBackend:
 
     def utterance(self, text: str) -> Utterance:
         """The utterance of ``text`` without marks: from memory, from disk, or synthesised now."""
-        key = self.key(text)
+        return self._kept(self.key(text), SpeechText(text))
+
+    def _kept(self, key: str, speech: SpeechText) -> Utterance:
+        """What the backend says for ``speech`` (kept under ``key``): from memory, from disk, or synthesised now."""
+        text = speech.text
         utt = self._memory.get(key)
         if utt is not None:
             return utt
@@ -229,7 +233,7 @@ class CachedBackend:
                 self.hits += 1
         if utt is None:
             started = time.perf_counter()
-            utt = self.backend.synthesize(SpeechText(text))
+            utt = self.backend.synthesize(speech)
             self.synthesis_seconds += time.perf_counter() - started
             self.misses += 1
             self.synthesised.add(key)
@@ -237,7 +241,7 @@ class CachedBackend:
                 utt = self._save(key, utt)
                 forget = getattr(self.backend, "forget", None)
                 if forget is not None and isinstance(utt.audio, PcmFile):  # its samples in memory: let go
-                    forget(SpeechText(text))
+                    forget(speech)
         self._memory[key] = utt
         return utt
 
@@ -274,6 +278,8 @@ class CachedBackend:
                 "duration": utt.duration, "sample_rate": utt.sample_rate, "backend_name": utt.backend,
                 "sentences": list(utt.sentences), "audio": has_audio,
                 "words": [asdict(w) for w in utt.words], "phonemes": [asdict(p) for p in utt.phonemes]}
+        if utt.marks:  # the backend's own marks (WholeSpeechCache)
+            meta["marks"] = [[m.name, m.time] for m in utt.marks]
         with written(meta_path) as tmp:
             tmp.write_text(json.dumps(meta, ensure_ascii=False))
         if has_audio:
@@ -294,13 +300,65 @@ class CachedBackend:
             meta = json.loads(meta_path.read_text())
             if meta.get("format") != CACHE_FORMAT or meta.get("text") != text:
                 return None
-            audio = None
-            if meta["audio"]:
-                audio = PcmFile(audio_path)  # read from the file as it is mixed, never held whole
+            audio = self._samples(audio_path) if meta["audio"] else None
         except (OSError, ValueError, KeyError):
             return None
         return Utterance(text=text, duration=float(meta["duration"]),
                          words=[Word(**w) for w in meta["words"]],
-                         phonemes=[Phoneme(**p) for p in meta["phonemes"]], marks=[],
+                         phonemes=[Phoneme(**p) for p in meta["phonemes"]],
+                         marks=[Mark(name, float(t)) for name, t in meta.get("marks", [])],
                          sentences=[float(s) for s in meta["sentences"]], sample_rate=int(meta["sample_rate"]),
                          audio=audio, backend=meta.get("backend_name", ""))
+
+    def _samples(self, path: Path) -> Pcm16:
+        """The samples of the cache file ``path``: read from the file as they are mixed, never held whole."""
+        return PcmFile(path)
+
+
+class WholeSpeechCache(CachedBackend):
+    """A :class:`CachedBackend` that keeps the backend's whole answer to each speech, as ``agentsim realize``
+    speaks: its marks as the backend placed them, and a speech at another rate or with prosody spans too.
+
+    The key is that of the text (:meth:`CachedBackend.key`, so a plain speech shares the storyteller's entry)
+    with the marks, the rate and the prosody spans added when the speech has them. The samples of an entry are
+    read into memory (as the backend's own are held), and audio that 16-bit samples do not give back exactly is
+    not kept: a speech read from the cache is, sample for sample and time for time, what the backend said.
+    """
+
+    def speech_key(self, speech: SpeechText) -> str:
+        """Cache key of ``speech`` spoken by this backend."""
+        if not speech.marks and speech.rate == 1.0 and not speech.prosody:
+            return self.key(speech.text)
+        blob = json.dumps({"backend": _identity(self.backend), "text": speech.text,
+                           "marks": [list(mark) for mark in speech.marks], "rate": speech.rate,
+                           "prosody": [asdict(span) for span in speech.prosody]}, sort_keys=True, ensure_ascii=False)
+        return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:32]
+
+    def synthesize(self, speech: SpeechText) -> Utterance:
+        """What the backend says for ``speech``: from memory, from the cache, or synthesised now (and kept)."""
+        return self._kept(self.speech_key(speech), speech)
+
+    def _save(self, key: str, utt: Utterance) -> Utterance:
+        if utt.audio is not None and not isinstance(utt.audio, Pcm16):
+            audio = np.asarray(utt.audio)
+            samples = np.clip(np.round(audio.astype(np.float64) * 32768.0), -32768, 32767)
+            if audio.dtype != np.float32 or not np.array_equal(samples / 32768.0, audio):
+                return utt  # not 16-bit samples: the cache would not give them back exactly
+        stored = super()._save(key, utt).audio
+        if isinstance(stored, PcmFile):
+            stored.close()
+        return utt  # the samples stay in memory
+
+    def _samples(self, path: Path) -> Pcm16:
+        """The samples of the cache file ``path``, read into memory as the backend's own are held (a file held
+        open a speech would not do for thousands of speeches)."""
+        with open(path, "rb") as file:
+            if np.lib.format.read_magic(file) != (1, 0):  # as _save writes them
+                raise ValueError(f"{path}: not a cache file")
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(file)
+            if dtype != np.dtype("<i2") or len(shape) != 1 or fortran:
+                raise ValueError(f"{path}: not 16-bit mono samples")
+            pcm = np.fromfile(file, dtype="<i2", count=shape[0])
+        if len(pcm) != shape[0]:
+            raise ValueError(f"{path}: cut short")
+        return Pcm(pcm)
