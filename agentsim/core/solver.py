@@ -160,7 +160,13 @@ class BlockSolver:
                     raise ScheduleError(f"anticipator {ref.anticipator!r} has no prediction for {ref.sync!r} yet")
                 self.nodes[key] = self.ties.add((peg, 0.0))
             return self.nodes[key], ref.offset
-        if ref.block is not None and ref.block != self.block.id:
+        if ref.block is None or ref.block == self.block.id:
+            nodes = self.local_nodes.get(ref.behaviour)
+            node = nodes.get(ref.sync) if nodes is not None else None
+            if node is not None:  # a sync point referred to before (by another reference): known to exist
+                found = self._local_refs[id(ref)] = (node, ref.offset)
+                return found
+        else:
             key = ("block", ref.block, ref.behaviour, ref.sync)
             if key not in self.nodes:
                 found = self.board.find_sync(ref.block, ref.behaviour, ref.sync)
@@ -263,10 +269,8 @@ class BlockSolver:
             nodes = self.local_nodes.get(beh.id)
             if not nodes:
                 continue
-            for sync_id in beh.sync_ids:
-                node = nodes.get(sync_id)
-                if node is not None:
-                    members.setdefault(find(node)[0], []).append(index)
+            for node in nodes.values():  # (each of its sync points tied: in any order, the same index)
+                members.setdefault(find(node)[0], []).append(index)
         # Among behaviours tied to known times, rigid ones (speech) go first: the others can stretch.
         priority = [(0 if self.engines[b.type].planner.rigid else 1, i) if b.type in self.engines else (1, i)
                     for i, b in enumerate(behaviours)]
