@@ -48,7 +48,7 @@ def add_parsers(commands) -> None:
     options.add_seed(realize, "the background motion (blinks, sway)")
     options.add_lexicon(realize)
     add_physics(realize)
-    realize.set_defaults(handler=realize_files)
+    realize.set_defaults(handler=realize_files, done_at_exit=True)
 
     plot = commands.add_parser(
         "plot", help="pictures of a realization",

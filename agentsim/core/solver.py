@@ -357,13 +357,14 @@ class BlockSolver:
             refs[0] = KeyRef(anchor, 0.0)
         newly_known: list[int] = []
         owned: set[int] = set()  # sync points whose group gets its time from this behaviour
+        only = next(iter(refs)) if len(refs) == 1 else None  # (the nearest key when there is one)
         for i, sync_id in enumerate(beh.sync_ids):
             if keys[i] is not None:
                 continue
             tied = sync_id in groups
             if not (tied or i == 0 or i == n - 1 or planner.rigid):
                 continue
-            j = min(refs, key=lambda r: (abs(preferred[r] - preferred[i]), r))
+            j = only if only is not None else min(refs, key=lambda r: (abs(preferred[r] - preferred[i]), r))
             ref_key = refs[j]
             offset = ref_key.offset + times[i] - times[j]
             if tied:
@@ -377,9 +378,12 @@ class BlockSolver:
             else:
                 keys[i] = KeyRef(ref_key.peg, offset)
         timed = TimedBehaviour(self.run, beh, preferred, keys, engine, self.board.plan_order())
-        timed.tied = [sync_id in groups for sync_id in beh.sync_ids]
-        timed.fixed = [sync_id in groups and groups[sync_id][0] in self.ties.fixed_node for sync_id in beh.sync_ids]
-        timed.owns = [i in owned for i in range(n)]
+        timed.tied = tied = [sync_id in groups for sync_id in beh.sync_ids]
+        if groups:
+            fixed_node = self.ties.fixed_node
+            timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(beh.sync_ids, tied)]
+        if owned:
+            timed.owns = [i in owned for i in range(n)]
         self.timed[beh.id] = timed
         return newly_known
 
