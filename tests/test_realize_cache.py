@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from agentsim.cli import main as cli_main
 from speech_timing.espeak import EspeakBackend
 
@@ -41,3 +43,23 @@ def test_a_speech_realized_again_is_read_from_the_cache(tmp_path, monkeypatch, c
     assert kept == [".json", ".npy"]
     assert first[:2] == again[:2] == fresh[:2]  # the same feedback and sound, byte for byte
     assert '"stroke"' in first[0] and not (tmp_path / "none").exists()
+
+
+def test_a_plain_speech_shares_the_storytellers_entry(tmp_path):
+    """A speech without marks, prosody or another rate is kept under the storyteller's key of its text, and
+    read back as the storyteller reads it."""
+    from scenarios.storytelling.voice import CachedBackend, WholeSpeechCache
+    from speech_timing.backend import SpeechText
+
+    text = 'Le héron dit "bonjour" \\ aujourd\'hui.'
+    kept = WholeSpeechCache(EspeakBackend(), cache_dir=tmp_path)
+    said = kept.synthesize(SpeechText(text))
+    storyteller = CachedBackend(EspeakBackend(), cache_dir=tmp_path)
+    assert kept.key(text) == storyteller.key(text)
+    again = storyteller.utterance(text)
+    assert (storyteller.hits, storyteller.misses) == (1, 0)
+    assert again.words == said.words and again.phonemes == said.phonemes and again.duration == said.duration
+    read = WholeSpeechCache(EspeakBackend(), cache_dir=tmp_path).synthesize(SpeechText(text)).audio
+    assert read.held_bytes == 0  # its samples are read when first asked for, then held
+    assert np.array_equal(np.asarray(read), np.asarray(said.audio)) and read.held_bytes == 2 * len(said.audio)
+    assert sorted(p.suffix for p in tmp_path.iterdir()) == [".json", ".npy"]

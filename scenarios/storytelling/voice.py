@@ -48,12 +48,14 @@ from agentsim.written import user_cache, written
 #: 16-bit samples read from (and written to) a cache file at a time.
 READ_BLOCK = BLOCK
 
-__all__ = ["CachedBackend", "WholeSpeechCache", "PhonemeMarks", "default_cache_dir", "word_after", "stressed_onset",
+__all__ = ["CachedBackend", "WholeSpeechCache", "KeptSamples", "PhonemeMarks", "default_cache_dir", "word_after", "stressed_onset",
            "mark_event", "place_mark", "CACHE_FORMAT"]
 
 #: Version of the cache files; bump it when their layout or the meaning of their contents changes.
 CACHE_FORMAT = 1
 
+#: The header of a cache file's samples (numpy's format 1.0, as ``write_array_header_1_0`` writes 16-bit mono).
+_SAMPLES_HEADER = re.compile(rb"\{'descr': '<i2', 'fortran_order': False, 'shape': \((\d+),\), \} *\n")
 _DELAY = re.compile(r"\.d\d+$")
 _EVENT = re.compile(r"^(?P<base>.+?)(?:\.(?P<event>stress|end|ph(?P<k>\d+)))?(?:\.d(?P<ms>\d+))?$")
 
@@ -167,6 +169,26 @@ def _identity(backend) -> dict:
     return identity
 
 
+_FIELDS = {kind: frozenset(kind.__dataclass_fields__) for kind in (Word, Phoneme)}
+_new = object.__new__
+_set = object.__setattr__
+
+
+def _made(kind, items: list) -> list:
+    """The ``Word`` or ``Phoneme`` of each of ``items`` (their fields, as ``asdict`` wrote them), made as their
+    ``__init__`` would make them, without a call of it each (a narration has thousands); TypeError for an item
+    that names other fields."""
+    fields = _FIELDS[kind]
+    made = []
+    for item in items:
+        if item.keys() != fields:
+            raise TypeError(f"a cached {kind.__name__} with the fields {sorted(item)}")
+        value = _new(kind)
+        _set(value, "__dict__", item)
+        made.append(value)
+    return made
+
+
 class CachedBackend:
     """A backend that synthesises each text once and keeps the utterance on disk and in memory.
 
@@ -255,8 +277,11 @@ class CachedBackend:
         return replace(utt, marks=marks)
 
     # -- files ---------------------------------------------------------------------------------------
-    def _paths(self, key: str) -> tuple[Path, Path]:
-        return self.cache_dir / f"{key}.json", self.cache_dir / f"{key}.npy"
+    def _paths(self, key: str) -> tuple[str, str]:
+        folder = self.__dict__.get("_folder")
+        if folder is None or folder[0] is not self.cache_dir:
+            folder = self._folder = (self.cache_dir, os.path.join(self.cache_dir, ""))
+        return f"{folder[1]}{key}.json", f"{folder[1]}{key}.npy"
 
     def _save(self, key: str, utt: Utterance) -> Utterance:
         """Write ``utt`` into the cache; returns it with its audio read from the cache file from now on
@@ -297,15 +322,15 @@ class CachedBackend:
     def _load(self, key: str, text: str) -> Utterance | None:
         meta_path, audio_path = self._paths(key)
         try:
-            meta = json.loads(meta_path.read_text())
+            with open(meta_path) as file:  # (as Path.read_text reads it, without pathlib's steps)
+                meta = json.loads(file.read())
             if meta.get("format") != CACHE_FORMAT or meta.get("text") != text:
                 return None
+            words, phonemes = _made(Word, meta["words"]), _made(Phoneme, meta["phonemes"])
             audio = self._samples(audio_path) if meta["audio"] else None
-        except (OSError, ValueError, KeyError):
+        except (OSError, ValueError, KeyError, TypeError):
             return None
-        return Utterance(text=text, duration=float(meta["duration"]),
-                         words=[Word(**w) for w in meta["words"]],
-                         phonemes=[Phoneme(**p) for p in meta["phonemes"]],
+        return Utterance(text=text, duration=float(meta["duration"]), words=words, phonemes=phonemes,
                          marks=[Mark(name, float(t)) for name, t in meta.get("marks", [])],
                          sentences=[float(s) for s in meta["sentences"]], sample_rate=int(meta["sample_rate"]),
                          audio=audio, backend=meta.get("backend_name", ""))
@@ -315,23 +340,39 @@ class CachedBackend:
         return PcmFile(path)
 
 
+#: What ``json.dumps(..., sort_keys=True, ensure_ascii=False)`` writes, made once.
+_KEY_JSON = json.JSONEncoder(sort_keys=True, ensure_ascii=False)
+
+
 class WholeSpeechCache(CachedBackend):
     """A :class:`CachedBackend` that keeps the backend's whole answer to each speech, as ``agentsim realize``
     speaks: its marks as the backend placed them, and a speech at another rate or with prosody spans too.
 
     The key is that of the text (:meth:`CachedBackend.key`, so a plain speech shares the storyteller's entry)
     with the marks, the rate and the prosody spans added when the speech has them. The samples of an entry are
-    read into memory (as the backend's own are held), and audio that 16-bit samples do not give back exactly is
-    not kept: a speech read from the cache is, sample for sample and time for time, what the backend said.
+    read into memory when they are first asked for (:class:`KeptSamples`), and audio that 16-bit samples do not
+    give back exactly is not kept: a speech read from the cache is, sample for sample and time for time, what
+    the backend said.
     """
 
     def speech_key(self, speech: SpeechText) -> str:
         """Cache key of ``speech`` spoken by this backend."""
         if not speech.marks and speech.rate == 1.0 and not speech.prosody:
             return self.key(speech.text)
-        blob = json.dumps({"backend": _identity(self.backend), "text": speech.text,
-                           "marks": [list(mark) for mark in speech.marks], "rate": speech.rate,
-                           "prosody": [asdict(span) for span in speech.prosody]}, sort_keys=True, ensure_ascii=False)
+        return self._hashed({"text": speech.text, "marks": [list(mark) for mark in speech.marks], "rate": speech.rate,
+                             "prosody": [asdict(span) for span in speech.prosody]})
+
+    def key(self, text: str) -> str:
+        """Cache key of ``text`` spoken by this backend (:meth:`CachedBackend.key`'s)."""
+        return self._hashed({"text": text})
+
+    def _hashed(self, fields: dict) -> str:
+        """The key of ``fields`` with the backend's identity: the hash of what ``json.dumps`` writes of them all
+        (sorted: "backend" first), the identity's part written once."""
+        identity = self.__dict__.get("_identity_json")
+        if identity is None:
+            identity = self._identity_json = _KEY_JSON.encode(_identity(self.backend))
+        blob = '{"backend": ' + identity + ", " + _KEY_JSON.encode(fields)[1:]
         return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:32]
 
     def synthesize(self, speech: SpeechText) -> Utterance:
@@ -350,15 +391,37 @@ class WholeSpeechCache(CachedBackend):
         return utt  # the samples stay in memory
 
     def _samples(self, path: Path) -> Pcm16:
-        """The samples of the cache file ``path``, read into memory as the backend's own are held (a file held
-        open a speech would not do for thousands of speeches)."""
+        """The samples of the cache file ``path``, read into memory when they are first asked for (no file is
+        held open meanwhile: a run may keep thousands of speeches, and most runs never hear them)."""
         with open(path, "rb") as file:
-            if np.lib.format.read_magic(file) != (1, 0):  # as _save writes them
+            start = file.read(10)  # numpy's magic, format 1.0 (as _save writes it), and the header's length
+            if len(start) != 10 or start[:8] != b"\x93NUMPY\x01\x00":
                 raise ValueError(f"{path}: not a cache file")
-            shape, fortran, dtype = np.lib.format.read_array_header_1_0(file)
-            if dtype != np.dtype("<i2") or len(shape) != 1 or fortran:
-                raise ValueError(f"{path}: not 16-bit mono samples")
-            pcm = np.fromfile(file, dtype="<i2", count=shape[0])
-        if len(pcm) != shape[0]:
-            raise ValueError(f"{path}: cut short")
-        return Pcm(pcm)
+            header = _SAMPLES_HEADER.fullmatch(file.read(int.from_bytes(start[8:], "little")))
+            if header is None:
+                raise ValueError(f"{path}: not 16-bit mono samples as the cache writes them")
+            offset, length = file.tell(), int(header.group(1))
+            if os.fstat(file.fileno()).st_size < offset + 2 * length:
+                raise ValueError(f"{path}: cut short")
+        return KeptSamples(path, offset, length)
+
+
+class KeptSamples(Pcm16):
+    """The 16-bit samples of a cache file (from byte ``offset``, ``length`` of them), read whole into memory the
+    first time any is asked for."""
+
+    def __init__(self, path: Path, offset: int, length: int) -> None:
+        self.path, self.offset, self.length = Path(path), offset, length
+        self._samples: Pcm | None = None
+
+    @property
+    def held_bytes(self) -> int:
+        return self._samples.held_bytes if self._samples is not None else 0
+
+    def read(self, first: int, last: int) -> np.ndarray:
+        if self._samples is None:
+            pcm = np.fromfile(self.path, dtype="<i2", count=self.length, offset=self.offset)
+            if len(pcm) != self.length:
+                raise ValueError(f"{self.path}: cut short")
+            self._samples = Pcm(pcm.astype(np.int16, copy=False))
+        return self._samples.read(first, last)
