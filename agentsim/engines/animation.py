@@ -11,6 +11,8 @@ from agentsim.core.interruption import due_by, skip_until
 from agentsim.core.timed import TimedBehaviour
 
 
+#: How many bindings of a behaviour type and lexeme a planner keeps (it forgets them all beyond).
+REMEMBERED = 4096
 #: Behaviour types whose motion unit is made from their own MURML form (not bound by their type and lexeme).
 _FORMS = ("murmlgesture", "murmlface")
 
@@ -38,6 +40,8 @@ class AnimationPlanner(Planner):
         key = (behaviour.type, behaviour.attributes.get("lexeme"))
         unit = self._units.get(key)
         if unit is None:
+            if len(self._units) >= REMEMBERED:  # (lexemes as written: a live service is sent any number)
+                self._units.clear()
             unit = self._units[key] = motion_unit(behaviour, self.lexicon)
         return unit
 
@@ -50,6 +54,8 @@ class AnimationPlanner(Planner):
         key = (behaviour.type, attributes.get("lexeme"), attributes.get("repetition"))
         keys = self._preferred.get(key)
         if keys is None:
+            if len(self._preferred) >= REMEMBERED:
+                self._preferred.clear()
             keys = self._preferred[key] = tuple(self.unit(behaviour).preferred(repetition(behaviour)))
         return list(keys)
 
