@@ -38,12 +38,14 @@ import re
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from speech_timing.backend import Mark, Phoneme, SpeechText, Utterance, Word
 from speech_timing.samples import BLOCK, Pcm, Pcm16, PcmFile
 from agentsim.written import user_cache, written
+
+if TYPE_CHECKING:  # numpy is imported where samples are written or read: a speech read from the cache does without
+    import numpy as np
 
 #: 16-bit samples read from (and written to) a cache file at a time.
 READ_BLOCK = BLOCK
@@ -286,6 +288,8 @@ class CachedBackend:
     def _save(self, key: str, utt: Utterance) -> Utterance:
         """Write ``utt`` into the cache; returns it with its audio read from the cache file from now on
         (not held in memory) when the file gives back exactly its samples."""
+        import numpy as np
+
         meta_path, audio_path = self._paths(key)
         self.cache_dir.mkdir(parents=True, exist_ok=True)
         has_audio = utt.audio is not None
@@ -381,6 +385,8 @@ class WholeSpeechCache(CachedBackend):
 
     def _save(self, key: str, utt: Utterance) -> Utterance:
         if utt.audio is not None and not isinstance(utt.audio, Pcm16):
+            import numpy as np
+
             audio = np.asarray(utt.audio)
             samples = np.clip(np.round(audio.astype(np.float64) * 32768.0), -32768, 32767)
             if audio.dtype != np.float32 or not np.array_equal(samples / 32768.0, audio):
@@ -420,6 +426,8 @@ class KeptSamples(Pcm16):
 
     def read(self, first: int, last: int) -> np.ndarray:
         if self._samples is None:
+            import numpy as np
+
             pcm = np.fromfile(self.path, dtype="<i2", count=self.length, offset=self.offset)
             if len(pcm) != self.length:
                 raise ValueError(f"{self.path}: cut short")
