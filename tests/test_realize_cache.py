@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from agentsim.cli import main as cli_main
 from speech_timing.espeak import EspeakBackend
@@ -63,3 +64,21 @@ def test_a_plain_speech_shares_the_storytellers_entry(tmp_path):
     assert read.held_bytes == 0  # its samples are read when first asked for, then held
     assert np.array_equal(np.asarray(read), np.asarray(said.audio)) and read.held_bytes == 2 * len(said.audio)
     assert sorted(p.suffix for p in tmp_path.iterdir()) == [".json", ".npy"]
+
+
+def test_samples_written_anew_meanwhile_are_not_read(tmp_path):
+    """A cache file written anew after its entry was read (by another process) is not paired with the timeline
+    read before: the run stops with one line saying so."""
+    from agentsim.errors import AgentsimError
+    from scenarios.storytelling.voice import WholeSpeechCache
+    from speech_timing.backend import SpeechText
+
+    speech = SpeechText("The heron waits by the water.")
+    WholeSpeechCache(EspeakBackend(), cache_dir=tmp_path).synthesize(speech)
+    read = WholeSpeechCache(EspeakBackend(), cache_dir=tmp_path).synthesize(speech).audio
+    (samples,) = tmp_path.glob("*.npy")
+    fresh = samples.with_suffix(".new")
+    fresh.write_bytes(samples.read_bytes())
+    fresh.replace(samples)  # the same bytes in another file, put in its place as the cache writes one
+    with pytest.raises(AgentsimError, match="written anew while this run used it"):
+        read[0:10]

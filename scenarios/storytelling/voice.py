@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING
 
 from speech_timing.backend import Mark, Phoneme, SpeechText, Utterance, Word
 from speech_timing.samples import BLOCK, Pcm, Pcm16, PcmFile
+from agentsim.errors import AgentsimError
 from agentsim.written import user_cache, written
 
 if TYPE_CHECKING:  # numpy is imported where samples are written or read: a speech read from the cache does without
@@ -407,17 +408,20 @@ class WholeSpeechCache(CachedBackend):
             if header is None:
                 raise ValueError(f"{path}: not 16-bit mono samples as the cache writes them")
             offset, length = file.tell(), int(header.group(1))
-            if os.fstat(file.fileno()).st_size < offset + 2 * length:
+            status = os.fstat(file.fileno())
+            if status.st_size < offset + 2 * length:
                 raise ValueError(f"{path}: cut short")
-        return KeptSamples(path, offset, length)
+        return KeptSamples(path, offset, length, (status.st_ino, status.st_size, status.st_mtime_ns))
 
 
 class KeptSamples(Pcm16):
     """The 16-bit samples of a cache file (from byte ``offset``, ``length`` of them), read whole into memory the
-    first time any is asked for."""
+    first time any is asked for; ``seen``: the file's inode, size and time of change when its entry was read (a
+    file written anew since, by another process, is not read: an :class:`~agentsim.errors.AgentsimError` says
+    so)."""
 
-    def __init__(self, path: Path, offset: int, length: int) -> None:
-        self.path, self.offset, self.length = Path(path), offset, length
+    def __init__(self, path: Path, offset: int, length: int, seen: tuple[int, int, int] | None = None) -> None:
+        self.path, self.offset, self.length, self.seen = Path(path), offset, length, seen
         self._samples: Pcm | None = None
 
     @property
@@ -428,7 +432,13 @@ class KeptSamples(Pcm16):
         if self._samples is None:
             import numpy as np
 
-            pcm = np.fromfile(self.path, dtype="<i2", count=self.length, offset=self.offset)
+            with open(self.path, "rb") as file:
+                status = os.fstat(file.fileno())
+                if self.seen is not None and (status.st_ino, status.st_size, status.st_mtime_ns) != self.seen:
+                    raise AgentsimError(f"the speech cache file {self.path} was written anew while this run used it: "
+                                        "run again (or with --no-cache)")
+                file.seek(self.offset)
+                pcm = np.fromfile(file, dtype="<i2", count=self.length)
             if len(pcm) != self.length:
                 raise ValueError(f"{self.path}: cut short")
             self._samples = Pcm(pcm.astype(np.int16, copy=False))
