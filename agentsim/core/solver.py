@@ -324,10 +324,8 @@ class BlockSolver:
         nodes = self.local_nodes.get(beh.id)
         if nodes:
             find, group_peg = self.ties.find, self.group_peg
-            for sync_id in beh.sync_ids:
-                node = nodes.get(sync_id)
-                if node is None:
-                    continue
+            # (its tied sync points, in the order they were tied: what is made of them does not depend on it)
+            for sync_id, node in nodes.items():
                 root, d = groups[sync_id] = find(node)
                 peg = group_peg.get(root)
                 if peg is not None:
