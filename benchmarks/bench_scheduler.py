@@ -5,10 +5,11 @@ Prints JSON with every figure, its target and whether it ``holds``:
 * the command line as the issue defines it (``cli``): ``agentsim realize DOC --until 0.001`` for a document of
   1,000 behaviours and 3,000 constraints minus the same for a document of one behaviour, the wall time of the
   command in a subprocess, minimum of 3 (target: at most 60 ms). It runs with the default speech backend
-  (espeak-ng when installed: then the synthesis of the block's 100 speeches dominates, and the figure says
-  which backend it had) and again with ``--tts builtin`` (``cli_builtin``), the figure of reading,
-  scheduling and the feedback printed. The commands run with their compiled bytecode cached (in a scratch
-  folder, after a first run of each), as an installed package runs; their CPU time is reported too.
+  (espeak-ng when installed, and the figure says which backend it had: the block's 100 speeches are read from
+  the speech cache, which the first run of each command fills, as a document realized again reads them) and
+  again with ``--tts builtin`` (``cli_builtin``), the figure of reading, scheduling and the feedback printed.
+  The commands run with their compiled bytecode cached (in a scratch folder, after a first run of each), as an
+  installed package runs; their CPU time is reported too.
 * the time growth (``growth_exponent``): parse plus schedule in-process from 100 to 10,000 behaviours, the
   fitted exponent of time ~ N^k (target: at most 1.05);
 * in-process, at 1,000 behaviours: the time to parse (the strict BML 1.0 reader, and the lenient one

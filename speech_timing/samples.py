@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:  # numpy is imported where samples are read: holding a file's place does without it
+    import numpy as np
 
 __all__ = ["Pcm16", "Pcm", "PcmFile", "pcm_to_float"]
 
@@ -21,6 +23,8 @@ BLOCK = 1 << 20
 
 def pcm_to_float(pcm: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """16-bit samples as float32 in [-1, 1) (divided by 32768, in float32)."""
+    import numpy as np
+
     return np.divide(pcm, np.float32(32768.0), out=out, dtype=np.float32)
 
 
@@ -29,7 +33,6 @@ class Pcm16:
     slicing and indexing give what the array would, read a stretch at a time by :meth:`read`;
     ``np.asarray`` gives the array whole."""
 
-    dtype = np.dtype(np.float32)
     ndim = 1
     length = 0
     #: bytes of memory the samples hold (those read from a file when asked for hold none)
@@ -38,6 +41,13 @@ class Pcm16:
     def read(self, first: int, last: int) -> np.ndarray:
         """Samples ``first .. last - 1`` (clipped to the samples) as float32."""
         raise NotImplementedError
+
+    @property
+    def dtype(self):
+        """float32, the samples' type as read."""
+        import numpy as np
+
+        return np.dtype(np.float32)
 
     @property
     def shape(self) -> tuple[int]:
@@ -52,17 +62,25 @@ class Pcm16:
 
     def astype(self, dtype, copy: bool = True) -> np.ndarray:
         """The samples whole, as an array of ``dtype``."""
+        import numpy as np
+
         return np.asarray(self, dtype=dtype)
 
     def tobytes(self) -> bytes:
         """The float32 samples' bytes, as the array's ``tobytes``."""
+        import numpy as np
+
         return np.asarray(self).tobytes()
 
     def copy(self) -> np.ndarray:
         """The samples whole, as a float32 array."""
+        import numpy as np
+
         return np.asarray(self)
 
     def __getitem__(self, key):
+        import numpy as np
+
         if isinstance(key, slice):
             first, last, step = key.indices(self.length)
             if step == 1:
@@ -85,6 +103,8 @@ class Pcm16:
         return self.read(lo, hi)[index - lo]
 
     def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        import numpy as np
+
         out = np.empty(self.length, np.float32)
         for a in range(0, self.length, BLOCK):
             out[a:a + BLOCK] = self.read(a, a + BLOCK)
@@ -96,6 +116,8 @@ class Pcm(Pcm16):
     array they stand for, converted a stretch at a time when read."""
 
     def __init__(self, pcm: np.ndarray) -> None:
+        import numpy as np
+
         if pcm.dtype != np.int16 or pcm.ndim != 1:
             raise ValueError("not 16-bit mono samples")
         self.pcm = pcm
@@ -114,6 +136,8 @@ class PcmFile(Pcm16):
     """
 
     def __init__(self, path: str | Path) -> None:
+        import numpy as np
+
         self.path = Path(path)
         mapped = np.load(self.path, mmap_mode="r")  # the header only: no sample is read here
         if mapped.dtype != np.dtype("<i2") or mapped.ndim != 1:
@@ -127,6 +151,8 @@ class PcmFile(Pcm16):
 
     def read(self, first: int, last: int) -> np.ndarray:
         """Samples ``first .. last - 1`` (clipped to the file) as float32."""
+        import numpy as np
+
         first, last = max(0, int(first)), min(self.length, int(last))
         count = max(0, last - first)
         data = os.pread(self._file.fileno(), 2 * count, self.offset + 2 * first)  # no shared file position

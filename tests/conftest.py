@@ -1,12 +1,28 @@
-"""Fixtures the tests share: the BML 1.0 examples and a rendered ensemble with its true beats."""
+"""Fixtures the tests share: the BML 1.0 examples, a rendered ensemble with its true beats, and a speech cache of
+the test run's own."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 from helpers import EXAMPLES, cached_render
+
+
+@pytest.fixture(scope="session", autouse=True)
+def speech_cache(tmp_path_factory) -> Path:
+    """The speech cache (``$AGENTSIM_CACHE``) of this test run, in and below its process: a new folder, so that
+    no test reads or fills the user's (``~/.cache/agentsim/tts``)."""
+    folder = tmp_path_factory.mktemp("speech-cache")
+    before = os.environ.get("AGENTSIM_CACHE")
+    os.environ["AGENTSIM_CACHE"] = str(folder)
+    yield folder
+    if before is None:
+        os.environ.pop("AGENTSIM_CACHE", None)
+    else:
+        os.environ["AGENTSIM_CACHE"] = before
 
 
 @pytest.fixture

@@ -10,9 +10,10 @@ from agentsim.cli import main
 from agentsim.cli.sweep.point import run_point
 
 STORY = "@title Short\nThe [beat]wind and the [point:LEFT]sun were arguing which was the [beat]stronger.\n"
-#: Fields of metrics.json that time the run itself.
+#: Fields of metrics.json that time the run itself, and whether its speech came from the speech cache (the
+#: first run fills the test run's cache, the second reads it).
 TIMING = {"wall_seconds", "wall_fraction_of_story", "stages_seconds", "cache_load_seconds", "synthesis_seconds",
-          "simulation_seconds"}
+          "simulation_seconds", "cached"}
 
 
 def _files(folder: Path) -> dict[str, bytes]:

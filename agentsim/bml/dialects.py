@@ -41,6 +41,8 @@ HEAD_LEXEMES = lexemes.HEAD_LEXEMES
 _ALIASED = re.compile("|".join(sorted(
     name for name in {n for aliases in SYNC_ALIASES.values() for n in aliases}
     if not any(other != name and other in name for aliases in SYNC_ALIASES.values() for other in aliases))))
+#: The sync point names that have an alias on some type (a reference to another one is never retargeted).
+_ALIAS_NAMES = frozenset(name for aliases in SYNC_ALIASES.values() for name in aliases)
 #: Elements of BMLA and BMLT, which only count in their own namespaces.
 EXTENSION_LOCALS = set().union(*EXTENSION_BEHAVIOURS.values())
 
@@ -66,7 +68,10 @@ class Adapter:
         self.prosody: list[Node] = []
         self.constraints: list[Node] = []
         self.written: dict[int, str] = {}  # id() of an element -> its name as written, before mapping
-        self._respelled: dict[str, tuple[str, str | None]] = {}  # see ref()
+        self._respelled: dict[str, tuple[str, str | None, bool]] = {}  # see ref()
+        # whether a reference in a constraint names a sync point that has an alias (else retarget_refs has
+        # nothing to do in the constraints)
+        self._aliased_constraint = False
 
     # ------------------------------------------------------------------------------------------- the block
     def adapt(self) -> None:
@@ -466,6 +471,7 @@ class Adapter:
 
     def constraint_refs(self, node: Node) -> None:
         respelled, notes = self._respelled, self.notes  # (Adapter.ref, without a call per reference)
+        aliased = False
         for child in node.children:
             if isinstance(child, str):
                 continue
@@ -478,6 +484,8 @@ class Adapter:
                     if found[1] is not None:
                         notes.add(found[1])
                     n.attrs["ref"] = found[0]
+                    aliased = aliased or found[2]
+        self._aliased_constraint = self._aliased_constraint or aliased
 
     def ref(self, value: str) -> str:
         """A reference with its sync point spelled as BML does, noting the respelling (a block repeats its
@@ -490,15 +498,17 @@ class Adapter:
         return found[0]
 
     @staticmethod
-    def _respell(value: str) -> tuple[str, str | None]:
+    def _respell(value: str) -> tuple[str, str | None, bool]:
+        """The reference spelled as BML does, the note of the respelling (None: none), and whether it names a
+        sync point that has an alias (:data:`_ALIASED`)."""
         match = ref_sync(value)
         if not match:
-            return value, None
+            return value, None, False
         path, sync, rest = match
         canonical = canonical_sync(sync)
         if canonical and canonical != sync:
-            return f"{path}{canonical}{rest}", f"sync point {sync} read as {canonical}"
-        return value, None
+            return f"{path}{canonical}{rest}", f"sync point {sync} read as {canonical}", canonical in _ALIAS_NAMES
+        return value, None, sync in _ALIAS_NAMES
 
     def retarget_refs(self, behaviours: list[Node], constraints: list[Node]) -> None:
         """References to a sync point that the behaviour referred to has under another name (SmartBody's
@@ -540,6 +550,8 @@ class Adapter:
         for b in behaviours:
             for key in self.sync_keys(b):
                 b.attrs[key] = fix(b.attrs[key])
+        if not self._aliased_constraint:
+            return  # (no reference in the constraints can be retargeted)
         for c in constraints:
             for child in c.children:
                 if not isinstance(child, Node):

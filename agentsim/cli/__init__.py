@@ -56,7 +56,14 @@ def main(argv: list[str] | None = None) -> int:
     error, 70 a bug, 130 interrupted)."""
     args = build_parser().parse_args(argv)
     try:
-        return args.handler(args) or 0
+        status = args.handler(args) or 0
+        if argv is None and getattr(args, "done_at_exit", False):
+            # the program's own command line, whose process ends now: what the command built (a block's
+            # thousands of objects) is left for the process's end, not traversed and freed one by one at exit
+            from agentsim.core.gcpause import keep_out_of_collections
+
+            keep_out_of_collections()
+        return status
     except AgentsimError as exc:
         print(f"agentsim: {exc}", file=sys.stderr)
         return exc.exit_status

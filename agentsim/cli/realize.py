@@ -38,12 +38,17 @@ def add_parsers(commands) -> None:
     realize.add_argument("--realtime", action="store_true", help="run in real time instead of simulated time")
     options.add_anticipators(realize)
     options.add_tts(realize)
+    realize.add_argument("--no-cache", action="store_true",
+                         help="synthesise every speech again and write no cache (by default espeak-ng's, Festival's "
+                              "and Piper's speech is kept in the storyteller's speech cache, ~/.cache/agentsim/tts "
+                              "or $AGENTSIM_CACHE, and a speech asked for again is read from it exactly as it was "
+                              "said)")
     add_outputs(realize)
     options.add_fps(realize, "--bvh/--poses/--report")
     options.add_seed(realize, "the background motion (blinks, sway)")
     options.add_lexicon(realize)
     add_physics(realize)
-    realize.set_defaults(handler=realize_files)
+    realize.set_defaults(handler=realize_files, done_at_exit=True)
 
     plot = commands.add_parser(
         "plot", help="pictures of a realization",
@@ -365,7 +370,8 @@ def realize_files(args: argparse.Namespace) -> int:
         raise UsageError("standard output is closed: there is nowhere to write the feedback")
     problems: list[str] = []
     made = options.anticipators(args, problems)
-    realizer = Realizer(realtime=args.realtime, anticipators=made, strict=args.strict, tts=tts, lexicon=lexicon,
+    realizer = Realizer(realtime=args.realtime, anticipators=made, strict=args.strict,
+                        tts=tts if args.no_cache else speech_cache(tts), lexicon=lexicon,
                         gc_pause=options.collection_pause())
 
     def emit(feedback):
@@ -386,6 +392,17 @@ def realize_files(args: argparse.Namespace) -> int:
     if written:
         print(f"wrote {', '.join(written)}", file=sys.stderr)
     return 0
+
+
+def speech_cache(tts):
+    """``tts`` behind the speech cache the storyteller keeps
+    (:class:`~scenarios.storytelling.voice.WholeSpeechCache`); the built-in backend, which times a text faster
+    than a cache file is read, as it is."""
+    if getattr(tts, "name", "") == "builtin":
+        return tts
+    from scenarios.storytelling.voice import WholeSpeechCache
+
+    return WholeSpeechCache(tts)
 
 
 def plot_timeline(args: argparse.Namespace) -> int:

@@ -160,7 +160,13 @@ class BlockSolver:
                     raise ScheduleError(f"anticipator {ref.anticipator!r} has no prediction for {ref.sync!r} yet")
                 self.nodes[key] = self.ties.add((peg, 0.0))
             return self.nodes[key], ref.offset
-        if ref.block is not None and ref.block != self.block.id:
+        if ref.block is None or ref.block == self.block.id:
+            nodes = self.local_nodes.get(ref.behaviour)
+            node = nodes.get(ref.sync) if nodes is not None else None
+            if node is not None:  # a sync point referred to before (by another reference): known to exist
+                found = self._local_refs[id(ref)] = (node, ref.offset)
+                return found
+        else:
             key = ("block", ref.block, ref.behaviour, ref.sync)
             if key not in self.nodes:
                 found = self.board.find_sync(ref.block, ref.behaviour, ref.sync)
@@ -263,10 +269,8 @@ class BlockSolver:
             nodes = self.local_nodes.get(beh.id)
             if not nodes:
                 continue
-            for sync_id in beh.sync_ids:
-                node = nodes.get(sync_id)
-                if node is not None:
-                    members.setdefault(find(node)[0], []).append(index)
+            for node in nodes.values():  # (each of its sync points tied: in any order, the same index)
+                members.setdefault(find(node)[0], []).append(index)
         # Among behaviours tied to known times, rigid ones (speech) go first: the others can stretch.
         priority = [(0 if self.engines[b.type].planner.rigid else 1, i) if b.type in self.engines else (1, i)
                     for i, b in enumerate(behaviours)]
@@ -320,10 +324,8 @@ class BlockSolver:
         nodes = self.local_nodes.get(beh.id)
         if nodes:
             find, group_peg = self.ties.find, self.group_peg
-            for sync_id in beh.sync_ids:
-                node = nodes.get(sync_id)
-                if node is None:
-                    continue
+            # (its tied sync points, in the order they were tied: what is made of them does not depend on it)
+            for sync_id, node in nodes.items():
                 root, d = groups[sync_id] = find(node)
                 peg = group_peg.get(root)
                 if peg is not None:
@@ -353,13 +355,14 @@ class BlockSolver:
             refs[0] = KeyRef(anchor, 0.0)
         newly_known: list[int] = []
         owned: set[int] = set()  # sync points whose group gets its time from this behaviour
+        only = next(iter(refs)) if len(refs) == 1 else None  # (the nearest key when there is one)
         for i, sync_id in enumerate(beh.sync_ids):
             if keys[i] is not None:
                 continue
             tied = sync_id in groups
             if not (tied or i == 0 or i == n - 1 or planner.rigid):
                 continue
-            j = min(refs, key=lambda r: (abs(preferred[r] - preferred[i]), r))
+            j = only if only is not None else min(refs, key=lambda r: (abs(preferred[r] - preferred[i]), r))
             ref_key = refs[j]
             offset = ref_key.offset + times[i] - times[j]
             if tied:
@@ -373,9 +376,12 @@ class BlockSolver:
             else:
                 keys[i] = KeyRef(ref_key.peg, offset)
         timed = TimedBehaviour(self.run, beh, preferred, keys, engine, self.board.plan_order())
-        timed.tied = [sync_id in groups for sync_id in beh.sync_ids]
-        timed.fixed = [sync_id in groups and groups[sync_id][0] in self.ties.fixed_node for sync_id in beh.sync_ids]
-        timed.owns = [i in owned for i in range(n)]
+        timed.tied = tied = [sync_id in groups for sync_id in beh.sync_ids]
+        if groups:
+            fixed_node = self.ties.fixed_node
+            timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(beh.sync_ids, tied)]
+        if owned:
+            timed.owns = [i in owned for i in range(n)]
         self.timed[beh.id] = timed
         return newly_known
 

@@ -38,22 +38,27 @@ import re
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from speech_timing.backend import Mark, Phoneme, SpeechText, Utterance, Word
-from speech_timing.samples import BLOCK, Pcm16, PcmFile
+from speech_timing.samples import BLOCK, Pcm, Pcm16, PcmFile
+from agentsim.errors import AgentsimError
 from agentsim.written import user_cache, written
+
+if TYPE_CHECKING:  # numpy is imported where samples are written or read: a speech read from the cache does without
+    import numpy as np
 
 #: 16-bit samples read from (and written to) a cache file at a time.
 READ_BLOCK = BLOCK
 
-__all__ = ["CachedBackend", "PhonemeMarks", "default_cache_dir", "word_after", "stressed_onset",
+__all__ = ["CachedBackend", "WholeSpeechCache", "KeptSamples", "PhonemeMarks", "default_cache_dir", "word_after", "stressed_onset",
            "mark_event", "place_mark", "CACHE_FORMAT"]
 
 #: Version of the cache files; bump it when their layout or the meaning of their contents changes.
 CACHE_FORMAT = 1
 
+#: The header of a cache file's samples (numpy's format 1.0, as ``write_array_header_1_0`` writes 16-bit mono).
+_SAMPLES_HEADER = re.compile(rb"\{'descr': '<i2', 'fortran_order': False, 'shape': \((\d+),\), \} *\n")
 _DELAY = re.compile(r"\.d\d+$")
 _EVENT = re.compile(r"^(?P<base>.+?)(?:\.(?P<event>stress|end|ph(?P<k>\d+)))?(?:\.d(?P<ms>\d+))?$")
 
@@ -167,6 +172,26 @@ def _identity(backend) -> dict:
     return identity
 
 
+_FIELDS = {kind: frozenset(kind.__dataclass_fields__) for kind in (Word, Phoneme)}
+_new = object.__new__
+_set = object.__setattr__
+
+
+def _made(kind, items: list) -> list:
+    """The ``Word`` or ``Phoneme`` of each of ``items`` (their fields, as ``asdict`` wrote them), made as their
+    ``__init__`` would make them, without a call of it each (a narration has thousands); TypeError for an item
+    that names other fields."""
+    fields = _FIELDS[kind]
+    made = []
+    for item in items:
+        if item.keys() != fields:
+            raise TypeError(f"a cached {kind.__name__} with the fields {sorted(item)}")
+        value = _new(kind)
+        _set(value, "__dict__", item)
+        made.append(value)
+    return made
+
+
 class CachedBackend:
     """A backend that synthesises each text once and keeps the utterance on disk and in memory.
 
@@ -217,7 +242,11 @@ class CachedBackend:
 
     def utterance(self, text: str) -> Utterance:
         """The utterance of ``text`` without marks: from memory, from disk, or synthesised now."""
-        key = self.key(text)
+        return self._kept(self.key(text), SpeechText(text))
+
+    def _kept(self, key: str, speech: SpeechText) -> Utterance:
+        """What the backend says for ``speech`` (kept under ``key``): from memory, from disk, or synthesised now."""
+        text = speech.text
         utt = self._memory.get(key)
         if utt is not None:
             return utt
@@ -229,7 +258,7 @@ class CachedBackend:
                 self.hits += 1
         if utt is None:
             started = time.perf_counter()
-            utt = self.backend.synthesize(SpeechText(text))
+            utt = self.backend.synthesize(speech)
             self.synthesis_seconds += time.perf_counter() - started
             self.misses += 1
             self.synthesised.add(key)
@@ -237,7 +266,7 @@ class CachedBackend:
                 utt = self._save(key, utt)
                 forget = getattr(self.backend, "forget", None)
                 if forget is not None and isinstance(utt.audio, PcmFile):  # its samples in memory: let go
-                    forget(SpeechText(text))
+                    forget(speech)
         self._memory[key] = utt
         return utt
 
@@ -251,12 +280,17 @@ class CachedBackend:
         return replace(utt, marks=marks)
 
     # -- files ---------------------------------------------------------------------------------------
-    def _paths(self, key: str) -> tuple[Path, Path]:
-        return self.cache_dir / f"{key}.json", self.cache_dir / f"{key}.npy"
+    def _paths(self, key: str) -> tuple[str, str]:
+        folder = self.__dict__.get("_folder")
+        if folder is None or folder[0] is not self.cache_dir:
+            folder = self._folder = (self.cache_dir, os.path.join(self.cache_dir, ""))
+        return f"{folder[1]}{key}.json", f"{folder[1]}{key}.npy"
 
     def _save(self, key: str, utt: Utterance) -> Utterance:
         """Write ``utt`` into the cache; returns it with its audio read from the cache file from now on
         (not held in memory) when the file gives back exactly its samples."""
+        import numpy as np
+
         meta_path, audio_path = self._paths(key)
         self.cache_dir.mkdir(parents=True, exist_ok=True)
         has_audio = utt.audio is not None
@@ -274,6 +308,8 @@ class CachedBackend:
                 "duration": utt.duration, "sample_rate": utt.sample_rate, "backend_name": utt.backend,
                 "sentences": list(utt.sentences), "audio": has_audio,
                 "words": [asdict(w) for w in utt.words], "phonemes": [asdict(p) for p in utt.phonemes]}
+        if utt.marks:  # the backend's own marks (WholeSpeechCache)
+            meta["marks"] = [[m.name, m.time] for m in utt.marks]
         with written(meta_path) as tmp:
             tmp.write_text(json.dumps(meta, ensure_ascii=False))
         if has_audio:
@@ -291,16 +327,119 @@ class CachedBackend:
     def _load(self, key: str, text: str) -> Utterance | None:
         meta_path, audio_path = self._paths(key)
         try:
-            meta = json.loads(meta_path.read_text())
+            with open(meta_path) as file:  # (as Path.read_text reads it, without pathlib's steps)
+                meta = json.loads(file.read())
             if meta.get("format") != CACHE_FORMAT or meta.get("text") != text:
                 return None
-            audio = None
-            if meta["audio"]:
-                audio = PcmFile(audio_path)  # read from the file as it is mixed, never held whole
-        except (OSError, ValueError, KeyError):
+            words, phonemes = _made(Word, meta["words"]), _made(Phoneme, meta["phonemes"])
+            audio = self._samples(audio_path) if meta["audio"] else None
+        except (OSError, ValueError, KeyError, TypeError):
             return None
-        return Utterance(text=text, duration=float(meta["duration"]),
-                         words=[Word(**w) for w in meta["words"]],
-                         phonemes=[Phoneme(**p) for p in meta["phonemes"]], marks=[],
+        return Utterance(text=text, duration=float(meta["duration"]), words=words, phonemes=phonemes,
+                         marks=[Mark(name, float(t)) for name, t in meta.get("marks", [])],
                          sentences=[float(s) for s in meta["sentences"]], sample_rate=int(meta["sample_rate"]),
                          audio=audio, backend=meta.get("backend_name", ""))
+
+    def _samples(self, path: Path) -> Pcm16:
+        """The samples of the cache file ``path``: read from the file as they are mixed, never held whole."""
+        return PcmFile(path)
+
+
+#: What ``json.dumps(..., sort_keys=True, ensure_ascii=False)`` writes, made once.
+_KEY_JSON = json.JSONEncoder(sort_keys=True, ensure_ascii=False)
+
+
+class WholeSpeechCache(CachedBackend):
+    """A :class:`CachedBackend` that keeps the backend's whole answer to each speech, as ``agentsim realize``
+    speaks: its marks as the backend placed them, and a speech at another rate or with prosody spans too.
+
+    The key is that of the text (:meth:`CachedBackend.key`, so a plain speech shares the storyteller's entry)
+    with the marks, the rate and the prosody spans added when the speech has them. The samples of an entry are
+    read into memory when they are first asked for (:class:`KeptSamples`), and audio that 16-bit samples do not
+    give back exactly is not kept: a speech read from the cache is, sample for sample and time for time, what
+    the backend said.
+    """
+
+    def speech_key(self, speech: SpeechText) -> str:
+        """Cache key of ``speech`` spoken by this backend."""
+        if not speech.marks and speech.rate == 1.0 and not speech.prosody:
+            return self.key(speech.text)
+        return self._hashed({"text": speech.text, "marks": [list(mark) for mark in speech.marks], "rate": speech.rate,
+                             "prosody": [asdict(span) for span in speech.prosody]})
+
+    def key(self, text: str) -> str:
+        """Cache key of ``text`` spoken by this backend (:meth:`CachedBackend.key`'s)."""
+        return self._hashed({"text": text})
+
+    def _hashed(self, fields: dict) -> str:
+        """The key of ``fields`` with the backend's identity: the hash of what ``json.dumps`` writes of them all
+        (sorted: "backend" first), the identity's part written once."""
+        identity = self.__dict__.get("_identity_json")
+        if identity is None:
+            identity = self._identity_json = _KEY_JSON.encode(_identity(self.backend))
+        blob = '{"backend": ' + identity + ", " + _KEY_JSON.encode(fields)[1:]
+        return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:32]
+
+    def synthesize(self, speech: SpeechText) -> Utterance:
+        """What the backend says for ``speech``: from memory, from the cache, or synthesised now (and kept)."""
+        return self._kept(self.speech_key(speech), speech)
+
+    def _save(self, key: str, utt: Utterance) -> Utterance:
+        if utt.audio is not None and not isinstance(utt.audio, Pcm16):
+            import numpy as np
+
+            audio = np.asarray(utt.audio)
+            samples = np.clip(np.round(audio.astype(np.float64) * 32768.0), -32768, 32767)
+            if audio.dtype != np.float32 or not np.array_equal(samples / 32768.0, audio):
+                return utt  # not 16-bit samples: the cache would not give them back exactly
+        stored = super()._save(key, utt).audio
+        if isinstance(stored, PcmFile):
+            stored.close()
+        return utt  # the samples stay in memory
+
+    def _samples(self, path: Path) -> Pcm16:
+        """The samples of the cache file ``path``, read into memory when they are first asked for (no file is
+        held open meanwhile: a run may keep thousands of speeches, and most runs never hear them)."""
+        with open(path, "rb") as file:
+            start = file.read(10)  # numpy's magic, format 1.0 (as _save writes it), and the header's length
+            if len(start) != 10 or start[:8] != b"\x93NUMPY\x01\x00":
+                raise ValueError(f"{path}: not a cache file")
+            header = _SAMPLES_HEADER.fullmatch(file.read(int.from_bytes(start[8:], "little")))
+            if header is None:
+                raise ValueError(f"{path}: not 16-bit mono samples as the cache writes them")
+            offset, length = file.tell(), int(header.group(1))
+            status = os.fstat(file.fileno())
+            if status.st_size < offset + 2 * length:
+                raise ValueError(f"{path}: cut short")
+        return KeptSamples(path, offset, length, (status.st_ino, status.st_size, status.st_mtime_ns))
+
+
+class KeptSamples(Pcm16):
+    """The 16-bit samples of a cache file (from byte ``offset``, ``length`` of them), read whole into memory the
+    first time any is asked for; ``seen``: the file's inode, size and time of change when its entry was read (a
+    file written anew since, by another process, is not read: an :class:`~agentsim.errors.AgentsimError` says
+    so)."""
+
+    def __init__(self, path: Path, offset: int, length: int, seen: tuple[int, int, int] | None = None) -> None:
+        self.path, self.offset, self.length, self.seen = Path(path), offset, length, seen
+        self._samples: Pcm | None = None
+
+    @property
+    def held_bytes(self) -> int:
+        return self._samples.held_bytes if self._samples is not None else 0
+
+    def read(self, first: int, last: int) -> np.ndarray:
+        if self._samples is None:
+            import numpy as np
+
+            with open(self.path, "rb") as file:
+                status = os.fstat(file.fileno())
+                if self.seen is not None and (status.st_ino, status.st_size, status.st_mtime_ns) != self.seen:
+                    raise AgentsimError(f"the speech cache file {self.path} was written anew while this run used it: "
+                                        "run again (or with --no-cache)")
+                file.seek(self.offset)
+                pcm = np.fromfile(file, dtype="<i2", count=self.length)
+            if len(pcm) != self.length:
+                raise ValueError(f"{self.path}: cut short")
+            self._samples = Pcm(pcm.astype(np.int16, copy=False))
+        return self._samples.read(first, last)
