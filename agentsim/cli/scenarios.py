@@ -78,7 +78,7 @@ def add_conductor(scenarios) -> argparse.ArgumentParser:
     add_no_pictures(parser)
     add_json(parser)
     add_physics(parser, csv=False, where=PHYSICS_FILE + "; the left arm hangs while the right conducts alone")
-    parser.set_defaults(handler=run_conductor)
+    parser.set_defaults(handler=run_conductor, done_at_exit=True)
     return parser
 
 
