@@ -27,6 +27,7 @@ from pathlib import Path
 from agentsim.errors import AgentsimError
 from agentsim.core.progress import Stages
 from agentsim.media import AXIS, GLOSSARY
+from scenarios import write_comparison
 from scenarios.conductor.names import STRATEGIES
 
 
@@ -129,15 +130,9 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
         else:
             stages.write(f"{name}: {time.perf_counter() - started:.1f} s")
     if args.compare:
-        print(f"{config.piece.title}: target {config.piece.tempo:g} BPM, ensemble starts at "
-              f"{config.ensemble.start_bpm:g} BPM, seed {args.seed}", file=table)
-        print(TABLE_HEADER, file=table)
-        for m in rows:
-            print(_summary_row(m), file=table)
-        from agentsim.media.files import write_text
-
-        write_text(out / "compare.json", json.dumps(rows, indent=2) + "\n")
-        print(f"written to {shown}/<strategy>/ and {shown / 'compare.json'}", file=table)
+        write_comparison(out, shown, rows, f"{config.piece.title}: target {config.piece.tempo:g} BPM, ensemble "
+                         f"starts at {config.ensemble.start_bpm:g} BPM, seed {args.seed}", TABLE_HEADER,
+                         [_summary_row(m) for m in rows], table)
     if as_json:
         print(json.dumps(rows if args.compare else {**rows[0], "time_axis": AXIS, "glossary": GLOSSARY}))  # as compare.json, metrics.json
     return 0

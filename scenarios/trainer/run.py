@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from agentsim.errors import UsageError
+from scenarios import write_comparison
 from scenarios.trainer.names import STRATEGIES, TARGET_TEMPO
 
 TABLE_HEADER = (f"{'strategy':<8} {'asy mean':>8} {'asy sd':>7} {'count p50':>9} {'count p95':>9} "
@@ -78,14 +79,8 @@ def _run(args, recording, shown: Path, out: Path, as_json: bool, table) -> int:
                       f"of mass over the support on {100 * (body['com_inside'] or 0):.1f} % of frames", file=table)
             print(f"written to {shown} in {time.perf_counter() - started:.1f} s", file=table)
     if every:
-        from agentsim.media.files import write_text
-
-        print(f"{args.exercise}: target {target:g} a minute, {rows[0]['user']} user, seed {args.seed}", file=table)
-        print(TABLE_HEADER, file=table)
-        for m in rows:
-            print(_row(m), file=table)
-        write_text(out / "compare.json", json.dumps(rows, indent=2) + "\n")
-        print(f"written to {shown}/<strategy>/ and {shown / 'compare.json'}", file=table)
+        write_comparison(out, shown, rows, f"{args.exercise}: target {target:g} a minute, {rows[0]['user']} user, "
+                         f"seed {args.seed}", TABLE_HEADER, [_row(m) for m in rows], table)
     if as_json:
         print(json.dumps(rows if every else rows[0]))
     return 0
