@@ -85,14 +85,12 @@ LIVE = ('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" xmlns:ex="urn:ag
 
 
 def test_the_live_viewer_films_and_lights_the_emotions(browser):
-    from test_live_viewer import clean, feedback_until, free_port, serve
+    from test_live_viewer import clean, feedback_until, free_port, open_viewer, serve
 
     port = free_port()
     server = serve(port)
     try:
-        browser.navigate(f"http://127.0.0.1:{port}/")
-        browser.wait_for("window.report && report.ready && report.live.connected && report.live.skeleton",
-                         timeout=10)
+        open_viewer(browser, port)
         assert browser.evaluate("report.environment().emotion") == "none"
         times = feedback_until(server.url, LIVE, "b1:e1:start")
         browser.wait_for("report.environment().emotion === 'joy'", timeout=10)

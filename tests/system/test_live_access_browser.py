@@ -16,7 +16,7 @@ from agentsim.live.poses import viewer_files
 from agentsim.live.service import Background, Service
 from agentsim.media.report.browser import Chromium, find_chromium
 from speech_timing.builtin import BuiltinBackend
-from test_live_viewer import BLOCK, clean, feedback_until, free_port
+from test_live_viewer import BLOCK, clean, feedback_until, free_port, open_viewer
 
 pytestmark = pytest.mark.system
 
@@ -55,9 +55,7 @@ def test_the_viewer_passes_its_token_on_and_another_sites_page_is_refused(chromi
         server = running.service.server
         ws_url = f"ws://127.0.0.1:{port}/?token={TOKEN}"
         # the viewer, opened with the token: it connects with it, and hears another client's block
-        chromium.navigate(f"http://127.0.0.1:{port}/?token={TOKEN}")
-        chromium.wait_for("window.report && report.ready && report.live.connected && report.live.skeleton",
-                          timeout=15)
+        open_viewer(chromium, port, f"?token={TOKEN}", timeout=15)
         assert chromium.evaluate("report.live.url") == ws_url
         times = feedback_until(running.url, BLOCK, "b1:end")
         chromium.wait_for("document.getElementById('feed').innerText.includes('b1:end')", timeout=10)

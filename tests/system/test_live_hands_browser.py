@@ -11,7 +11,7 @@ import pytest
 
 from helpers import whole_run_points
 from test_hands_browser import BML, TIPS
-from test_live_viewer import clean, feedback_until, free_port, serve
+from test_live_viewer import clean, feedback_until, free_port, open_viewer, serve
 
 pytestmark = pytest.mark.system
 
@@ -22,9 +22,7 @@ def test_the_live_viewer_draws_the_hands(browser, tmp_path):
     port = free_port()
     server = serve(port)
     try:
-        browser.navigate(f"http://127.0.0.1:{port}/")
-        browser.wait_for("window.report && report.ready && report.live.connected && report.live.skeleton",
-                         timeout=10)
+        open_viewer(browser, port)
         browser.wait_for("report.time() !== null", timeout=10)
         for name in WATCHED:
             browser.evaluate(f"report.watch({name!r})")

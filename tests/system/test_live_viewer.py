@@ -60,6 +60,15 @@ def feedback_until(url: str, document: str, last: str) -> dict[str, float]:
     return times
 
 
+def open_viewer(browser, port: int, query: str = "", timeout: float = 10.0) -> float:
+    """Open the live viewer of the service on ``port`` (``query``: what follows its ``/``) and wait until it plays
+    the live run (connected, with its skeleton); the seconds the page took to load."""
+    seconds = browser.navigate(f"http://127.0.0.1:{port}/{query}")
+    browser.wait_for("window.report && report.ready && report.live.connected && report.live.skeleton",
+                     timeout=timeout)
+    return seconds
+
+
 def clean(browser) -> None:
     assert browser.evaluate("report.errors") == [] and browser.exceptions == []
 
@@ -68,9 +77,7 @@ def test_the_viewer_plays_the_live_run_and_says_when_the_server_goes(browser, tm
     port = free_port()
     server = serve(port)
     try:
-        seconds = browser.navigate(f"http://127.0.0.1:{port}/")
-        browser.wait_for("window.report && report.ready && report.live.connected && report.live.skeleton",
-                         timeout=10)
+        seconds = open_viewer(browser, port)
         print(f"viewer loaded in {seconds:.2f} s")
         clean(browser)
         assert browser.evaluate("report.live.url") == f"ws://127.0.0.1:{port}/"
