@@ -237,7 +237,11 @@ class CachedBackend:
 
     def key(self, text: str) -> str:
         """Cache key of ``text`` spoken by this backend."""
-        blob = json.dumps({"backend": _identity(self.backend), "text": text}, sort_keys=True, ensure_ascii=False)
+        return self._hashed({"text": text})
+
+    def _hashed(self, fields: dict) -> str:
+        """The key of ``fields`` with the backend's identity (the hash of their JSON, keys sorted)."""
+        blob = json.dumps({"backend": _identity(self.backend), **fields}, sort_keys=True, ensure_ascii=False)
         return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:32]
 
     def utterance(self, text: str) -> Utterance:
@@ -281,10 +285,8 @@ class CachedBackend:
 
     # -- files ---------------------------------------------------------------------------------------
     def _paths(self, key: str) -> tuple[str, str]:
-        folder = self.__dict__.get("_folder")
-        if folder is None or folder[0] is not self.cache_dir:
-            folder = self._folder = (self.cache_dir, os.path.join(self.cache_dir, ""))
-        return f"{folder[1]}{key}.json", f"{folder[1]}{key}.npy"
+        base = os.path.join(self.cache_dir, key)
+        return f"{base}.json", f"{base}.npy"
 
     def _save(self, key: str, utt: Utterance) -> Utterance:
         """Write ``utt`` into the cache; returns it with its audio read from the cache file from now on
@@ -345,10 +347,6 @@ class CachedBackend:
         return PcmFile(path)
 
 
-#: What ``json.dumps(..., sort_keys=True, ensure_ascii=False)`` writes, made once.
-_KEY_JSON = json.JSONEncoder(sort_keys=True, ensure_ascii=False)
-
-
 class WholeSpeechCache(CachedBackend):
     """A :class:`CachedBackend` that keeps the backend's whole answer to each speech, as ``agentsim realize``
     speaks: its marks as the backend placed them, and a speech at another rate or with prosody spans too.
@@ -366,19 +364,6 @@ class WholeSpeechCache(CachedBackend):
             return self.key(speech.text)
         return self._hashed({"text": speech.text, "marks": [list(mark) for mark in speech.marks], "rate": speech.rate,
                              "prosody": [asdict(span) for span in speech.prosody]})
-
-    def key(self, text: str) -> str:
-        """Cache key of ``text`` spoken by this backend (:meth:`CachedBackend.key`'s)."""
-        return self._hashed({"text": text})
-
-    def _hashed(self, fields: dict) -> str:
-        """The key of ``fields`` with the backend's identity: the hash of what ``json.dumps`` writes of them all
-        (sorted: "backend" first), the identity's part written once."""
-        identity = self.__dict__.get("_identity_json")
-        if identity is None:
-            identity = self._identity_json = _KEY_JSON.encode(_identity(self.backend))
-        blob = '{"backend": ' + identity + ", " + _KEY_JSON.encode(fields)[1:]
-        return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:32]
 
     def synthesize(self, speech: SpeechText) -> Utterance:
         """What the backend says for ``speech``: from memory, from the cache, or synthesised now (and kept)."""
