@@ -222,6 +222,29 @@ def test_every_value_of_a_long_block_has_at_most_one_writer(long_realizer, monke
     assert set(np.unique(stream.writers)) <= set(stream.driver_names) | {-1}
 
 
+def test_poses_told_a_stretch_at_a_time_are_the_frames_of_the_finished_stream(long_realizer):
+    from agentsim.animation.output import PROGRESS_FRAMES
+
+    told = []
+
+    def progress(body, times, values):
+        told.append((len(times), times.copy(), values.copy()))
+        assert body.n_dofs == values.shape[1] and len(times) == len(values)
+
+    stream = evaluate_poses(long_realizer, fps=60, duration=30.0, progress=progress)
+    plain = evaluate_poses(long_realizer, fps=60, duration=30.0)
+    counts = [n for n, _, _ in told]
+    # the frames made so far from the first, each time at least PROGRESS_FRAMES more (the frames before a
+    # segment of the animation are final once it begins); the last time, all of them
+    assert counts[-1] == stream.n_frames and len(counts) >= stream.n_frames // (4 * PROGRESS_FRAMES)
+    assert all(b - a >= PROGRESS_FRAMES for a, b in zip([0, *counts[:-2]], counts[:-1])), counts
+    for n, times, values in told:
+        np.testing.assert_array_equal(times, stream.times[:n])
+        np.testing.assert_array_equal(values, stream.values[:n])
+    for name in ("values", "writers", "positions", "times"):
+        np.testing.assert_array_equal(getattr(stream, name), getattr(plain, name))
+
+
 # --------------------------------------------------------------------------------------------- files
 def test_bvh_of_a_30_second_block_reads_back_with_an_independent_reader(long_realizer, tmp_path):
     bvhio = pytest.importorskip("bvhio")

@@ -15,7 +15,7 @@ from agentsim.music.events import score_events
 from agentsim.music.instruments import HIHAT, KICK, SNARE
 from agentsim.music.midi import midi_tick_times, midi_to_events, score_to_midi
 from agentsim.music.onsets import beat_onset_offset, energy_onsets, measure_onset_offsets
-from agentsim.music.rendering import FluidSynthRenderer, render_events, render_midi_file
+from agentsim.music.rendering import PUBLISHED, FluidSynthRenderer, render_events, render_midi_file
 from agentsim.music.score import build_score
 from agentsim.music.tempo import Meter, TempoChange, TempoMap, TempoRamp, TempoStep, make_tempo_map
 
@@ -223,6 +223,29 @@ def test_rendering_ahead_gives_the_same_samples_and_counts_a_broken_promise():
         r.note(6.5, 0, 60, 100, 0.2)  # both events are within what was promised quiet: counted
         assert r.broken_promises == 2
     np.testing.assert_array_equal(np.concatenate(blocks), whole)
+
+def test_a_caller_waits_for_the_start_of_a_stretch_rendered_ahead_not_for_the_whole_stretch():
+    sc = build_score(make_tempo_map(125, "4/4", seed=1), 2, seed=1)
+    events = sorted(score_events(sc, offset=0.1), key=lambda e: e.time)
+    whole = render_events(events, 2.0, 22050)
+    go = threading.Event()
+    with FluidSynthRenderer(22050) as r:
+        render = r._render
+
+        def held(n, out):  # the rendering thread stops after its first stretch until it is let go
+            render(n, out)
+            if threading.current_thread().name.startswith("fluidsynth") and r._pos > PUBLISHED:
+                assert go.wait(30)
+
+        r._render = held
+        r.schedule(events)
+        r.render_ahead(2.0)
+        first = r.render_until(PUBLISHED / 22050)  # handed out while the thread still holds the rest
+        assert len(first) == PUBLISHED and not r._jobs[0].done()
+        go.set()
+        rest = r.render_until(2.0)
+    np.testing.assert_array_equal(np.concatenate([first, rest]), whole)
+
 
 def test_event_sample_is_block_aligned():
     with FluidSynthRenderer(44100) as r:

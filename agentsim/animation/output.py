@@ -27,6 +27,8 @@ from agentsim.written import written
 #: Joints whose world positions a PoseStream carries for every frame.
 TRACKED_JOINTS = ("HumanoidRoot", "vt10", "skullbase", "l_eyeball", "r_eyeball", "l_shoulder", "r_shoulder",
                   "l_elbow", "r_elbow", "l_wrist", "r_wrist", "l_fingers", "r_fingers")
+#: How many frames :func:`evaluate_poses` makes between two calls of its ``progress`` (about 4 s at 60 fps).
+PROGRESS_FRAMES = 256
 
 
 class FrameFile:
@@ -193,7 +195,7 @@ def lexicon_of(source) -> Lexicon:
 def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | None = None, start: float = 0.0,
                    scene: dict | None = None, animator_time: TimeSource | None = None,
                    manager: DriverManager | None = None, body: Body | None = None,
-                   times=None, folder: str | Path | None = None) -> PoseStream:
+                   times=None, folder: str | Path | None = None, progress=None) -> PoseStream:
     """Evaluate the body's pose at ``fps`` frames per second for everything a realizer played.
 
     Parameters
@@ -243,7 +245,18 @@ def evaluate_poses(source, fps: float = 60.0, seed: int = 0, duration: float | N
         times = start + np.arange(n) / fps
     joints = [j for j in TRACKED_JOINTS if j in manager.body.joint]
     files = None
-    if folder is None:
+    if folder is None and progress is not None:
+        values = np.empty((len(times), manager.body.n_dofs))
+        writers = np.empty((len(times), manager.body.n_dofs), np.int32)
+
+        def told(first: int, block: np.ndarray, wrote: np.ndarray) -> None:
+            end = first + len(block)
+            values[first:end], writers[first:end] = block, wrote
+            progress(manager.body, times[:end], values[:end])
+
+        manager.evaluate(times, sink=told, window=PROGRESS_FRAMES)
+        positions = manager.body.positions(values, joints)
+    elif folder is None:
         values, writers = manager.evaluate(times)
         positions = manager.body.positions(values, joints)
     else:

@@ -25,6 +25,7 @@ __all__ = [
     "INSTALL_HINT",
     "FLUID_BLOCK",
     "AHEAD_SECONDS",
+    "PUBLISHED",
     "check_soundfont",
     "FluidSynthRenderer",
     "render_events",
@@ -42,6 +43,8 @@ FLUID_BLOCK = 64
 
 
 AHEAD_SECONDS = 1.0
+#: The rendering thread hands out what it rendered every this many samples (a multiple of FLUID_BLOCK).
+PUBLISHED = 1024
 """How far beyond what it handed out :meth:`FluidSynthRenderer.render_ahead` renders at most (seconds)."""
 
 
@@ -158,6 +161,7 @@ class FluidSynthRenderer:
         # beyond what was handed out); the queue and _ahead are shared with it under _lock; the synthesizer
         # and _pos belong to whichever thread renders, the caller's only while no job is pending
         self._lock = threading.Lock()
+        self._published = threading.Condition(self._lock)  # a stretch was added to _ahead
         self._ahead: list[np.ndarray] = []
         self._ready = 0  # samples synthesised by finished jobs (or by the caller)
         self._promised = 0  # sample before which no new event will be scheduled
@@ -188,6 +192,10 @@ class FluidSynthRenderer:
     def set_program(self, channel: int, program: int) -> None:
         """Select a General MIDI program on a melodic channel now."""
         self._drain()  # the synthesizer is the rendering thread's until its jobs are done
+        self._select(channel, program)
+
+    def _select(self, channel: int, program: int) -> None:
+        """Select a program (by the thread that renders)."""
         if channel == DRUM_CHANNEL:
             self._synth.program_select(DRUM_CHANNEL, self._sfid, 128, int(program))
         else:
@@ -217,7 +225,7 @@ class FluidSynthRenderer:
         elif ev.kind == "note_off":
             s.noteoff(ev.channel, ev.data1)
         elif ev.kind == "program":
-            self.set_program(ev.channel, ev.data1)
+            self._select(ev.channel, ev.data1)
         else:
             s.cc(ev.channel, ev.data1, ev.data2)
 
@@ -232,32 +240,45 @@ class FluidSynthRenderer:
             self._pos += n
 
     def _synthesise(self, end: int) -> None:
-        """Synthesise from ``_pos`` to sample ``end``, applying the events due on the way, into ``_ahead``."""
-        chunks: list[np.ndarray] = []
+        """Synthesise from ``_pos`` to sample ``end``, applying the events due on the way, into ``_ahead``, a
+        stretch of at most :data:`PUBLISHED` samples at a time, so that a caller waiting for the start of a long
+        stretch waits for that start alone."""
         queue = self._queue
-        while True:
-            with self._lock:
-                if not queue or queue[0][0] > end:
-                    break
-                at, _, _, event = heapq.heappop(queue)
-            # Render up to the event's boundary (event samples are multiples of FLUID_BLOCK, so
-            # FluidSynth's block position is aligned there). A late event is applied at once and
-            # takes effect on FluidSynth's next block boundary.
-            self._render(at - self._pos, chunks)
-            self._apply(event)
-        self._render(end - self._pos, chunks)
-        if chunks:
-            stereo = np.concatenate(chunks).astype(np.float32).reshape(-1, 2)
-            mono = (stereo.sum(axis=1) * (0.5 / 32768.0)).astype(np.float32)
-            with self._lock:
-                self._ahead.append(mono)
-                self._ready = self._pos
+        while self._pos < end:
+            chunks: list[np.ndarray] = []
+            stop = min(end, self._pos + PUBLISHED)
+            while True:
+                with self._lock:
+                    if not queue or queue[0][0] > stop:
+                        break
+                    at, _, _, event = heapq.heappop(queue)
+                # Render up to the event's boundary (event samples are multiples of FLUID_BLOCK, so
+                # FluidSynth's block position is aligned there). A late event is applied at once and
+                # takes effect on FluidSynth's next block boundary.
+                self._render(at - self._pos, chunks)
+                self._apply(event)
+            self._render(stop - self._pos, chunks)
+            if chunks:
+                stereo = np.concatenate(chunks).astype(np.float32).reshape(-1, 2)
+                mono = (stereo.sum(axis=1) * (0.5 / 32768.0)).astype(np.float32)
+                with self._published:
+                    self._ahead.append(mono)
+                    self._ready = self._pos
+                    self._published.notify_all()
 
     def _drain(self) -> None:
         """Wait for the rendering thread's jobs (raising what one raised)."""
         jobs, self._jobs = self._jobs, []
         for job in jobs:
             job.result()
+
+    def _wait_for(self, end: int) -> None:
+        """Wait until the rendering thread has published sample ``end``, or has no job left (raising what
+        a job raised); the jobs finished are let go."""
+        with self._published:
+            self._published.wait_for(lambda: self._ready >= end or all(job.done() for job in self._jobs))
+        while self._jobs and self._jobs[0].done():
+            self._jobs.pop(0).result()
 
     def render_ahead(self, until: float) -> None:
         """Promise that no event will be scheduled before ``until`` seconds, and render up to there on a
@@ -301,8 +322,8 @@ class FluidSynthRenderer:
         with self._lock:
             ready = self._ready
         if ready < end:
-            self._drain()
-            if self._pos < end:
+            self._wait_for(end)
+            if not self._jobs and self._pos < end:
                 self._synthesise(end)
         with self._lock:
             ahead = self._ahead

@@ -107,10 +107,15 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
     rows = []
     stages = Stages()
     pictures = not getattr(args, "no_pictures", False)
+    from scenarios.conductor.scenario import begin
+
+    # one run: what it needs before the piece plays (FluidSynth's synthesizers, the sound check) begins now,
+    # on threads of its own, and the processes that draw its pictures get ready while it is simulated
+    begun = None if args.compare else begin(config)
     if not args.compare and pictures:
         from agentsim.animation.pictures import warm_workers
 
-        warm_workers()  # the processes that draw the timeline pictures get ready while the run is simulated
+        warm_workers()
     import agentsim.realizer  # noqa: F401  (what a run imports, imported now: see below)
     import scenarios.conductor.ensemble  # noqa: F401
     from agentsim.core.gcpause import keep_out_of_collections
@@ -118,7 +123,7 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
     keep_out_of_collections()  # the modules, classes and tables stay for the process's life
     for name in stages.over(list(strategies), "strategies", unit="strategy") if args.compare else strategies:
         started = time.perf_counter()
-        run = simulate(config, name, args.seed, stages=stages)
+        run = simulate(config, name, args.seed, stages=stages, begun=begun)
         with stages("measuring"):
             metrics = collect_metrics(run)
         folder = out / name if args.compare else out

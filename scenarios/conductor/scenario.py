@@ -107,25 +107,50 @@ def sound_check(config: ScenarioConfig) -> dict[str, float]:
     return out
 
 
+class Begun:
+    """What a run needs before its piece plays, under way on threads of their own (:func:`begin`): the sound
+    check, the measure of the renderer's onset offsets and the renderer itself. FluidSynth works without
+    Python's lock, so they go on while the caller imports and prepares; each has a synthesizer of its own, so
+    what each renders is the same as one after the other. Use it once, as a context manager (which waits for
+    them all at its end)."""
+
+    def __init__(self, config: ScenarioConfig) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        from agentsim.music.onsets import beat_onset_offset
+
+        self.config = config
+        self._pool = ThreadPoolExecutor(max_workers=3, thread_name_prefix="begin")
+        self.checked = self._pool.submit(sound_check, config)
+        self._pool.submit(beat_onset_offset, config.audio.sample_rate, _soundfont(config))
+        self.renderer = self._pool.submit(_renderer, config)
+
+    def __enter__(self) -> Begun:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._pool.shutdown(wait=True)
+        if exc[0] is not None and self.renderer.done() and self.renderer.exception() is None:
+            self.renderer.result().close()  # (a run that did not take it)
+
+
+def begin(config: ScenarioConfig) -> Begun:
+    """Begin what a run of ``config`` needs before its piece plays (:class:`Begun`); :func:`simulate` takes it."""
+    return Begun(config)
+
+
 def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int = 0,
-             stages: Stages | None = None) -> Run:
+             stages: Stages | None = None, begun: Begun | None = None) -> Run:
     """Run the closed loop once, as fast as the computer allows; returns the finished :class:`Run`.
-    ``stages``: where to say on a terminal how many seconds of the piece have been simulated."""
+    ``stages``: where to say on a terminal how many seconds of the piece have been simulated. ``begun``:
+    what :func:`begin` began for this run's ``config`` (by default it is begun here)."""
     started = time.perf_counter()
     name = strategy_name or config.conductor.strategy
-    # FluidSynth renders without Python's lock: the sound check renders, and the renderer's onset offsets
-    # are measured (for the scores), on threads of their own while the piece plays on this one; the
-    # conductor waits for the sound check's levels when it first needs them (its first downbeat). Each has
-    # a synthesizer of its own, so what each renders is the same as one after the other.
-    from concurrent.futures import ThreadPoolExecutor
-
-    from agentsim.music.onsets import beat_onset_offset
-
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        checked = pool.submit(sound_check, config)
-        pool.submit(beat_onset_offset, config.audio.sample_rate, _soundfont(config))
-        return _simulate(config, name, seed, started, renderer=_renderer(config), reference=Later(checked),
-                         stages=stages or Stages.off())
+    # the sound check and the renderer's onset offsets go on while the piece plays; the conductor waits for
+    # the sound check's levels when it first needs them (its first downbeat)
+    with begun or begin(config) as ready:
+        return _simulate(config, name, seed, started, renderer=ready.renderer.result(),
+                         reference=Later(ready.checked), stages=stages or Stages.off())
 
 
 class Later(Mapping):
@@ -458,13 +483,14 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
                 [(out / "tempo.png", tempo_figure, tempo_figure_arguments(run, metrics))]))
                 if plots and pictures else None)
             # the timeline pictures begin before the poses: the overview, which shows none, at once, and each
-            # window as soon as its poses are made (the physical body's come a stretch at a time)
+            # window as soon as its poses are made (they come a stretch at a time)
             timelines = (drawing.enter_context(start_timelines(
                 recording, out / "timeline.png", window=TIMELINE_WINDOW, threshold=TIMELINE_WINDOW,
                 title=f"conductor ({run.strategy_name})", poses_later=True)) if plots and pictures else None)
             body = None  # the physical body's figures (--physics)
             if physics is None:
-                stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed)
+                stream = evaluate_poses(recording, fps=run.config.conductor.fps, seed=run.seed,
+                                        progress=timelines and timelines.follow())
             else:
                 stream, body = physical_poses(recording, run.config.conductor.fps, run.seed, physics, out,
                                               progress=timelines and timelines.follow())
