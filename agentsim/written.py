@@ -35,7 +35,7 @@ from typing import Callable, Iterable, Iterator
 
 from agentsim.errors import UsageError
 
-__all__ = ["written", "check_output", "save_figure", "staged_folder", "staged_page", "check_folder", "clear_staged", "clear_stale",
+__all__ = ["written", "check_output", "save_figure", "png_bytes", "staged_folder", "staged_page", "check_folder", "clear_staged", "clear_stale",
            "scratch_folder", "clear_scratch",
            "clear_partials", "RUN_FILES"]
 
@@ -228,14 +228,74 @@ def user_cache(name: str) -> Path:
 PNG_COMPRESSION = 3
 
 
+def png_bytes(rgba, dpi: float, texts: dict[str, str] | None = None) -> bytes:
+    """A PNG file of 8-bit RGBA pixels (an array of rows x columns x 4) at ``dpi``, with ``texts`` (tEXt
+    chunks): rows unfiltered, deflated at :data:`PNG_COMPRESSION`.
+
+    A picture of plots is mostly runs of one colour, which zlib packs as well unfiltered as filtered: the
+    file is smaller than Pillow's (which tries five filters on every row and keeps the best) and is
+    written in a third of the time."""
+    import struct
+    import zlib
+
+    import numpy as np
+
+    pixels = np.ascontiguousarray(rgba, dtype=np.uint8)
+    rows, columns, channels = pixels.shape
+    if channels != 4:
+        raise ValueError(f"png_bytes takes RGBA pixels, not {channels} channels")
+    raw = np.zeros((rows, 1 + 4 * columns), np.uint8)  # each row: filter type 0 (none), then its pixels
+    raw[:, 1:] = pixels.reshape(rows, -1)
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    per_metre = int(dpi / 0.0254 + 0.5)
+    out = [b"\x89PNG\r\n\x1a\n", chunk(b"IHDR", struct.pack(">IIBBBBB", columns, rows, 8, 6, 0, 0, 0)),
+           chunk(b"pHYs", struct.pack(">IIB", per_metre, per_metre, 1))]
+    out += [chunk(b"tEXt", key.encode("latin-1") + b"\0" + value.encode("latin-1", "replace"))
+            for key, value in (texts or {}).items() if value is not None]
+    out += [chunk(b"IDAT", zlib.compress(raw.tobytes(), PNG_COMPRESSION)), chunk(b"IEND", b"")]
+    return b"".join(out)
+
+
+def _print_png(canvas, filename_or_obj, *, metadata: dict | None = None, **_) -> None:
+    """An Agg canvas's ``print_png`` (what ``savefig`` calls once it has set the figure up) through
+    :func:`png_bytes`, with the metadata matplotlib writes."""
+    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg.draw(canvas)
+    texts = {"Software": f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/", **(metadata or {})}
+    data = png_bytes(canvas.buffer_rgba(), canvas.figure.dpi, texts)
+    if isinstance(filename_or_obj, (str, os.PathLike)):
+        Path(filename_or_obj).write_bytes(data)
+    else:
+        filename_or_obj.write(data)
+
+
 def save_figure(fig, path: str | Path, **options) -> Path:
-    """Save a matplotlib figure through :func:`written` (the format from ``path``'s suffix)."""
+    """Save a matplotlib figure through :func:`written` (the format from ``path``'s suffix); a PNG of an Agg
+    canvas through :func:`png_bytes`."""
+    import functools
+
     path = Path(path)
     kind = path.suffix.lstrip(".").lower() or None
-    if kind == "png" and "pil_kwargs" not in options:  # zlib's level 3: three times faster than its default
-        options["pil_kwargs"] = {"compress_level": PNG_COMPRESSION}  # for a fifth more bytes, the same pixels
-    with written(path) as tmp:
-        fig.savefig(tmp, format=kind, **options)
+    fast = False
+    if kind == "png" and "pil_kwargs" not in options:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        fast = isinstance(fig.canvas, FigureCanvasAgg) and "print_png" not in vars(fig.canvas)
+        if fast:  # (savefig takes the canvas's own print_png)
+            fig.canvas.print_png = functools.partial(_print_png, fig.canvas)
+        else:  # zlib's level 3: three times faster than its default
+            options["pil_kwargs"] = {"compress_level": PNG_COMPRESSION}  # for a fifth more bytes, the same pixels
+    try:
+        with written(path) as tmp:
+            fig.savefig(tmp, format=kind, **options)
+    finally:
+        if fast:
+            del fig.canvas.print_png
     return path
 
 

@@ -247,6 +247,63 @@ def test_a_caller_waits_for_the_start_of_a_stretch_rendered_ahead_not_for_the_wh
     np.testing.assert_array_equal(np.concatenate([first, rest]), whole)
 
 
+def test_a_renderer_in_a_process_of_its_own_gives_the_same_samples_and_counts_a_broken_promise():
+    from agentsim.music.process import RenderingProcess
+
+    sc = build_score(make_tempo_map(125, "4/4", rubato=0.02, seed=1), 3, seed=1)
+    events = sorted(score_events(sc, offset=0.3), key=lambda e: e.time)
+    whole = render_events(events, 6.0, 22050)
+    rng = np.random.default_rng(0)
+    blocks, lead = [], 0.4
+    with RenderingProcess(22050) as r:
+        child = r._process
+        pending = list(events)
+        t = 0.0
+        while t < 6.0:
+            t = min(6.0, t + float(rng.uniform(0.002, 0.05)))
+            while pending and pending[0].time < t + lead:
+                r.schedule(pending.pop(0))
+            blocks.append(r.render_until(t))
+            r.render_ahead(t + lead if not pending else min(t + lead, pending[0].time))
+        assert r.time == pytest.approx(6.0) and r.broken_promises == 0
+        r.render_ahead(7.0)
+        r.note(6.5, 0, 60, 100, 0.2)  # both events are within what was promised quiet: counted
+        assert r.broken_promises == 2
+    np.testing.assert_array_equal(np.concatenate(blocks), whole)
+    assert not child.is_alive() and child.exitcode == 0
+
+
+def test_a_renderer_process_that_cannot_load_its_soundfont_says_so_where_samples_are_asked_for(tmp_path):
+    from agentsim.errors import Unavailable
+    from agentsim.music.process import RenderingProcess, renderer
+
+    bad = tmp_path / "not-a-soundfont.sf2"
+    bad.write_bytes(b"RIFF nothing of a soundfont")
+    with RenderingProcess(22050, bad) as r:
+        with pytest.raises(Unavailable, match="could not load the soundfont"):
+            r.render_until(0.1)
+    with pytest.raises(Unavailable, match="soundfont not found"):  # a missing file: at once, in this process
+        renderer(22050, tmp_path / "missing.sf2")
+
+
+def test_a_renderer_is_forked_only_from_a_process_with_no_other_thread(monkeypatch):
+    from agentsim.music import process
+    from agentsim.music.process import RenderingProcess, renderer
+
+    held = threading.Event()
+    other = threading.Thread(target=held.wait, args=(30,))
+    other.start()
+    try:
+        with renderer(22050) as r:  # another thread: rendered here, on a thread of its own
+            assert isinstance(r, FluidSynthRenderer)
+    finally:
+        held.set()
+        other.join()
+    monkeypatch.setattr(process.threading, "active_count", lambda: 1)  # (as the command line has it)
+    with renderer(22050) as r:
+        assert isinstance(r, RenderingProcess)
+
+
 def test_event_sample_is_block_aligned():
     with FluidSynthRenderer(44100) as r:
         assert r.event_sample(1.0) % 64 == 0

@@ -27,6 +27,7 @@ __all__ = [
     "AHEAD_SECONDS",
     "PUBLISHED",
     "check_soundfont",
+    "import_fluidsynth",
     "FluidSynthRenderer",
     "render_events",
     "render_midi_file",
@@ -77,7 +78,7 @@ def check_soundfont(soundfont: "str | os.PathLike") -> str:
 _IMPORT_LOCK = threading.Lock()
 
 
-def _import_fluidsynth():
+def import_fluidsynth():
     try:
         with _IMPORT_LOCK:
             # pyfluidsynth prints where it found the library onto stdout, which carries our JSON, when $CI is
@@ -144,7 +145,7 @@ class FluidSynthRenderer:
         if sample_rate < 8000 or sample_rate > 192000:
             raise ValueError("sample_rate must be within 8000..192000 Hz")
         path = check_soundfont(soundfont)
-        fluidsynth = _import_fluidsynth()
+        fluidsynth = import_fluidsynth()
         self.sample_rate = int(sample_rate)
         with _IMPORT_LOCK:  # FluidSynth sets up its default modulators, shared by all synthesizers, unguarded
             self._synth = fluidsynth.Synth(gain=float(gain), samplerate=float(sample_rate))
@@ -243,28 +244,37 @@ class FluidSynthRenderer:
         """Synthesise from ``_pos`` to sample ``end``, applying the events due on the way, into ``_ahead``, a
         stretch of at most :data:`PUBLISHED` samples at a time, so that a caller waiting for the start of a long
         stretch waits for that start alone."""
-        queue = self._queue
         while self._pos < end:
-            chunks: list[np.ndarray] = []
-            stop = min(end, self._pos + PUBLISHED)
-            while True:
-                with self._lock:
-                    if not queue or queue[0][0] > stop:
-                        break
-                    at, _, _, event = heapq.heappop(queue)
-                # Render up to the event's boundary (event samples are multiples of FLUID_BLOCK, so
-                # FluidSynth's block position is aligned there). A late event is applied at once and
-                # takes effect on FluidSynth's next block boundary.
-                self._render(at - self._pos, chunks)
-                self._apply(event)
-            self._render(stop - self._pos, chunks)
-            if chunks:
-                stereo = np.concatenate(chunks).astype(np.float32).reshape(-1, 2)
-                mono = (stereo.sum(axis=1) * (0.5 / 32768.0)).astype(np.float32)
-                with self._published:
-                    self._ahead.append(mono)
-                    self._ready = self._pos
-                    self._published.notify_all()
+            mono = self.render_stretch(min(end, self._pos + PUBLISHED))
+            with self._published:
+                self._ahead.append(mono)
+                self._ready = self._pos
+                self._published.notify_all()
+
+    @property
+    def position(self) -> int:
+        """Number of samples synthesised so far (handed out or not)."""
+        return self._pos
+
+    def render_stretch(self, stop: int) -> np.ndarray:
+        """Synthesise from :attr:`position` to sample ``stop`` (past it), applying the events due on the way,
+        and return the mono samples, by the thread that renders (for a renderer not rendering ahead: the
+        process of :class:`~agentsim.music.process.RenderingProcess` renders with it)."""
+        chunks: list[np.ndarray] = []
+        queue = self._queue
+        while True:
+            with self._lock:
+                if not queue or queue[0][0] > stop:
+                    break
+                at, _, _, event = heapq.heappop(queue)
+            # Render up to the event's boundary (event samples are multiples of FLUID_BLOCK, so
+            # FluidSynth's block position is aligned there). A late event is applied at once and
+            # takes effect on FluidSynth's next block boundary.
+            self._render(at - self._pos, chunks)
+            self._apply(event)
+        self._render(stop - self._pos, chunks)
+        stereo = np.concatenate(chunks).astype(np.float32).reshape(-1, 2)
+        return (stereo.sum(axis=1) * (0.5 / 32768.0)).astype(np.float32)
 
     def _drain(self) -> None:
         """Wait for the rendering thread's jobs (raising what one raised)."""

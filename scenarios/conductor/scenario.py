@@ -60,12 +60,16 @@ def _soundfont(config: ScenarioConfig) -> str:
     return config.audio.soundfont or DEFAULT_SOUNDFONT
 
 
-def _renderer(config: ScenarioConfig):
+def _renderer(config: ScenarioConfig, apart: bool = False):
+    """The ensemble's synthesizer; ``apart``: in a process of its own where one can start (called before this
+    process starts threads), as the piece is rendered while the simulation works."""
+    from agentsim.music.process import renderer
     from agentsim.music.rendering import FluidSynthRenderer
 
     programs = {m.channel: m.program for m in config.ensemble.musicians if m.program >= 0}
-    return FluidSynthRenderer(config.audio.sample_rate, _soundfont(config), config.audio.gain,
-                              reverb=config.audio.reverb, programs=programs)
+    return (renderer if apart else FluidSynthRenderer)(config.audio.sample_rate, _soundfont(config),
+                                                        config.audio.gain, reverb=config.audio.reverb,
+                                                        programs=programs)
 
 
 def sound_check(config: ScenarioConfig) -> dict[str, float]:
@@ -108,11 +112,11 @@ def sound_check(config: ScenarioConfig) -> dict[str, float]:
 
 
 class Begun:
-    """What a run needs before its piece plays, under way on threads of their own (:func:`begin`): the sound
-    check, the measure of the renderer's onset offsets and the renderer itself. FluidSynth works without
-    Python's lock, so they go on while the caller imports and prepares; each has a synthesizer of its own, so
-    what each renders is the same as one after the other. Use it once, as a context manager (which waits for
-    them all at its end)."""
+    """What a run needs before its piece plays, under way while the caller imports and prepares
+    (:func:`begin`): the ensemble's renderer, in a process of its own (:func:`_renderer`), and on threads of
+    their own the sound check and the measure of the renderer's onset offsets. FluidSynth works without
+    Python's lock; each has a synthesizer of its own, so what each renders is the same as one after the
+    other. Use it once, as a context manager (which waits for them all at its end)."""
 
     def __init__(self, config: ScenarioConfig) -> None:
         from concurrent.futures import ThreadPoolExecutor
@@ -120,18 +124,17 @@ class Begun:
         from agentsim.music.onsets import beat_onset_offset
 
         self.config = config
-        self._pool = ThreadPoolExecutor(max_workers=3, thread_name_prefix="begin")
+        self.renderer = _renderer(config, apart=True)  # (first: its process is forked before any thread starts)
+        self._pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="begin")
         self.checked = self._pool.submit(sound_check, config)
         self._pool.submit(beat_onset_offset, config.audio.sample_rate, _soundfont(config))
-        self.renderer = self._pool.submit(_renderer, config)
 
     def __enter__(self) -> Begun:
         return self
 
     def __exit__(self, *exc) -> None:
         self._pool.shutdown(wait=True)
-        if exc[0] is not None and self.renderer.done() and self.renderer.exception() is None:
-            self.renderer.result().close()  # (a run that did not take it)
+        self.renderer.close()  # (closed by the run that took it; here, that of a run that did not)
 
 
 def begin(config: ScenarioConfig) -> Begun:
@@ -149,7 +152,7 @@ def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int
     # the sound check and the renderer's onset offsets go on while the piece plays; the conductor waits for
     # the sound check's levels when it first needs them (its first downbeat)
     with begun or begin(config) as ready:
-        return _simulate(config, name, seed, started, renderer=ready.renderer.result(),
+        return _simulate(config, name, seed, started, renderer=ready.renderer,
                          reference=Later(ready.checked), stages=stages or Stages.off())
 
 
