@@ -177,7 +177,8 @@ class BlockSolver:
         beh = self.block.behaviour(ref.behaviour)
         if beh is None:
             raise ScheduleError(f"no behaviour {ref.behaviour!r} in block {self.block.id}")
-        if ref.sync not in self._sync_set(beh):
+        syncs = beh.sync_ids  # (a short list is searched as it is; a speech's thousands, in a set)
+        if ref.sync not in (syncs if len(syncs) <= 16 else self._sync_set(beh)):
             raise ScheduleError(f"behaviour {ref.behaviour!r} has no sync point {ref.sync!r}")
         found = self._local_refs[id(ref)] = (self.local_node(beh.id, ref.sync), ref.offset)
         return found
@@ -218,18 +219,23 @@ class BlockSolver:
                 if reason:
                     self.drop(beh.id, f"{sync_id}={ref.text!r}: {reason}")
         inequalities = []
-        local_refs = self._local_refs  # (what node() looks up first, looked up here without the call)
+        # (what node() gives for a sync point of this block that has its node already, found here without
+        # the call: a block's constraints name thousands)
+        local_nodes, own = self.local_nodes, (None, self.block.id)
         union = self.ties.union
         for constraint in self.block.constraints:
             resolved = []
             for ref in constraint.refs:
-                found = local_refs.get(id(ref))
-                if found is None:
-                    try:
-                        found = self.node(ref)
-                    except ScheduleError as exc:
-                        self.constraint_issue(constraint, f"reference {ref.text!r} ignored: {exc}")
-                        continue
+                nodes = local_nodes.get(ref.behaviour) if ref.block in own and ref.kind == "sync" else None
+                node = nodes.get(ref.sync) if nodes is not None else None
+                if node is not None:
+                    resolved.append((node, ref.offset, ref))
+                    continue
+                try:
+                    found = self.node(ref)
+                except ScheduleError as exc:
+                    self.constraint_issue(constraint, f"reference {ref.text!r} ignored: {exc}")
+                    continue
                 resolved.append((found[0], found[1], ref))
             if constraint.kind == "synchronize":
                 if resolved:
@@ -240,12 +246,18 @@ class BlockSolver:
                         blame = ref if ref.kind == "sync" else first
                         self.constraint_issue(constraint, f"cannot synchronise {ref.text!r}: {reason}", blame)
             else:
+                ref = constraint.anchor
+                nodes = local_nodes.get(ref.behaviour) if ref.block in own and ref.kind == "sync" else None
+                node = nodes.get(ref.sync) if nodes is not None else None
+                if node is not None:
+                    inequalities.append((constraint, resolved, (node, ref.offset, ref)))
+                    continue
                 try:
-                    anchor = self.node(constraint.anchor)
+                    anchor = self.node(ref)
                 except ScheduleError as exc:
                     self.constraint_issue(constraint, f"constraint ignored: {exc}")
                     continue
-                inequalities.append((constraint, resolved, (*anchor, constraint.anchor)))
+                inequalities.append((constraint, resolved, (*anchor, ref)))
         return inequalities
 
     def constraint_issue(self, constraint: Constraint, reason: str, ref: SyncRef | None = None) -> None:

@@ -85,13 +85,14 @@ class TimedBehaviour:
         self.preferred = list(preferred)
         self.keys = keys
         self.engine = engine
-        self.passed: list[float | None] = [None] * len(self.sync_ids)
+        n = len(self.sync_ids)
+        self.passed: list[float | None] = [None] * n
         self.order = order  # ties at one time are passed in planning order
-        self.tied = [False] * len(self.sync_ids)  # which keys share a peg with other sync points
+        self.tied = [False] * n  # which keys share a peg with other sync points
         # which of those pegs are held by a time given from outside: a number, an anticipator, another block
-        self.fixed = [False] * len(self.sync_ids)
+        self.fixed = self.tied.copy()
         # which of those pegs get their time from this behaviour (what else hangs from them follows it)
-        self.owns = [False] * len(self.sync_ids)
+        self.owns = self.tied.copy()
         self.heap_version = 0  # which of the player's heap entries for this behaviour is current
         self.next_index = 0
         self._state = ""
@@ -175,12 +176,10 @@ class TimedBehaviour:
         """Global times of all sync points (one pass: tied keys, then warping between them)."""
         # (what _anchor gives for each key, without a call per key: the scheduler asks this of every
         # behaviour of a block several times over)
-        times: list[float | None] = []
-        for passed, key in zip(self.passed, self.keys):
-            if passed is None and key is not None:
-                peg_time = key.peg.time
-                passed = None if peg_time is None else peg_time + key.offset
-            times.append(passed)
+        times: list[float | None] = [
+            passed if passed is not None or key is None
+            else None if (peg_time := key.peg.time) is None else peg_time + key.offset
+            for passed, key in zip(self.passed, self.keys)]
         pref = self.preferred
         lo = None
         for hi, t_hi in enumerate(times):
