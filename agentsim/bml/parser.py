@@ -397,8 +397,12 @@ class _Reader:
                           "every behaviour after it ignored", node, [bid])
             return
         self.seen.add(bid)
-        beh = Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), required=required,
-                        index=len(self.block.behaviours), line=node.line, column=node.column)
+        # (made as Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), required=required, index=...,
+        # line=..., column=...) makes it, without its __init__: a block has thousands)
+        beh = _new_behaviour(Behaviour)
+        beh.__dict__.update(id=bid, type=kind.name, sync_ids=list(kind.syncs), attributes=dict(node.attrs), refs={},
+                            text="", marks=[], prosody=[], params={}, source="", required=required,
+                            index=len(self.block.behaviours), line=node.line, column=node.column)
         if kind.name == "speech":
             if not self.speech_text(node, beh):
                 return
@@ -550,4 +554,8 @@ class _Reader:
             add(constraint)
 
 
-_new_constraint = object.__new__
+_new_constraint = _new_behaviour = object.__new__
+# (the fields the reader gives a behaviour and a constraint, in their order, are all they have)
+assert list(Behaviour.__dataclass_fields__) == ["id", "type", "sync_ids", "attributes", "refs", "text", "marks",
+                                                "prosody", "params", "source", "required", "index", "line", "column"]
+assert list(Constraint.__dataclass_fields__) == ["kind", "refs", "anchor", "id", "required", "owner", "line", "column"]

@@ -66,6 +66,11 @@ class _Ties:
         return n
 
     def find(self, x: int) -> tuple[int, float]:
+        parent = self.parent[x]
+        if parent == x:  # (a root, or a node tied to one: the usual cases, told without a walk)
+            return x, 0.0
+        if self.parent[parent] == parent:
+            return parent, self.delta[x]
         path = []
         while self.parent[x] != x:
             path.append(x)
