@@ -394,8 +394,8 @@ class BlockSolver:
                 keys[i] = KeyRef(ref_key.peg, offset)
         timed = TimedBehaviour(self.run, beh, preferred, keys, engine, self.board.plan_order())
         timed.tied = tied = [sync_id in groups for sync_id in beh.sync_ids]
-        if groups:
-            fixed_node = self.ties.fixed_node
+        fixed_node = self.ties.fixed_node
+        if any(root in fixed_node for root, _ in groups.values()):  # (else none is: as it was made)
             timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(beh.sync_ids, tied)]
         if owned:
             timed.owns = [i in owned for i in range(n)]
