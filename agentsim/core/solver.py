@@ -395,8 +395,10 @@ class BlockSolver:
         timed = TimedBehaviour(self.run, beh, preferred, keys, engine, self.board.plan_order())
         timed.tied = tied = [sync_id in groups for sync_id in beh.sync_ids]
         fixed_node = self.ties.fixed_node
-        if any(root in fixed_node for root, _ in groups.values()):  # (else none is: as it was made)
-            timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(beh.sync_ids, tied)]
+        for root, _ in groups.values():
+            if root in fixed_node:  # (a group held by a fixed time: which keys are; else none is, as it was made)
+                timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(beh.sync_ids, tied)]
+                break
         if owned:
             timed.owns = [i in owned for i in range(n)]
         self.timed[beh.id] = timed

@@ -77,6 +77,11 @@ class TimedBehaviour:
     order its realizer planned behaviours (:meth:`~agentsim.core.pegboard.PegBoard.plan_order`).
     """
 
+    # (its fields in slots: a block makes thousands, and the scheduler and the players read them all the time)
+    __slots__ = ("run", "behaviour", "sync_ids", "preferred", "keys", "engine", "passed", "order", "tied", "fixed",
+                 "owns", "heap_version", "next_index", "_state", "stopped", "planned_start", "interrupted", "skipped",
+                 "parameters", "phonemes", "__weakref__")
+
     def __init__(self, run: "BlockRun", behaviour: Behaviour, preferred: Sequence[float],
                  keys: list[KeyRef | None], engine: Any, order: int):
         self.run = run
