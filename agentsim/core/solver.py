@@ -185,7 +185,10 @@ class BlockSolver:
         syncs = beh.sync_ids  # (a short list is searched as it is; a speech's thousands, in a set)
         if ref.sync not in (syncs if len(syncs) <= 16 else self._sync_set(beh)):
             raise ScheduleError(f"behaviour {ref.behaviour!r} has no sync point {ref.sync!r}")
-        found = self._local_refs[id(ref)] = (self.local_node(beh.id, ref.sync), ref.offset)
+        if nodes is None:  # (what local_node does, with the look-up above: the sync point has no node yet)
+            nodes = self.local_nodes[beh.id] = {}
+        node = nodes[ref.sync] = self.ties.add()
+        found = self._local_refs[id(ref)] = (node, ref.offset)
         return found
 
     def _sync_set(self, beh) -> frozenset[str]:
@@ -371,7 +374,7 @@ class BlockSolver:
             self.anchors.append(anchor)
             refs[0] = KeyRef(anchor, 0.0)
         newly_known: list[int] = []
-        owned: set[int] = set()  # sync points whose group gets its time from this behaviour
+        owns: list[bool] | None = None  # which sync points' groups get their time from this behaviour
         only = next(iter(refs)) if len(refs) == 1 else None  # (the nearest key when there is one)
         for i, sync_id in enumerate(beh.sync_ids):
             if keys[i] is not None:
@@ -388,7 +391,9 @@ class BlockSolver:
                 if peg is None:
                     peg = self.group_peg[root] = OffsetPeg(ref_key.peg, offset - d, name=f"{self.block.id}:group")
                     newly_known.append(root)
-                    owned.add(i)
+                    if owns is None:
+                        owns = [False] * n
+                    owns[i] = True
                 keys[i] = KeyRef(peg, d)
             else:
                 keys[i] = KeyRef(ref_key.peg, offset)
@@ -399,8 +404,8 @@ class BlockSolver:
             if root in fixed_node:  # (a group held by a fixed time: which keys are; else none is, as it was made)
                 timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(beh.sync_ids, tied)]
                 break
-        if owned:
-            timed.owns = [i in owned for i in range(n)]
+        if owns is not None:
+            timed.owns = owns
         self.timed[beh.id] = timed
         return newly_known
 
