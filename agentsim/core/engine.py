@@ -88,9 +88,13 @@ class Planner:
         """
         pref = preferred if preferred is not None else self.preferred(behaviour)
         sync_ids = behaviour.sync_ids
+        at = None
         if len(known) <= 2:  # (a key or two, found in the list: no table of every sync point made)
-            at = {sync_ids.index(s): t for s, t in known.items()}
-        else:
+            try:
+                at = {sync_ids.index(s): t for s, t in known.items()}
+            except ValueError:  # (not one of its sync points: the KeyError below says which)
+                pass
+        if at is None:
             index = {s: i for i, s in enumerate(sync_ids)}
             at = {index[s]: t for s, t in known.items()}
         times = stretch_times(pref, at, start)
@@ -105,7 +109,11 @@ class Planner:
             total = math.nan
         if total != total and any(t != t for t in times):
             raise ScheduleError("a sync point's time is not a number (NaN)")
-        if times != sorted(times):  # (in order, the usual case, told at once)
+        try:
+            in_order = times == sorted(times)  # (the usual case, told at once)
+        except TypeError:  # (what is not a number: the comparisons below say so)
+            in_order = False
+        if not in_order:
             for a, b in zip(times, times[1:]):
                 if b < a - EPSILON:
                     raise ScheduleError("sync points would happen out of order")
