@@ -142,7 +142,11 @@ class BuiltinBackend:
                                                  "word_index": index, "stressed": stressed})
                 phonemes.append(phoneme)
                 t += duration * word_scale
-            words.append(Word(index, token, start, t, match.start(), match.end()))
+            # (Word(index, token, start, t, char start, char end), made without the frozen dataclass's __init__)
+            word = new(Word)
+            set_fields(word, "__dict__", {"index": index, "text": token, "start": start, "end": t,
+                                          "char_start": match.start(), "char_end": match.end()})
+            words.append(word)
             following = text[match.end():match.end() + 2].strip()[:1]
             if following in ",;:":
                 t += self.comma_pause * scale

@@ -170,9 +170,7 @@ class Adapter:
                 self.notes.current = None
                 found.extend(self.behaviours(child))
                 kept.append(child)
-            elif child.local == "constraint" and is_bml_uri(uri) and child.elements() and all(
-                    c.local in ("synchronize", "before", "after") for c in child.elements()):
-                self.constraint_refs(child)
+            elif child.local == "constraint" and is_bml_uri(uri) and self.constraint_refs(child):
                 self.constraints.append(child)
                 kept.append(child)
             elif uri == BMLT_NAMESPACE and child.local in EXTENSION_BEHAVIOURS[BMLA_NAMESPACE]:
@@ -469,12 +467,16 @@ class Adapter:
                 node.attrs[canonical] = node.attrs.pop(key)
             node.attrs[canonical] = self.ref(node.attrs[canonical])
 
-    def constraint_refs(self, node: Node) -> None:
+    def constraint_refs(self, node: Node) -> bool:
+        """Respell the references of a ``<constraint>`` whose elements are all ``<synchronize>``, ``<before>``
+        and ``<after>`` (:meth:`ref`), and say whether it is one: a ``<constraint>`` with no element, or
+        with another one, is left as it is (then False)."""
+        elements = node.elements()
+        if not elements or any(c.local not in ("synchronize", "before", "after") for c in elements):
+            return False
         respelled, notes = self._respelled, self.notes  # (Adapter.ref, without a call per reference)
         aliased = False
-        for child in node.children:
-            if isinstance(child, str):
-                continue
+        for child in elements:
             for n in (child, *child.children):
                 value = None if isinstance(n, str) else n.attrs.get("ref")
                 if value is not None:
@@ -486,6 +488,7 @@ class Adapter:
                     n.attrs["ref"] = found[0]
                     aliased = aliased or found[2]
         self._aliased_constraint = self._aliased_constraint or aliased
+        return True
 
     def ref(self, value: str) -> str:
         """A reference with its sync point spelled as BML does, noting the respelling (a block repeats its

@@ -137,6 +137,27 @@ def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
     return _new_ref(SyncRef, ("sync", offset, block, parts[-2], parts[-1], None, raw))
 
 
+_match_plain = _PLAIN_REF.match
+
+
+def _plain_ref(text: str) -> SyncRef | None:
+    """``text`` read as :func:`_parse_ref` reads it if it is a short reference of the usual form
+    (``g1:stroke``, ``g1:end+0.5``: one behaviour's sync point, an offset in range), else None (then
+    :func:`parse_ref` reads it, or says what is wrong with it). A block's constraints are mostly such."""
+    plain = _match_plain(text) if len(text) <= MAX_NUMBER else None
+    if plain is None:
+        return None
+    first, second, third, sign, number = plain.groups()
+    if third is not None:
+        return None
+    offset = 0.0
+    if number is not None:
+        offset = float(number) * (-1.0 if sign == "-" else 1.0)
+        if abs(offset) > MAX_TIME:
+            return None
+    return _new_ref(SyncRef, ("sync", offset, None, first, second, None, text))
+
+
 def _check_magnitude(value: float, raw: str) -> None:
     if not math.isfinite(value) or abs(value) > MAX_TIME:
         raise BMLError(f"time {raw!r} is out of range (at most {MAX_TIME:g} s)")
@@ -333,7 +354,7 @@ class _Reader:
         """The reference ``text`` (of ``node``) read; :class:`BMLError` located at ``node`` if it is not one."""
         ref = self.refs.get(text)
         if ref is None:
-            ref = self.refs[text] = parse_ref(text, node.line, node.column, self.lenient)
+            ref = self.refs[text] = _plain_ref(text) or parse_ref(text, node.line, node.column, self.lenient)
         return ref
 
     def is_bml(self, node: Node) -> bool:
@@ -376,8 +397,12 @@ class _Reader:
                           "every behaviour after it ignored", node, [bid])
             return
         self.seen.add(bid)
-        beh = Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), required=required,
-                        index=len(self.block.behaviours), line=node.line, column=node.column)
+        # (made as Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), required=required, index=...,
+        # line=..., column=...) makes it, without its __init__: a block has thousands)
+        beh = _new_behaviour(Behaviour)
+        beh.__dict__.update(id=bid, type=kind.name, sync_ids=list(kind.syncs), attributes=dict(node.attrs), refs={},
+                            text="", marks=[], prosody=[], params={}, source="", required=required,
+                            index=len(self.block.behaviours), line=node.line, column=node.column)
         if kind.name == "speech":
             if not self.speech_text(node, beh):
                 return
@@ -480,6 +505,7 @@ class _Reader:
         owner = node.attrs.get("id", "")
         add = self.block.constraints.append
         known = self.refs  # (looked up here at once: a block's constraints repeat their references)
+        plain = _plain_ref  # (and the usual form read here at once)
         new = _new_constraint
         for child in node.children:
             if isinstance(child, str):
@@ -496,16 +522,23 @@ class _Reader:
                 if text is None:
                     self.warn("PARSING_FAILURE", f"<{sync.tag}> in <{kind}> ignored: expected <sync ref=...>", sync)
                     continue
-                ref = known.get(text) or self._ref_or_warn(text, sync, "reference")
+                ref = known.get(text)
                 if ref is None:
-                    continue
+                    ref = plain(text)
+                    if ref is None:
+                        ref = self._ref_or_warn(text, sync, "reference")
+                        if ref is None:
+                            continue
+                    else:
+                        known[text] = ref
                 refs.append(ref)
             anchor = None
             text = child.attrs.get("ref")
             if text is not None:
-                anchor = known.get(text) or self._ref_or_warn(text, child, "constraint")
+                anchor = known.get(text) or plain(text) or self._ref_or_warn(text, child, "constraint")
                 if anchor is None:
                     continue
+                known[text] = anchor
             if kind == "synchronize":
                 if anchor is not None:
                     refs.insert(0, anchor)
@@ -521,4 +554,8 @@ class _Reader:
             add(constraint)
 
 
-_new_constraint = object.__new__
+_new_constraint = _new_behaviour = object.__new__
+# (the fields the reader gives a behaviour and a constraint, in their order, are all they have)
+assert list(Behaviour.__dataclass_fields__) == ["id", "type", "sync_ids", "attributes", "refs", "text", "marks",
+                                                "prosody", "params", "source", "required", "index", "line", "column"]
+assert list(Constraint.__dataclass_fields__) == ["kind", "refs", "anchor", "id", "required", "owner", "line", "column"]

@@ -32,6 +32,13 @@ def stretch_times(preferred: Sequence[float], known: dict[int, float], start: fl
     n = len(preferred)
     if not known:
         return [start + p - preferred[0] for p in preferred]
+    if len(known) == 1:  # (the commonest case, at its preferred timing from the one known key)
+        (first, t_first), = known.items()
+        p_first = preferred[first]
+        # (``t_first - (p_first - p)`` before the key, as below, is this same number)
+        times = [t_first + (p - p_first) for p in preferred]
+        times[first] = t_first
+        return times
     order = sorted(known)
     for a, b in zip(order, order[1:]):
         if known[b] < known[a] - EPSILON:
@@ -80,8 +87,17 @@ class Planner:
         for the preferred timing again.
         """
         pref = preferred if preferred is not None else self.preferred(behaviour)
-        index = {s: i for i, s in enumerate(behaviour.sync_ids)}
-        times = stretch_times(pref, {index[s]: t for s, t in known.items()}, start)
+        sync_ids = behaviour.sync_ids
+        at = None
+        if len(known) <= 2:  # (a key or two, found in the list: no table of every sync point made)
+            try:
+                at = {sync_ids.index(s): t for s, t in known.items()}
+            except ValueError:  # (not one of its sync points: the KeyError below says which)
+                pass
+        if at is None:
+            index = {s: i for i, s in enumerate(sync_ids)}
+            at = {index[s]: t for s, t in known.items()}
+        times = stretch_times(pref, at, start)
         self.check_times(behaviour, pref, times)
         return times
 
@@ -93,9 +109,14 @@ class Planner:
             total = math.nan
         if total != total and any(t != t for t in times):
             raise ScheduleError("a sync point's time is not a number (NaN)")
-        for a, b in zip(times, times[1:]):
-            if b < a - EPSILON:
-                raise ScheduleError("sync points would happen out of order")
+        try:
+            in_order = times == sorted(times)  # (the usual case, told at once)
+        except TypeError:  # (what is not a number: the comparisons below say so)
+            in_order = False
+        if not in_order:
+            for a, b in zip(times, times[1:]):
+                if b < a - EPSILON:
+                    raise ScheduleError("sync points would happen out of order")
         if times[-1] - times[0] <= EPSILON and preferred[-1] > preferred[0]:
             raise ScheduleError("the behaviour would have no duration")
 

@@ -66,6 +66,11 @@ class _Ties:
         return n
 
     def find(self, x: int) -> tuple[int, float]:
+        parent = self.parent[x]
+        if parent == x:  # (a root, or a node tied to one: the usual cases, told without a walk)
+            return x, 0.0
+        if self.parent[parent] == parent:
+            return parent, self.delta[x]
         path = []
         while self.parent[x] != x:
             path.append(x)
@@ -177,9 +182,13 @@ class BlockSolver:
         beh = self.block.behaviour(ref.behaviour)
         if beh is None:
             raise ScheduleError(f"no behaviour {ref.behaviour!r} in block {self.block.id}")
-        if ref.sync not in self._sync_set(beh):
+        syncs = beh.sync_ids  # (a short list is searched as it is; a speech's thousands, in a set)
+        if ref.sync not in (syncs if len(syncs) <= 16 else self._sync_set(beh)):
             raise ScheduleError(f"behaviour {ref.behaviour!r} has no sync point {ref.sync!r}")
-        found = self._local_refs[id(ref)] = (self.local_node(beh.id, ref.sync), ref.offset)
+        if nodes is None:  # (what local_node does, with the look-up above: the sync point has no node yet)
+            nodes = self.local_nodes[beh.id] = {}
+        node = nodes[ref.sync] = self.ties.add()
+        found = self._local_refs[id(ref)] = (node, ref.offset)
         return found
 
     def _sync_set(self, beh) -> frozenset[str]:
@@ -218,18 +227,23 @@ class BlockSolver:
                 if reason:
                     self.drop(beh.id, f"{sync_id}={ref.text!r}: {reason}")
         inequalities = []
-        local_refs = self._local_refs  # (what node() looks up first, looked up here without the call)
+        # (what node() gives for a sync point of this block that has its node already, found here without
+        # the call: a block's constraints name thousands)
+        local_nodes, own = self.local_nodes, (None, self.block.id)
         union = self.ties.union
         for constraint in self.block.constraints:
             resolved = []
             for ref in constraint.refs:
-                found = local_refs.get(id(ref))
-                if found is None:
-                    try:
-                        found = self.node(ref)
-                    except ScheduleError as exc:
-                        self.constraint_issue(constraint, f"reference {ref.text!r} ignored: {exc}")
-                        continue
+                nodes = local_nodes.get(ref.behaviour) if ref.block in own and ref.kind == "sync" else None
+                node = nodes.get(ref.sync) if nodes is not None else None
+                if node is not None:
+                    resolved.append((node, ref.offset, ref))
+                    continue
+                try:
+                    found = self.node(ref)
+                except ScheduleError as exc:
+                    self.constraint_issue(constraint, f"reference {ref.text!r} ignored: {exc}")
+                    continue
                 resolved.append((found[0], found[1], ref))
             if constraint.kind == "synchronize":
                 if resolved:
@@ -240,12 +254,18 @@ class BlockSolver:
                         blame = ref if ref.kind == "sync" else first
                         self.constraint_issue(constraint, f"cannot synchronise {ref.text!r}: {reason}", blame)
             else:
+                ref = constraint.anchor
+                nodes = local_nodes.get(ref.behaviour) if ref.block in own and ref.kind == "sync" else None
+                node = nodes.get(ref.sync) if nodes is not None else None
+                if node is not None:
+                    inequalities.append((constraint, resolved, (node, ref.offset, ref)))
+                    continue
                 try:
-                    anchor = self.node(constraint.anchor)
+                    anchor = self.node(ref)
                 except ScheduleError as exc:
                     self.constraint_issue(constraint, f"constraint ignored: {exc}")
                     continue
-                inequalities.append((constraint, resolved, (*anchor, constraint.anchor)))
+                inequalities.append((constraint, resolved, (*anchor, ref)))
         return inequalities
 
     def constraint_issue(self, constraint: Constraint, reason: str, ref: SyncRef | None = None) -> None:
@@ -354,7 +374,7 @@ class BlockSolver:
             self.anchors.append(anchor)
             refs[0] = KeyRef(anchor, 0.0)
         newly_known: list[int] = []
-        owned: set[int] = set()  # sync points whose group gets its time from this behaviour
+        owns: list[bool] | None = None  # which sync points' groups get their time from this behaviour
         only = next(iter(refs)) if len(refs) == 1 else None  # (the nearest key when there is one)
         for i, sync_id in enumerate(beh.sync_ids):
             if keys[i] is not None:
@@ -371,17 +391,21 @@ class BlockSolver:
                 if peg is None:
                     peg = self.group_peg[root] = OffsetPeg(ref_key.peg, offset - d, name=f"{self.block.id}:group")
                     newly_known.append(root)
-                    owned.add(i)
+                    if owns is None:
+                        owns = [False] * n
+                    owns[i] = True
                 keys[i] = KeyRef(peg, d)
             else:
                 keys[i] = KeyRef(ref_key.peg, offset)
         timed = TimedBehaviour(self.run, beh, preferred, keys, engine, self.board.plan_order())
         timed.tied = tied = [sync_id in groups for sync_id in beh.sync_ids]
-        if groups:
-            fixed_node = self.ties.fixed_node
-            timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(beh.sync_ids, tied)]
-        if owned:
-            timed.owns = [i in owned for i in range(n)]
+        fixed_node = self.ties.fixed_node
+        for root, _ in groups.values():
+            if root in fixed_node:  # (a group held by a fixed time: which keys are; else none is, as it was made)
+                timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(beh.sync_ids, tied)]
+                break
+        if owns is not None:
+            timed.owns = owns
         self.timed[beh.id] = timed
         return newly_known
 

@@ -77,6 +77,11 @@ class TimedBehaviour:
     order its realizer planned behaviours (:meth:`~agentsim.core.pegboard.PegBoard.plan_order`).
     """
 
+    # (its fields in slots: a block makes thousands, and the scheduler and the players read them all the time)
+    __slots__ = ("run", "behaviour", "sync_ids", "preferred", "keys", "engine", "passed", "order", "tied", "fixed",
+                 "owns", "heap_version", "next_index", "_state", "stopped", "planned_start", "interrupted", "skipped",
+                 "parameters", "phonemes", "__weakref__")
+
     def __init__(self, run: "BlockRun", behaviour: Behaviour, preferred: Sequence[float],
                  keys: list[KeyRef | None], engine: Any, order: int):
         self.run = run
@@ -85,13 +90,14 @@ class TimedBehaviour:
         self.preferred = list(preferred)
         self.keys = keys
         self.engine = engine
-        self.passed: list[float | None] = [None] * len(self.sync_ids)
+        n = len(self.sync_ids)
+        self.passed: list[float | None] = [None] * n
         self.order = order  # ties at one time are passed in planning order
-        self.tied = [False] * len(self.sync_ids)  # which keys share a peg with other sync points
+        self.tied = [False] * n  # which keys share a peg with other sync points
         # which of those pegs are held by a time given from outside: a number, an anticipator, another block
-        self.fixed = [False] * len(self.sync_ids)
+        self.fixed = self.tied.copy()
         # which of those pegs get their time from this behaviour (what else hangs from them follows it)
-        self.owns = [False] * len(self.sync_ids)
+        self.owns = self.tied.copy()
         self.heap_version = 0  # which of the player's heap entries for this behaviour is current
         self.next_index = 0
         self._state = ""
@@ -154,9 +160,14 @@ class TimedBehaviour:
 
     def time(self, i: int) -> float | None:
         """Global time of sync point ``i`` as planned now (or as it was passed)."""
-        t = self._anchor(i)
+        t = self.passed[i]  # (what _anchor(i) gives, without its call: the commonest answer)
         if t is not None:
             return t
+        key = self.keys[i]
+        if key is not None:
+            t = key.peg.time
+            if t is not None:
+                return t + key.offset
         lo = i - 1
         while lo >= 0 and self._anchor(lo) is None:
             lo -= 1
@@ -175,12 +186,10 @@ class TimedBehaviour:
         """Global times of all sync points (one pass: tied keys, then warping between them)."""
         # (what _anchor gives for each key, without a call per key: the scheduler asks this of every
         # behaviour of a block several times over)
-        times: list[float | None] = []
-        for passed, key in zip(self.passed, self.keys):
-            if passed is None and key is not None:
-                peg_time = key.peg.time
-                passed = None if peg_time is None else peg_time + key.offset
-            times.append(passed)
+        times: list[float | None] = [
+            passed if passed is not None or key is None
+            else None if (peg_time := key.peg.time) is None else peg_time + key.offset
+            for passed, key in zip(self.passed, self.keys)]
         pref = self.preferred
         lo = None
         for hi, t_hi in enumerate(times):

@@ -175,6 +175,7 @@ def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None, made:
     # references on its expat parser; the tree is built straight from that parser's callbacks.
     reader = create_parser(forbid_dtd=False, forbid_entities=True, forbid_external=True)
     reader.setFeature(xml.sax.handler.feature_namespaces, False)
+    reader.setFeature(xml.sax.handler.feature_string_interning, True)  # (a tag name is one string: hashed once)
     reader.reset()
     expat = reader._parser
     builder = _builder(expat, shift, data)
