@@ -259,13 +259,23 @@ def png_bytes(rgba, dpi: float, texts: dict[str, str] | None = None) -> bytes:
     return b"".join(out)
 
 
+#: How :func:`save_figure` has FreeType draw the letters of a PNG (matplotlib's ``text.hinting``, unless the
+#: program set it): unhinted, the outlines as they are, which takes a fifth of a picture's time less than the
+#: auto-hinter matplotlib uses by default.
+TEXT_HINTING = "no_hinting"
+
+
 def _print_png(canvas, filename_or_obj, *, metadata: dict | None = None, **_) -> None:
     """An Agg canvas's ``print_png`` (what ``savefig`` calls once it has set the figure up) through
-    :func:`png_bytes`, with the metadata matplotlib writes."""
+    :func:`png_bytes`, with the metadata matplotlib writes, its letters drawn as :data:`TEXT_HINTING` says."""
     import matplotlib
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    FigureCanvasAgg.draw(canvas)
+    settings = {}
+    if matplotlib.rcParams["text.hinting"] == matplotlib.rcParamsDefault["text.hinting"]:
+        settings["text.hinting"] = TEXT_HINTING
+    with matplotlib.rc_context(settings):
+        FigureCanvasAgg.draw(canvas)
     texts = {"Software": f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/", **(metadata or {})}
     data = png_bytes(canvas.buffer_rgba(), canvas.figure.dpi, texts)
     if isinstance(filename_or_obj, (str, os.PathLike)):

@@ -154,7 +154,7 @@ class RenderingProcess:
                 raise RuntimeError("the FluidSynth process ended before the samples asked for") from None
             tag, body = message[:1], message[1:]
             if tag == _SAMPLES:
-                samples = np.frombuffer(body, np.float32)
+                samples = np.frombuffer(body, np.float32).copy()  # (an array of its own, as a renderer's)
                 self._ahead.append(samples)
                 self._received += len(samples)
             elif tag == _READY:

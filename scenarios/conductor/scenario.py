@@ -113,10 +113,12 @@ def sound_check(config: ScenarioConfig) -> dict[str, float]:
 
 class Begun:
     """What a run needs before its piece plays, under way while the caller imports and prepares
-    (:func:`begin`): the ensemble's renderer, in a process of its own (:func:`_renderer`), and on threads of
-    their own the sound check and the measure of the renderer's onset offsets. FluidSynth works without
+    (:func:`begin`): the ensemble's renderer, in a process of its own (:func:`_renderer`), and on a thread of
+    its own the sound check, then the measure of the renderer's onset offsets. FluidSynth works without
     Python's lock; each has a synthesizer of its own, so what each renders is the same as one after the
-    other. Use it once, as a context manager (which waits for them all at its end)."""
+    other (one thread, so that fewer synthesizers of this process are at work at once: libfluidsynth has
+    crashed once in a thread of a run). Use it once, as a context manager (which waits for them all at its
+    end)."""
 
     def __init__(self, config: ScenarioConfig) -> None:
         from concurrent.futures import ThreadPoolExecutor
@@ -125,7 +127,7 @@ class Begun:
 
         self.config = config
         self.renderer = _renderer(config, apart=True)  # (first: its process is forked before any thread starts)
-        self._pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="begin")
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="begin")
         self.checked = self._pool.submit(sound_check, config)
         self._pool.submit(beat_onset_offset, config.audio.sample_rate, _soundfont(config))
 
