@@ -201,13 +201,16 @@ def test_block_renderer_matches_whole_render():
 
 
 
-def test_rendering_ahead_gives_the_same_samples_and_counts_a_broken_promise():
+@pytest.mark.parametrize("apart", [False, True], ids=["thread", "process"])
+def test_rendering_ahead_gives_the_same_samples_and_counts_a_broken_promise(apart):
+    from agentsim.music.process import RenderingProcess
+
     sc = build_score(make_tempo_map(125, "4/4", rubato=0.02, seed=1), 3, seed=1)
     events = sorted(score_events(sc, offset=0.3), key=lambda e: e.time)
     whole = render_events(events, 6.0, 22050)
     rng = np.random.default_rng(0)
     blocks, lead = [], 0.4
-    with FluidSynthRenderer(22050) as r:
+    with (RenderingProcess if apart else FluidSynthRenderer)(22050) as r:
         pending = list(events)
         t = 0.0
         while t < 6.0:
@@ -215,14 +218,20 @@ def test_rendering_ahead_gives_the_same_samples_and_counts_a_broken_promise():
             while pending and pending[0].time < t + lead:
                 r.schedule(pending.pop(0))
             blocks.append(r.render_until(t))
-            # every event before t + lead is queued: a thread may render up to there while we go on
+            # every event before t + lead is queued: a thread (a process) may render up to there while we go on
             r.render_ahead(t + lead if not pending else min(t + lead, pending[0].time))
         assert r.time == pytest.approx(6.0) and r.broken_promises == 0
-        assert any(th.name.startswith("fluidsynth") for th in threading.enumerate())  # it rendered ahead
+        if apart:
+            child = r._process
+        else:  # it rendered ahead
+            assert any(th.name.startswith("fluidsynth") for th in threading.enumerate())
         r.render_ahead(7.0)
         r.note(6.5, 0, 60, 100, 0.2)  # both events are within what was promised quiet: counted
         assert r.broken_promises == 2
     np.testing.assert_array_equal(np.concatenate(blocks), whole)
+    if apart:  # the child has ended
+        assert not child.is_alive() and child.exitcode == 0
+
 
 def test_a_caller_waits_for_the_start_of_a_stretch_rendered_ahead_not_for_the_whole_stretch():
     sc = build_score(make_tempo_map(125, "4/4", seed=1), 2, seed=1)
@@ -245,32 +254,6 @@ def test_a_caller_waits_for_the_start_of_a_stretch_rendered_ahead_not_for_the_wh
         go.set()
         rest = r.render_until(2.0)
     np.testing.assert_array_equal(np.concatenate([first, rest]), whole)
-
-
-def test_a_renderer_in_a_process_of_its_own_gives_the_same_samples_and_counts_a_broken_promise():
-    from agentsim.music.process import RenderingProcess
-
-    sc = build_score(make_tempo_map(125, "4/4", rubato=0.02, seed=1), 3, seed=1)
-    events = sorted(score_events(sc, offset=0.3), key=lambda e: e.time)
-    whole = render_events(events, 6.0, 22050)
-    rng = np.random.default_rng(0)
-    blocks, lead = [], 0.4
-    with RenderingProcess(22050) as r:
-        child = r._process
-        pending = list(events)
-        t = 0.0
-        while t < 6.0:
-            t = min(6.0, t + float(rng.uniform(0.002, 0.05)))
-            while pending and pending[0].time < t + lead:
-                r.schedule(pending.pop(0))
-            blocks.append(r.render_until(t))
-            r.render_ahead(t + lead if not pending else min(t + lead, pending[0].time))
-        assert r.time == pytest.approx(6.0) and r.broken_promises == 0
-        r.render_ahead(7.0)
-        r.note(6.5, 0, 60, 100, 0.2)  # both events are within what was promised quiet: counted
-        assert r.broken_promises == 2
-    np.testing.assert_array_equal(np.concatenate(blocks), whole)
-    assert not child.is_alive() and child.exitcode == 0
 
 
 def test_a_renderer_process_that_cannot_load_its_soundfont_says_so_where_samples_are_asked_for(tmp_path):

@@ -23,7 +23,7 @@ import numpy as np
 from agentsim.errors import Unavailable
 from agentsim.music.events import SynthEvent
 from agentsim.music.rendering import (AHEAD_SECONDS, DEFAULT_SOUNDFONT, FLUID_BLOCK, PUBLISHED, FluidSynthRenderer,
-                                      check_soundfont, import_fluidsynth)
+                                      SampleClock, check_soundfont, import_fluidsynth)
 
 __all__ = ["RenderingProcess", "renderer"]
 
@@ -73,7 +73,7 @@ def _serve(connection, arguments: tuple) -> None:
         synth.close()
 
 
-class RenderingProcess:
+class RenderingProcess(SampleClock):
     """Render MIDI events to mono audio as a simulation advances, in a child process: the interface of
     :class:`~agentsim.music.rendering.FluidSynthRenderer` that a simulation uses (:meth:`schedule`,
     :meth:`note`, :meth:`render_ahead`, :meth:`render_until`, :meth:`close`), and the same samples.
@@ -105,20 +105,6 @@ class RenderingProcess:
                                                       programs)))
         self._process.start()
         child.close()
-
-    @property
-    def time(self) -> float:
-        """Seconds of audio handed out so far."""
-        return self._handed / self.sample_rate
-
-    @property
-    def samples_rendered(self) -> int:
-        """Number of samples handed out so far (by :meth:`render_until`)."""
-        return self._handed
-
-    def event_sample(self, time: float) -> int:
-        """Sample index at which an event at ``time`` seconds takes effect (nearest 64-sample boundary)."""
-        return int(np.round(time * self.sample_rate / FLUID_BLOCK)) * FLUID_BLOCK
 
     def schedule(self, events: SynthEvent | Iterable[SynthEvent]) -> None:
         """Queue one event or several; they sound when rendering passes their time."""

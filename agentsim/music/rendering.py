@@ -29,6 +29,7 @@ __all__ = [
     "check_soundfont",
     "import_fluidsynth",
     "FluidSynthRenderer",
+    "SampleClock",
     "render_events",
     "render_midi_file",
 ]
@@ -97,7 +98,30 @@ def import_fluidsynth():
     return fluidsynth
 
 
-class FluidSynthRenderer:
+class SampleClock:
+    """Where a renderer of ``sample_rate`` is in its audio (the samples it handed out, ``_handed``) and on which
+    sample an event takes effect: what :class:`FluidSynthRenderer` and
+    :class:`~agentsim.music.process.RenderingProcess` share."""
+
+    sample_rate: int
+    _handed: int
+
+    @property
+    def time(self) -> float:
+        """Seconds of audio handed out so far."""
+        return self._handed / self.sample_rate
+
+    @property
+    def samples_rendered(self) -> int:
+        """Number of samples handed out so far (by :meth:`render_until`)."""
+        return self._handed
+
+    def event_sample(self, time: float) -> int:
+        """Sample index at which an event at ``time`` seconds takes effect (nearest 64-sample boundary)."""
+        return int(np.round(time * self.sample_rate / FLUID_BLOCK)) * FLUID_BLOCK
+
+
+class FluidSynthRenderer(SampleClock):
     """Render MIDI events to mono audio block by block with FluidSynth, as a simulation advances.
 
     Events are queued with :meth:`schedule` (or :meth:`note`) and sound when :meth:`render_until`
@@ -175,20 +199,6 @@ class FluidSynthRenderer:
         self._synth.program_select(DRUM_CHANNEL, self._sfid, 128, 0)
         for ch, prog in (programs or {}).items():
             self.set_program(ch, prog)
-
-    @property
-    def time(self) -> float:
-        """Seconds of audio handed out so far."""
-        return self._handed / self.sample_rate
-
-    @property
-    def samples_rendered(self) -> int:
-        """Number of samples handed out so far (by :meth:`render_until`)."""
-        return self._handed
-
-    def event_sample(self, time: float) -> int:
-        """Sample index at which an event at ``time`` seconds takes effect (nearest 64-sample boundary)."""
-        return int(np.round(time * self.sample_rate / FLUID_BLOCK)) * FLUID_BLOCK
 
     def set_program(self, channel: int, program: int) -> None:
         """Select a General MIDI program on a melodic channel now."""
