@@ -256,6 +256,16 @@ def test_a_caller_waits_for_the_start_of_a_stretch_rendered_ahead_not_for_the_wh
     np.testing.assert_array_equal(np.concatenate([first, rest]), whole)
 
 
+def test_a_renderer_process_ends_when_its_parent_has_gone():
+    from agentsim.music.process import RenderingProcess
+
+    r = RenderingProcess(22050)
+    r.render_until(0.1)
+    r._connection.close()  # as the parent's end closes when the parent dies, killed before it could say so
+    r._process.join(timeout=30)
+    assert r._process.exitcode == 0
+
+
 def test_a_renderer_process_that_cannot_load_its_soundfont_says_so_where_samples_are_asked_for(tmp_path):
     from agentsim.errors import Unavailable
     from agentsim.music.process import RenderingProcess, renderer

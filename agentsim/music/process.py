@@ -43,9 +43,12 @@ def renderer(sample_rate: int = 44100, soundfont=DEFAULT_SOUNDFONT, gain: float 
     return FluidSynthRenderer(sample_rate, soundfont, gain, reverb, chorus, programs)
 
 
-def _serve(connection, arguments: tuple) -> None:
+def _serve(connection, parents, arguments: tuple) -> None:
     """The child: render what the parent asks for, a stretch of :data:`PUBLISHED` samples at a time, reading
-    its messages between two stretches (``("events", [...])``, ``("until", sample)``, ``("close",)``)."""
+    its messages between two stretches (``("events", [...])``, ``("until", sample)``, ``("close",)``), until
+    the parent says so or has gone. ``parents``: the parent's end of the pipe, which the fork copied, closed
+    here first (held open, it would keep the child from seeing the parent go)."""
+    parents.close()
     try:
         synth = FluidSynthRenderer(*arguments)
     except Exception as exc:  # (said to the parent, which raises it where it asks for samples)
@@ -101,8 +104,8 @@ class RenderingProcess(SampleClock):
         context = multiprocessing.get_context("fork")
         self._connection, child = context.Pipe()
         self._process = context.Process(target=_serve, name="fluidsynth", daemon=True,
-                                        args=(child, (sample_rate, os.fspath(soundfont), gain, reverb, chorus,
-                                                      programs)))
+                                        args=(child, self._connection, (sample_rate, os.fspath(soundfont), gain,
+                                                                        reverb, chorus, programs)))
         self._process.start()
         child.close()
 
