@@ -191,6 +191,7 @@ class FluidSynthRenderer(SampleClock):
         self._ready = 0  # samples synthesised by finished jobs (or by the caller)
         self._promised = 0  # sample before which no new event will be scheduled
         self._jobs: list = []
+        self._submitted = self._finished = 0  # jobs handed to the thread, and those over
         self._worker = None
         self.broken_promises = 0
         self._sfid = self._synth.sfload(path)
@@ -292,12 +293,23 @@ class FluidSynthRenderer(SampleClock):
         for job in jobs:
             job.result()
 
+    def _job(self, end: int) -> None:
+        """A job of the rendering thread: synthesise up to ``end``, then say that it is over (its future is
+        done only after this returns, too late for a caller waiting on :attr:`_published`)."""
+        try:
+            self._synthesise(end)
+        finally:
+            with self._published:
+                self._finished += 1
+                self._published.notify_all()
+
     def _wait_for(self, end: int) -> None:
         """Wait until the rendering thread has published sample ``end``, or has no job left (raising what
         a job raised); the jobs finished are let go."""
         with self._published:
-            self._published.wait_for(lambda: self._ready >= end or all(job.done() for job in self._jobs))
-        while self._jobs and self._jobs[0].done():
+            self._published.wait_for(lambda: self._ready >= end or self._finished == self._submitted)
+            over = self._finished == self._submitted
+        while self._jobs and (over or self._jobs[0].done()):
             self._jobs.pop(0).result()
 
     def render_ahead(self, until: float) -> None:
@@ -319,7 +331,8 @@ class FluidSynthRenderer(SampleClock):
             from concurrent.futures import ThreadPoolExecutor
 
             self._worker = ThreadPoolExecutor(1, thread_name_prefix="fluidsynth")
-        job = self._worker.submit(self._synthesise, target)
+        job = self._worker.submit(self._job, target)
+        self._submitted += 1
         job.target = target
         self._jobs.append(job)
 
