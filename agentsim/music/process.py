@@ -22,13 +22,13 @@ import numpy as np
 
 from agentsim.errors import Unavailable
 from agentsim.music.events import SynthEvent
-from agentsim.music.rendering import (AHEAD_SECONDS, DEFAULT_SOUNDFONT, FLUID_BLOCK, PUBLISHED, FluidSynthRenderer,
-                                      SampleClock, check_soundfont, import_fluidsynth)
+from agentsim.music.rendering import (DEFAULT_SOUNDFONT, PUBLISHED, FluidSynthRenderer, SampleClock,
+                                      check_soundfont, import_fluidsynth)
 
 __all__ = ["RenderingProcess", "renderer"]
 
-#: The child's first message (and its tag for samples, for a failure).
-_READY, _SAMPLES, _FAILED = b"r", b"s", b"f"
+#: The tags of the child's messages: samples, a failure.
+_SAMPLES, _FAILED = b"s", b"f"
 
 
 def renderer(sample_rate: int = 44100, soundfont=DEFAULT_SOUNDFONT, gain: float = 0.3, reverb: bool = True,
@@ -54,7 +54,6 @@ def _serve(connection, parents, arguments: tuple) -> None:
     except Exception as exc:  # (said to the parent, which raises it where it asks for samples)
         connection.send_bytes(_FAILED + f"{type(exc).__name__}: {exc}".encode())
         return
-    connection.send_bytes(_READY)
     target = 0
     try:
         while True:
@@ -100,7 +99,6 @@ class RenderingProcess(SampleClock):
         self._received = 0
         self._handed = 0
         self._ahead: list[np.ndarray] = []  # received, not yet handed out
-        self._ready = False
         context = multiprocessing.get_context("fork")
         self._connection, child = context.Pipe()
         self._process = context.Process(target=_serve, name="fluidsynth", daemon=True,
@@ -118,11 +116,6 @@ class RenderingProcess(SampleClock):
             if at < self._promised:
                 self.broken_promises += 1
             self._events.append(ev)
-
-    def note(self, time: float, channel: int, key: int, velocity: int, duration: float) -> None:
-        """Queue a note: a note-on at ``time`` and a note-off ``duration`` seconds later."""
-        self.schedule([SynthEvent(time, "note_on", channel, key, velocity),
-                       SynthEvent(time + duration, "note_off", channel, key, 0)])
 
     def _ask(self, end: int) -> None:
         """Send the events queued, and ask the child to render up to sample ``end``."""
@@ -146,8 +139,6 @@ class RenderingProcess(SampleClock):
                 samples = np.frombuffer(body, np.float32).copy()  # (an array of its own, as a renderer's)
                 self._ahead.append(samples)
                 self._received += len(samples)
-            elif tag == _READY:
-                self._ready = True
             else:
                 raise Unavailable(f"FluidSynth could not render: {body.decode(errors='replace')}")
 
@@ -155,8 +146,7 @@ class RenderingProcess(SampleClock):
         """Promise that no event will be scheduled before ``until`` seconds; the child renders up to there
         (at most :data:`~agentsim.music.rendering.AHEAD_SECONDS` beyond what was handed out) while the caller
         goes on."""
-        until = min(until, self.time + AHEAD_SECONDS)
-        target = int(until * self.sample_rate) // FLUID_BLOCK * FLUID_BLOCK
+        target = self.promised_sample(until)
         if target <= self._promised:
             return
         self._promised = target
@@ -172,11 +162,8 @@ class RenderingProcess(SampleClock):
         self._receive(wait=False)
         while self._received < end:
             self._receive(wait=True)
-        have = np.concatenate(self._ahead) if len(self._ahead) > 1 else self._ahead[0]
-        n = end - self._handed
-        self._ahead = [have[n:]] if have.size > n else []
-        self._handed = end
-        return have[:n]
+        samples, self._ahead = self.hand_out(self._ahead, end)
+        return samples
 
     def close(self) -> None:
         """End the child process."""

@@ -45,9 +45,11 @@ FLUID_BLOCK = 64
 
 
 AHEAD_SECONDS = 1.0
-#: The rendering thread hands out what it rendered every this many samples (a multiple of FLUID_BLOCK).
-PUBLISHED = 1024
 """How far beyond what it handed out :meth:`FluidSynthRenderer.render_ahead` renders at most (seconds)."""
+
+PUBLISHED = 1024
+"""The rendering thread (or process) hands out what it rendered every this many samples (a multiple of
+FLUID_BLOCK)."""
 
 
 def check_soundfont(soundfont: "str | os.PathLike") -> str:
@@ -99,9 +101,9 @@ def import_fluidsynth():
 
 
 class SampleClock:
-    """Where a renderer of ``sample_rate`` is in its audio (the samples it handed out, ``_handed``) and on which
-    sample an event takes effect: what :class:`FluidSynthRenderer` and
-    :class:`~agentsim.music.process.RenderingProcess` share."""
+    """What :class:`FluidSynthRenderer` and :class:`~agentsim.music.process.RenderingProcess` share: where a
+    renderer of ``sample_rate`` is in its audio (the samples it handed out, ``_handed``), on which sample an
+    event takes effect, how far a promise reaches, and a note as its two events (through ``schedule``)."""
 
     sample_rate: int
     _handed: int
@@ -119,6 +121,26 @@ class SampleClock:
     def event_sample(self, time: float) -> int:
         """Sample index at which an event at ``time`` seconds takes effect (nearest 64-sample boundary)."""
         return int(np.round(time * self.sample_rate / FLUID_BLOCK)) * FLUID_BLOCK
+
+    def note(self, time: float, channel: int, key: int, velocity: int, duration: float) -> None:
+        """Queue a note: a note-on at ``time`` and a note-off ``duration`` seconds later."""
+        self.schedule(
+            [SynthEvent(time, "note_on", channel, key, velocity), SynthEvent(time + duration, "note_off", channel, key, 0)]
+        )
+
+    def promised_sample(self, until: float) -> int:
+        """The sample a promise of quiet until ``until`` seconds reaches: a FLUID_BLOCK boundary, at most
+        :data:`AHEAD_SECONDS` beyond what was handed out."""
+        until = min(until, self.time + AHEAD_SECONDS)
+        return int(until * self.sample_rate) // FLUID_BLOCK * FLUID_BLOCK
+
+    def hand_out(self, ahead: list[np.ndarray], end: int) -> tuple[np.ndarray, list[np.ndarray]]:
+        """The samples up to ``end`` from ``ahead`` (the stretches rendered beyond what was handed out), and
+        what is left of ``ahead``; they are handed out."""
+        have = np.concatenate(ahead) if len(ahead) > 1 else ahead[0]
+        n = end - self._handed
+        self._handed = end
+        return have[:n], ([have[n:]] if have.size > n else [])
 
 
 class FluidSynthRenderer(SampleClock):
@@ -224,12 +246,6 @@ class FluidSynthRenderer(SampleClock):
                     self.broken_promises += 1
                 heapq.heappush(self._queue, (at, EVENT_ORDER[ev.kind], next(self._counter), ev))
 
-    def note(self, time: float, channel: int, key: int, velocity: int, duration: float) -> None:
-        """Queue a note: a note-on at ``time`` and a note-off ``duration`` seconds later."""
-        self.schedule(
-            [SynthEvent(time, "note_on", channel, key, velocity), SynthEvent(time + duration, "note_off", channel, key, 0)]
-        )
-
     def _apply(self, ev: SynthEvent) -> None:
         s = self._synth
         if ev.kind == "note_on":
@@ -318,8 +334,7 @@ class FluidSynthRenderer(SampleClock):
         beyond what was handed out) while the caller goes on."""
         if self._synth is None:
             return
-        until = min(until, self.time + AHEAD_SECONDS)
-        target = int(until * self.sample_rate) // FLUID_BLOCK * FLUID_BLOCK
+        target = self.promised_sample(until)
         if target <= self._promised:
             return
         with self._lock:
@@ -359,12 +374,8 @@ class FluidSynthRenderer(SampleClock):
             if not self._jobs and self._pos < end:
                 self._synthesise(end)
         with self._lock:
-            ahead = self._ahead
-            have = np.concatenate(ahead) if len(ahead) > 1 else ahead[0]
-            n = end - self._handed
-            self._ahead = [have[n:]] if have.size > n else []
-        self._handed = end
-        return have[:n]
+            samples, self._ahead = self.hand_out(self._ahead, end)
+        return samples
 
     def close(self) -> None:
         """Free the synthesizer."""

@@ -109,8 +109,8 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
     pictures = not getattr(args, "no_pictures", False)
     from scenarios.conductor.scenario import begin
 
-    # one run: what it needs before the piece plays (FluidSynth's synthesizers, the sound check) begins now,
-    # on threads of its own, and the processes that draw its pictures get ready while it is simulated
+    # one run: what it needs before the piece plays (the renderer's process, the sound check) begins now, and
+    # the processes that draw its pictures get ready while it is simulated
     begun = None if args.compare else begin(config)
     if not args.compare and pictures:
         from agentsim.animation.pictures import warm_workers

@@ -479,17 +479,6 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
     # the poses and the rest are made; the pictures are drawn by worker processes meanwhile, and waited for at
     # the end
     with contextlib.ExitStack() as drawing, concurrent.futures.ThreadPoolExecutor(1) as sound:
-        def sound_files():
-            with say("audio"):
-                # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the
-                # feedback's)
-                track = run_track(recording, [ensemble_source(run)])
-                ogg = start_audio(out / "report.html", track, sound)
-                write_wav(out / "ensemble.wav", track)
-            return track, ogg
-
-        if physics is not None:  # the physical body's poses take longest: its sound is encoded meanwhile
-            track, ogg = sound_files()
         with say("poses/BVH"):  # first: the pictures, the longest to make, begin before the poses
             # the tempo figure, which needs no poses, is begun first, in a process of its own (this one never
             # imports matplotlib's figures)
@@ -515,8 +504,12 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
 
                 timelines.poses_until(PosePanel.of(stream), complete=True)
             write_bvh(out / "conductor.bvh", stream)
-        if physics is None:
-            track, ogg = sound_files()
+        with say("audio"):
+            # what the conductor heard, from where it started hearing, on the run's axis (the motion's, the
+            # feedback's)
+            track = run_track(recording, [ensemble_source(run)])
+            ogg = start_audio(out / "report.html", track, sound)
+            write_wav(out / "ensemble.wav", track)
         with say("report"):
             write_csv(out / "beats.csv", beat_rows(run))
             gestures = gesture_rows(recording, beat_sounded(run))
