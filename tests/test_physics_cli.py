@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -289,3 +290,18 @@ def test_the_live_viewer_shows_the_physical_body_window_after_window():
     forward = pushed[:, 2] - standing[:, 2]
     assert np.abs(forward[:10]).max() < 1e-9 and forward[15:].max() > 0.01  # pushed forward from 0.3 s on
     assert np.abs(np.diff(pushed[:, 0:3], axis=0)).max() < 0.01  # no jump from one window to the next
+
+
+@pytest.mark.parametrize("chosen, expected", [(None, "disable"), ("egl", "egl")])
+def test_the_command_imports_mujoco_without_an_opengl_library_unless_a_backend_was_chosen(tmp_path, chosen,
+                                                                                         expected):
+    code = ("import os, sys\nfrom agentsim.cli import main\nsys.argv = ['agentsim', '--version']\n"
+            "try:\n    main()\nexcept SystemExit:\n    pass\nimport mujoco\n"
+            "print(os.environ['MUJOCO_GL'], 'glfw' in sys.modules)\n")
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    if chosen is not None:
+        env["MUJOCO_GL"] = chosen
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tmp_path,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.splitlines()[-1] == f"{expected} False"

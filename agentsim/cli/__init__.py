@@ -54,6 +54,11 @@ def _quiet_stdout() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status (0 done, 1 an error the user can fix, 2 a usage
     error, 70 a bug, 130 interrupted)."""
+    if argv is None:
+        # the program's own process, which draws nothing with MuJoCo (its bodies are shown in a browser):
+        # MuJoCo is imported without looking for an OpenGL library, a tenth of a second, unless a backend
+        # was chosen
+        os.environ.setdefault("MUJOCO_GL", "disable")
     args = build_parser().parse_args(argv)
     try:
         status = args.handler(args) or 0

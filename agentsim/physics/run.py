@@ -85,22 +85,7 @@ class PhysicalManager(DriverManager):
     def evaluate(self, times, sink=None, window: int = 16384):
         times = np.asarray(times, dtype=float)
         if sink is None:
-            values, writers = super().evaluate(times)
-            out = np.empty_like(values)
-            made = [0]
-
-            def put(k: int, pose: np.ndarray) -> None:
-                out[k] = pose
-                made[0] = k + 1
-
-            stepper = Stepper(self.body, self.fps, times, self.controllers, self.pushes, put)
-            step = PROGRESS_FRAMES if self.progress is not None else max(1, len(values))
-            for a in range(0, len(values), step):
-                stepper.feed(values[a:a + step])
-                if self.progress is not None:
-                    self.progress(self.body, times[:made[0]], out[:made[0]])
-            self.result = stepper.finish()
-            return out, writers
+            return self._in_memory(times)
         made: list[np.ndarray] = []  # physical frames not yet handed on
         state = {"sent": 0, "writers": np.empty((0, self.body.n_dofs), dtype=np.int32)}
 
@@ -124,8 +109,62 @@ class PhysicalManager(DriverManager):
         return None
 
 
+    def _in_memory(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The physical body's frames and the animation's writers, in arrays. The animation's frames are
+        evaluated on this thread, a window of :data:`ANIMATION_FRAMES` at a time, while a thread of the
+        simulation's own steps the body through those already evaluated: MuJoCo lets go of the interpreter
+        while it steps, so that the two share the machine's cores. The simulation is fed the same frames in
+        the same order as on one thread, so its frames are the same."""
+        import collections
+        import concurrent.futures
+
+        n = len(times)
+        values = np.empty((n, self.body.n_dofs))
+        writers = np.empty((n, self.body.n_dofs), dtype=np.int32)
+        out = np.empty_like(values)
+        made = [0]
+        told = [0]
+
+        def put(k: int, pose: np.ndarray) -> None:
+            out[k] = pose
+            made[0] = k + 1
+
+        def tell(final: bool = False) -> None:
+            if self.progress is not None and (made[0] - told[0] >= PROGRESS_FRAMES or final and made[0] > told[0]):
+                told[0] = made[0]
+                self.progress(self.body, times[:told[0]], out[:told[0]])
+
+        # the simulation, its model built, is made on its thread too, while the first frames are evaluated
+        with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="physical body") as steps:
+            stepper = steps.submit(Stepper, self.body, self.fps, times, self.controllers, self.pushes, put)
+            pending: collections.deque = collections.deque()
+
+            def take(first: int, block: np.ndarray, block_writers: np.ndarray) -> None:
+                last = first + len(block)
+                values[first:last], writers[first:last] = block, block_writers
+                pending.append(steps.submit(lambda rows: stepper.result().feed(rows), values[first:last]))
+                while pending and pending[0].done():
+                    pending.popleft().result()
+                    tell()
+
+            try:
+                super().evaluate(times, sink=take, window=ANIMATION_FRAMES)
+                while pending:
+                    pending.popleft().result()
+                    tell()
+                self.result = steps.submit(lambda: stepper.result().finish()).result()
+            except BaseException:
+                steps.shutdown(wait=True, cancel_futures=True)
+                raise
+        tell(final=True)
+        return out, writers
+
 #: How many of the animation's frames :class:`PhysicalManager` simulates between two calls of its ``progress``.
 PROGRESS_FRAMES = 64
+
+#: How many of the animation's frames :class:`PhysicalManager` evaluates before it hands them to the
+#: simulation (when it keeps the frames in memory).
+ANIMATION_FRAMES = 256
 
 
 #: The modes of a gesture or pointing that leave the left hand alone.

@@ -154,7 +154,9 @@ class Simulation:
         self.pelvis = self.layout.body_id["sacroiliac"]
         #: the steps of a frame at which a call of mj_step ends (the kinematic targets' knots)
         self.bounds = sorted({round(k * self.substeps / CALLS) for k in range(CALLS + 1)})
-        self.physical = np.zeros(len(self.joints), dtype=bool)
+        #: the Hermite basis at those ends (a frame with a push has its own)
+        self._basis = _hermite_at(np.asarray(self.bounds, dtype=float) / self.substeps)
+        self._physical(np.zeros(len(self.joints), dtype=bool))
         self.release: dict[int, tuple[float, np.ndarray]] = {}  # joint -> (time given back, angle offsets)
         self.taken: dict[int, np.ndarray] = {}  # joint -> its angles (rad) when a JointController took it
         self.handover: dict[int, tuple[float, np.ndarray]] = {}  # joint -> (time taken, its angles then)
@@ -245,7 +247,19 @@ class Simulation:
                 m.actuator_biasprm[a, 0] = 0.0
                 d.ctrl[a] = 0.0
         self.owner = owner
-        self.physical = np.array([o is not None for o in owner])
+        physical = np.array([o is not None for o in owner])
+        if not np.array_equal(physical, self.physical):
+            self._physical(physical)
+
+    def _physical(self, physical: np.ndarray) -> None:
+        """The joints that are ``physical`` now, and the hinges and actuators of either kind, which every frame
+        reads until the configuration changes."""
+        self.physical = physical
+        #: the physical joints' hinges, (J, 3); the kinematic joints' hinges, their actuators and positions
+        self.physical_hinges = physical[:, None] & self.valid
+        self.moving = ~physical[:, None] & self.valid
+        self.moving_actuators, self.moving_qpos = self.aadr[self.moving], self.qadr[self.moving]
+        self.physical_actuators = self.aadr[self.physical_hinges]
 
     # ------------------------------------------------------------------ the frame loop
     def advance(self, time: float, rows: np.ndarray) -> np.ndarray:
@@ -256,26 +270,25 @@ class Simulation:
         """
         m, d, mj = self.model, self.data, self.mj
         self._configure(time)
-        kin = ~self.physical
         targets = np.radians(np.stack([self._kinematic(time + (k - 1) * self.frame_time, rows[k])
                                        for k in range(4)]))  # (4, J, 3)
         targets = targets[1] + _wrapped_rad(targets - targets[1])  # no turn through +-180 degrees
         h = self.frame_time
         v1 = (targets[2] - targets[0]) / (2 * h)
         v2 = (targets[3] - targets[1]) / (2 * h)
-        moving = kin[:, None] & self.valid  # the kinematic joints' hinges
+        moving = self.moving  # the kinematic joints' hinges
         coeffs = np.stack([targets[1], h * v1, targets[2], h * v2])[:, moving]  # (4, hinges)
-        ka = self.aadr[moving]
+        ka = self.moving_actuators
         self._servo_targets(time, rows[2])
         self._turn_welded(np.degrees(targets[2]))
         pushes = [p for p in self.pushes if p.time < time + h and p.time + p.duration > time]
-        bounds = self.bounds
+        bounds, basis = self.bounds, self._basis
         if pushes:  # a push starts and ends at a step: a call of mj_step ends there
             edges = [round((t - time) / self.step) for p in pushes for t in (p.time, p.time + p.duration)]
             bounds = sorted({*bounds, *(e for e in edges if 0 < e < self.substeps)})
-        u = np.asarray(bounds, dtype=float) / self.substeps
-        knots = _hermite_at(u) @ coeffs  # (chunks + 1, kinematic DOFs): the curve at the calls' ends
-        hinges = self.qadr[moving]
+            basis = _hermite_at(np.asarray(bounds, dtype=float) / self.substeps)
+        knots = basis @ coeffs  # (chunks + 1, kinematic DOFs): the curve at the calls' ends
+        hinges = self.moving_qpos
         turns = np.round((d.qpos[hinges] - knots[0]) / (2 * math.pi))
         if turns.any():  # an angle of the animation wrapped through +-180 degrees: so does the joint's (same pose)
             d.qpos[hinges] -= 2 * math.pi * turns
@@ -329,8 +342,7 @@ class Simulation:
                 continue
             w = u * u * (3 - 2 * u)
             ctrl[i] = start + w * _wrapped_rad(ctrl[i] - start)
-        physical = self.physical[:, None] & self.valid
-        d.act[self.aadr[physical]] = ctrl[physical]
+        d.act[self.physical_actuators] = ctrl[self.physical_hinges]
 
     def _balance(self, spec: ControllerSpec, ctrl: np.ndarray) -> None:
         """Ankle and hip corrections that bring the centre of mass over the middle of the feet."""
@@ -380,7 +392,7 @@ class Simulation:
         roll, pitch, yaw = matrix_euler(_quat_matrix(d.qpos[3:7]))
         pose[self.root_rotation] = (roll, pitch, yaw)
         angles = self._kinematic(time, row)
-        physical = self.physical[:, None] & self.valid
+        physical = self.physical_hinges
         angles[physical] = np.degrees(d.qpos[self.qadr[physical]])
         pose[self.columns] = angles
         pairs = d.contact.geom[:d.ncon]
