@@ -167,28 +167,34 @@ def test_the_physics_runs_inside_the_frame_loop_the_same_in_memory_and_in_files(
 
     told = []  # what the progress of an in-memory run was told: the frames made so far, each time
 
-    def physical(folder, progress=None):
-        manager = PhysicalManager(run_controllers(realizer), pushes, fps=60.0, seed=0, progress=progress)
+    def physical(folder, progress=None, process=None):
+        manager = PhysicalManager(run_controllers(realizer), pushes, fps=60.0, seed=0, progress=progress,
+                                  process=process)
         stream = evaluate_poses(realizer, fps=60.0, manager=manager, folder=folder)
         return stream, manager.result
 
     memory, result = physical(None)
     files, _ = physical(tmp_path / "poses")
-    followed, _ = physical(None, lambda body, times, values: told.append((body, times.copy(), values.copy())))
     plain = evaluate_poses(realizer, fps=60.0)
     np.testing.assert_array_equal(np.asarray(files.values), memory.values)
-    np.testing.assert_array_equal(followed.values, memory.values)  # told or not, the same poses
+    from agentsim.physics.process import PhysicsProcess
     from agentsim.physics.run import PROGRESS_FRAMES
 
-    # told every PROGRESS_FRAMES frames made or more (the simulation's thread makes them as it can), and
-    # of every frame at the end; each time the frames made so far, the same as those of the run in files
-    made = [len(times) for _, times, _ in told]
-    assert len(told) >= 2 and made[-1] == memory.n_frames
-    assert all(b - a >= PROGRESS_FRAMES for a, b in zip(made[:-2], made[1:-1])) and made[-1] > made[-2]
-    for body, times, values in told:
-        assert body is followed.body
-        np.testing.assert_array_equal(times, memory.times[:len(times)])
-        np.testing.assert_array_equal(values, memory.values[:len(times)])
+    for process in (None, PhysicsProcess()):  # simulated on this thread, or apart while the animation goes on
+        told.clear()
+        followed, apart = physical(None, lambda body, times, values: told.append((body, times.copy(),
+                                                                                  values.copy())), process)
+        np.testing.assert_array_equal(followed.values, memory.values)  # told or not, apart or not: the same
+        assert apart.rows == result.rows
+        # told each time PROGRESS_FRAMES frames or more were made, and of every frame at the end; each time
+        # the frames made so far, the same as those of the run in files
+        made = [len(times) for _, times, _ in told]
+        assert len(told) >= 2 and made[-1] == memory.n_frames
+        assert all(b - a >= PROGRESS_FRAMES for a, b in zip(made[:-2], made[1:-1])) and made[-1] > made[-2]
+        for body, times, values in told:
+            assert body is followed.body
+            np.testing.assert_array_equal(times, memory.times[:len(times)])
+            np.testing.assert_array_equal(values, memory.values[:len(times)])
     def named(stream):  # driver uids count on from run to run: compare the drivers' names
         names = {**stream.driver_names, -1: ""}
         return np.vectorize(names.get)(np.asarray(stream.writers))
@@ -199,3 +205,20 @@ def test_the_physics_runs_inside_the_frame_loop_the_same_in_memory_and_in_files(
     np.testing.assert_array_equal(memory.values[:, nod], plain.values[:, nod])
     pelvis = memory.position("HumanoidRoot")[:, 2] - plain.position("HumanoidRoot")[:, 2]
     assert pelvis.max() > 0.005  # the tracked positions are the pushed body's
+
+
+def test_the_physical_bodys_process_says_what_went_wrong_and_ends_when_its_parent_goes():
+    from agentsim.physics.process import PhysicsProcess
+
+    process = PhysicsProcess()  # frames of the wrong shape: the child's failure is raised where frames are taken
+    process.start(BODY, 60.0, np.arange(10) / 60.0, [default_balance()], [])
+    process.feed(np.zeros((10, 3)))
+    process._process.join(timeout=30)  # (it has failed and ended: what is sent now finds no reader)
+    with pytest.raises(RuntimeError, match="the physical body's simulation failed: IndexError"):
+        process.feed(np.zeros((10, 3)))
+    process.close()
+    assert process._process.exitcode == 0
+    gone = PhysicsProcess()  # a parent that goes without a word: the child sees its end of the pipe close
+    gone._connection.close()
+    gone._process.join(timeout=30)
+    assert gone._process.exitcode == 0

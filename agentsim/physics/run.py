@@ -71,15 +71,19 @@ class PhysicalManager(DriverManager):
     window of frames the drivers evaluate goes to the simulation as it comes, and the physical body's frames
     go on to the pose files (or the arrays) in order, two frames behind the drivers (a frame's velocities
     need the next one). :attr:`result` is the :class:`PhysicsResult` once the frames are evaluated.
-    ``progress(body, times, values)``, if given, is called with the physical frames made so far (arrays) every
-    :data:`PROGRESS_FRAMES` frames of the animation, so that what needs them can begin.
+    ``progress(body, times, values)``, if given, is called with the physical frames made so far (arrays) each
+    time :data:`PROGRESS_FRAMES` frames or more have been made, and with every frame at the end, so that what
+    needs them can begin.
     """
 
     def __init__(self, controllers: list[ControllerSpec], pushes: list[Push] = (), fps: float = 60.0,
-                 progress=None, **kwargs):
+                 progress=None, process=None, **kwargs):
         super().__init__(**kwargs)
         self.controllers, self.pushes, self.fps = list(controllers), list(pushes), float(fps)
         self.progress = progress
+        #: the :class:`~agentsim.physics.process.PhysicsProcess` that simulates the frames kept in memory,
+        #: beside the animation (None: this thread does, after the animation)
+        self.process = process
         self.result: PhysicsResult | None = None
 
     def evaluate(self, times, sink=None, window: int = 16384):
@@ -110,60 +114,54 @@ class PhysicalManager(DriverManager):
 
 
     def _in_memory(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The physical body's frames and the animation's writers, in arrays. The animation's frames are
-        evaluated on this thread, a window of :data:`ANIMATION_FRAMES` at a time, while a thread of the
-        simulation's own steps the body through those already evaluated: MuJoCo lets go of the interpreter
-        while it steps, so that the two share the machine's cores. The simulation is fed the same frames in
-        the same order as on one thread, so its frames are the same."""
-        import collections
-        import concurrent.futures
-
+        """The physical body's frames and the animation's writers, in arrays: simulated by :attr:`process`
+        while the animation's next frames are evaluated here, when the manager was given one, else on this
+        thread after the animation's frames. The frames are the same either way."""
         n = len(times)
-        values = np.empty((n, self.body.n_dofs))
-        writers = np.empty((n, self.body.n_dofs), dtype=np.int32)
-        out = np.empty_like(values)
+        out = np.empty((n, self.body.n_dofs))
         made = [0]
         told = [0]
 
-        def put(k: int, pose: np.ndarray) -> None:
-            out[k] = pose
-            made[0] = k + 1
-
-        def tell(final: bool = False) -> None:
-            if self.progress is not None and (made[0] - told[0] >= PROGRESS_FRAMES or final and made[0] > told[0]):
+        def put(first: int, poses: np.ndarray) -> None:
+            out[first:first + len(poses)] = poses
+            made[0] = first + len(poses)
+            if self.progress is not None and made[0] - told[0] >= PROGRESS_FRAMES:
                 told[0] = made[0]
                 self.progress(self.body, times[:told[0]], out[:told[0]])
 
-        # the simulation, its model built, is made on its thread too, while the first frames are evaluated
-        with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="physical body") as steps:
-            stepper = steps.submit(Stepper, self.body, self.fps, times, self.controllers, self.pushes, put)
-            pending: collections.deque = collections.deque()
+        process, self.process = self.process, None  # (it serves one run of frames)
+        if process is None:
+            values, writers = super().evaluate(times)
+            stepper = Stepper(self.body, self.fps, times, self.controllers, self.pushes,
+                              lambda k, pose: put(k, pose[None]))
+            for a in range(0, n, PROGRESS_FRAMES):
+                stepper.feed(values[a:a + PROGRESS_FRAMES])
+            self.result = stepper.finish()
+        else:
+            values = np.empty((n, self.body.n_dofs))
+            writers = np.empty((n, self.body.n_dofs), dtype=np.int32)
 
             def take(first: int, block: np.ndarray, block_writers: np.ndarray) -> None:
                 last = first + len(block)
                 values[first:last], writers[first:last] = block, block_writers
-                pending.append(steps.submit(lambda rows: stepper.result().feed(rows), values[first:last]))
-                while pending and pending[0].done():
-                    pending.popleft().result()
-                    tell()
+                process.feed(values[first:last])
+                for at, poses in process.made():
+                    put(at, poses)
 
             try:
+                process.start(self.body, self.fps, times, self.controllers, self.pushes)
                 super().evaluate(times, sink=take, window=ANIMATION_FRAMES)
-                while pending:
-                    pending.popleft().result()
-                    tell()
-                self.result = steps.submit(lambda: stepper.result().finish()).result()
-            except BaseException:
-                steps.shutdown(wait=True, cancel_futures=True)
-                raise
-        tell(final=True)
+                self.result = process.finish(put)
+            finally:
+                process.close()
+        if self.progress is not None and made[0] > told[0]:
+            self.progress(self.body, times, out)
         return out, writers
 
 #: How many of the animation's frames :class:`PhysicalManager` simulates between two calls of its ``progress``.
 PROGRESS_FRAMES = 64
 
-#: How many of the animation's frames :class:`PhysicalManager` evaluates before it hands them to the
-#: simulation (when it keeps the frames in memory).
+#: How many of the animation's frames :class:`PhysicalManager` evaluates before it sends them to its process.
 ANIMATION_FRAMES = 256
 
 
@@ -199,28 +197,29 @@ def hanging_left_arm(source, end: float) -> list[ControllerSpec]:
 
 
 def physical_poses(recording, fps: float, seed: int, pushes=(), controllers=(), scene=None, folder=None,
-                   progress=None):
+                   progress=None, process=None):
     """The poses of a finished run on the physical body (as :func:`~agentsim.animation.evaluate_poses` gives
     the animation's), with the run's controllers under the default balance, ``controllers`` added (e.g. a
     scenario's HangControllers) and the ``pushes``; returns the stream and the :class:`PhysicsResult`.
-    ``progress``: as :class:`PhysicalManager` takes it (poses held in memory, no ``folder``)."""
+    ``progress`` and ``process``: as :class:`PhysicalManager` takes them (poses held in memory, no
+    ``folder``)."""
     from agentsim.animation import evaluate_poses
     from agentsim.animation.output import lexicon_of
 
     manager = PhysicalManager([*run_controllers(recording), *controllers], list(pushes), fps=fps, seed=seed,
-                              scene=scene, lexicon=lexicon_of(recording), progress=progress)
+                              scene=scene, lexicon=lexicon_of(recording), progress=progress, process=process)
     stream = evaluate_poses(recording, fps=fps, seed=seed, folder=folder, manager=manager)
     return stream, manager.result
 
 
 def scenario_poses(recording, fps: float, seed: int, pushes, out: Path, controllers=(), scene=None, folder=None,
-                   progress=None):
+                   progress=None, process=None):
     """:func:`physical_poses` for a scenario's folder ``out``: its ``physics.csv`` written there, a fall or an
     unstable simulation said on one line of stderr (the scenario's feedback is its realizer's); the stream and
     the :class:`PhysicsResult`."""
     import sys
 
-    stream, result = physical_poses(recording, fps, seed, pushes, controllers, scene, folder, progress)
+    stream, result = physical_poses(recording, fps, seed, pushes, controllers, scene, folder, progress, process)
     write_physics_csv(Path(out) / "physics.csv", result)
     line = fell_line(result)
     if line:

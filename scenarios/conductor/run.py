@@ -111,7 +111,8 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
 
     # one run: what it needs before the piece plays (the renderer's process, the sound check) begins now, and
     # the processes that draw its pictures get ready while it is simulated
-    begun = None if args.compare else begin(config)
+    physics = getattr(args, "physics_pushes", None)
+    begun = None if args.compare else begin(config, physics=physics is not None)
     if not args.compare and pictures:
         from agentsim.animation.pictures import warm_workers
 
@@ -128,7 +129,7 @@ def _run(args, config, shown: Path, out: Path, live: bool, as_json: bool, table)
             metrics = collect_metrics(run)
         folder = out / name if args.compare else out
         write_outputs(run, metrics, folder, pictures=not args.compare, plots=pictures, stages=stages,
-                      physics=getattr(args, "physics_pushes", None))
+                      physics=physics, process=begun and begun.physics)
         rows.append(metrics)
         if not args.compare:
             _report(metrics, shown, time.perf_counter() - started, table)

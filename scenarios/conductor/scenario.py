@@ -117,16 +117,23 @@ class Begun:
     its own the sound check, then the measure of the renderer's onset offsets. FluidSynth works without
     Python's lock; each has a synthesizer of its own, so what each renders is the same as one after the
     other (one thread, so that fewer synthesizers of this process are at work at once: libfluidsynth has
-    crashed once in a thread of a run). Use it once, as a context manager (which waits for them all at its
-    end)."""
+    crashed once in a thread of a run). With ``physics``, the process that will simulate the physical body
+    (:func:`~agentsim.physics.process.physics_process`, None where none can be forked), which imports MuJoCo
+    meanwhile: :func:`write_outputs` takes it as ``process``. Use it once, as a context manager (which waits
+    for them all at its end)."""
 
-    def __init__(self, config: ScenarioConfig) -> None:
+    def __init__(self, config: ScenarioConfig, physics: bool = False) -> None:
         from concurrent.futures import ThreadPoolExecutor
 
         from agentsim.music.onsets import beat_onset_offset
 
         self.config = config
         self.renderer = _renderer(config, apart=True)  # (first: its process is forked before any thread starts)
+        self.physics = None
+        if physics:
+            from agentsim.physics.process import physics_process
+
+            self.physics = physics_process()
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="begin")
         self.checked = self._pool.submit(sound_check, config)
         self._pool.submit(beat_onset_offset, config.audio.sample_rate, _soundfont(config))
@@ -139,9 +146,10 @@ class Begun:
         self.renderer.close()  # (closed by the run that took it; here, that of a run that did not)
 
 
-def begin(config: ScenarioConfig) -> Begun:
-    """Begin what a run of ``config`` needs before its piece plays (:class:`Begun`); :func:`simulate` takes it."""
-    return Begun(config)
+def begin(config: ScenarioConfig, physics: bool = False) -> Begun:
+    """Begin what a run of ``config`` needs before its piece plays (:class:`Begun`; ``physics``: a run on the
+    physical body); :func:`simulate` takes it."""
+    return Begun(config, physics)
 
 
 def simulate(config: ScenarioConfig, strategy_name: str | None = None, seed: int = 0,
@@ -436,23 +444,25 @@ def tempo_figure_arguments(run: Run, metrics: dict) -> tuple:
             run.extra["first_index"], run.extra["onsets"])
 
 
-def physical_poses(recording, fps: float, seed: int, pushes: list, out: Path, progress=None):
+def physical_poses(recording, fps: float, seed: int, pushes: list, out: Path, progress=None, process=None):
     """The run's poses on the physical body and its figures, its ``physics.csv`` written in ``out``: the left arm hangs
     (a HangController) while the right hand conducts alone, and is taken back by the animation for the
-    gestures with the left or both hands ("play louder", stop)."""
+    gestures with the left or both hands ("play louder", stop). ``process``: the
+    :class:`~agentsim.physics.process.PhysicsProcess` that simulates the body (None: this thread does)."""
     from agentsim.animation.timeline import run_duration
     from agentsim.physics.run import hanging_left_arm, scenario_poses
 
     hang = hanging_left_arm(recording, run_duration(recording) + 2.0)
-    return scenario_poses(recording, fps, seed, pushes, out, controllers=hang, progress=progress)
+    return scenario_poses(recording, fps, seed, pushes, out, controllers=hang, progress=progress, process=process)
 
 
 def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = True, plots: bool = True,
-                  stages: Stages | None = None, physics: list | None = None) -> Path:
+                  stages: Stages | None = None, physics: list | None = None, process=None) -> Path:
     """Write the run's files into the folder ``out`` (created if needed); ``pictures``: the timeline
     pictures too, ``plots``: any picture at all (``tempo.png`` and the timeline). ``stages``: where to say
     on a terminal which stage is under way. ``physics``: the pushes of a run on the physical body (its
-    poses the physical body's, and ``physics.csv``); None: the animation's poses."""
+    poses the physical body's, and ``physics.csv``); None: the animation's poses. ``process``: the process
+    that simulates the physical body (:class:`Begun`'s ``physics``)."""
     import concurrent.futures
     import contextlib
 
@@ -498,7 +508,7 @@ def write_outputs(run: Run, metrics: dict, out: str | Path, pictures: bool = Tru
                                         progress=timelines and timelines.follow())
             else:
                 stream, body = physical_poses(recording, run.config.conductor.fps, run.seed, physics, out,
-                                              progress=timelines and timelines.follow())
+                                              progress=timelines and timelines.follow(), process=process)
             if timelines is not None:
                 from agentsim.animation.timeline import PosePanel
 
