@@ -400,9 +400,10 @@ class _Reader:
         # (made as Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), required=required, index=...,
         # line=..., column=...) makes it, without its __init__: a block has thousands)
         beh = _new_behaviour(Behaviour)
-        beh.__dict__.update(id=bid, type=kind.name, sync_ids=list(kind.syncs), attributes=dict(node.attrs), refs={},
-                            text="", marks=[], prosody=[], params={}, source="", required=required,
-                            index=len(self.block.behaviours), line=node.line, column=node.column)
+        beh.__dict__ = {"id": bid, "type": kind.name, "sync_ids": list(kind.syncs), "attributes": dict(node.attrs),
+                        "refs": {}, "text": "", "marks": [], "prosody": [], "params": {}, "source": "",
+                        "required": required, "index": len(self.block.behaviours), "line": node.line,
+                        "column": node.column}
         if kind.name == "speech":
             if not self.speech_text(node, beh):
                 return
@@ -430,7 +431,7 @@ class _Reader:
                 beh.attributes["repetition"] = str(times)
                 kind_of = "IMPOSSIBLE_TO_SCHEDULE" if times == MAX_REPETITION else "PARSING_FAILURE"
                 self.warn(kind_of, f"{bid}: {problem}", node, [bid])
-        for child in node.elements():
+        for child in node.elements() if node.children else ():
             extension = child.namespace in EXTENSION_BEHAVIOURS
             if kind.name == "speech" and self.lenient:
                 continue  # the speech reading took what it could, and said what it could not
@@ -549,8 +550,8 @@ class _Reader:
             # (made as Constraint(kind, refs, anchor, owner, required, line=, column=) makes it, without its
             # __init__: a block has thousands)
             constraint = new(Constraint)
-            constraint.__dict__.update(kind=kind, refs=refs, anchor=anchor, id=owner, required=required, owner="",
-                                       line=child.line, column=child.column)
+            constraint.__dict__ = {"kind": kind, "refs": refs, "anchor": anchor, "id": owner, "required": required,
+                                   "owner": "", "line": child.line, "column": child.column}
             add(constraint)
 
 
