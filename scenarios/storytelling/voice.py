@@ -181,11 +181,11 @@ assert _WORD_FIELDS == tuple(Word.__dataclass_fields__) and _PHONEME_FIELDS == t
 
 
 def _in_samples(times: list[float], rate: int) -> list[int] | None:
-    """``times`` (s) as whole numbers of samples at ``rate``, if each is exactly such a number divided by
-    ``rate`` (as reading divides it again); else None."""
+    """``times`` (s) as whole numbers of samples at ``rate``, if each is a float that is exactly such a number
+    divided by ``rate`` (as reading divides it again); else None."""
     samples = []
     for t in times:
-        if not math.isfinite(t):
+        if type(t) is not float or not math.isfinite(t):
             return None
         n = round(t * rate)
         if n / rate != t:
