@@ -25,7 +25,7 @@ from agentsim.bml.dialect_tables import (CLIP_WORDS, COMPOSITIONS, DEICTIC_TARGE
                                          UNMAPPED_HINTS)
 from agentsim.bml.documents import (NUMBER, Envelope, implied_start, is_bml_uri, is_smartbody, remove_nodes,
                                     seconds, speech_marks)
-from agentsim.bml.spelling import REF_SYNC, SYNC_SPELLINGS, canonical_sync, ref_sync
+from agentsim.bml.spelling import REF_SYNC, SYNC_SPELLINGS, canonical_sync, ref_sync, tail_sync
 from agentsim.core.xmltree import Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
@@ -77,6 +77,7 @@ class Adapter:
         self.written: dict[int, str] = {}  # id() of an element -> its name as written, before mapping
         self._respelled: dict[str, tuple[str, str | None, bool]] = {}  # see ref()
         self._spelled: dict[str, str | None] = {}  # attribute name -> the sync point it spells (None: none)
+        self._written_tails: dict[str, bool] = {}  # see _respell_once()
         # whether a reference in a constraint names a sync point that has an alias (else retarget_refs has
         # nothing to do in the constraints)
         self._aliased_constraint = False
@@ -492,12 +493,12 @@ class Adapter:
         respelled, notes = self._respelled, self.notes  # (Adapter.ref, without a call per reference)
         aliased = False
         for child in elements:
-            for n in (child, *child.children):
+            for n in (child, *child.children) if child.children else (child,):
                 value = None if isinstance(n, str) else n.attrs.get("ref")
                 if value is not None:
                     found = respelled.get(value)
                     if found is None:
-                        found = respelled[value] = self._respell(value)
+                        found = respelled[value] = self._respell_once(value)
                     if found is _AS_WRITTEN:  # (most references)
                         continue
                     if found[1] is not None:
@@ -518,6 +519,19 @@ class Adapter:
         if found[1] is not None:
             self.notes.add(found[1])
         return found[0]
+
+    def _respell_once(self, value: str) -> tuple[str, str | None, bool]:
+        """:meth:`_respell` of ``value``; a reference kept as it is is known from what follows its last colon,
+        which references share (``b1:end``, ``b2:end``), once that has been split."""
+        path, colon, tail = value.rpartition(":")
+        if not colon or "\n" in path or value[:1].isspace() or value[-1:].isspace():
+            return self._respell(value)
+        written = self._written_tails.get(tail)
+        if written is None:  # (split as ref_sync splits the reference, the part before the colon aside)
+            found = self._respell(value)
+            written = self._written_tails[tail] = found is _AS_WRITTEN and tail_sync(tail) is not None
+            return found
+        return _AS_WRITTEN if written else self._respell(value)
 
     @staticmethod
     def _respell(value: str) -> tuple[str, str | None, bool]:
