@@ -265,3 +265,34 @@ def test_an_unknown_encoding_is_refused_in_both_readers():
         r = realize(doc, strict=strict)
         (w,) = r.warnings
         assert w["warningType"] == "PARSING_FAILURE" and "TF-8" in w["description"] and not r.blocks
+
+
+def test_the_usual_references_are_read_quickly_as_the_pattern_reads_them():
+    """The references of the usual form are read with string methods where they plainly are of it, and every
+    text comes out as the general pattern reads it: the same reference, or None for the full reader to read (or
+    refuse); the lenient reader keeps a reference's spelling as it is where one like it was kept."""
+    import numpy as np
+
+    from agentsim.bml.dialects import Adapter
+    from agentsim.bml.documents import Envelope
+    from agentsim.bml.parser import _matched_ref, _plain_ref
+    from agentsim.core.xmltree import Node
+
+    texts = ["g1:stroke", "g1:end+0.5", "g1:end-2.", "b1:g1:start", "g1:end+.5", "g1:end+1.2.3", "g1:end+1-2",
+             "g1:end+1e3", "é1:start", "g1:strokeé", "g1:end+²", "g1:end+١", "1g:start", "g1:1", "g1 :start",
+             "g1:start ", "g1:end+ 1", ":start", "g1:", "g1:end+", "g1:end-0", "g1:end+99999999", "g1:end+1000000.5",
+             "_:_", "a_1:b_2-0.5", "g1:end+0001", "g1:start\n", "g1\n:start", "class:def", "g1:end--1", "g1:end++1",
+             "g1:end+1:2", "a" * 30 + ":b", "anticipators:beat:b1"]
+    rng = np.random.default_rng(5)
+    alphabet = list("ab_1.:+- \n\u00e9\u00b2")
+    texts += ["".join(rng.choice(alphabet, int(rng.integers(1, 12)))) for _ in range(3000)]
+    for text in texts:
+        assert _plain_ref(text) == _matched_ref(text), text
+    assert _plain_ref("g1:end-2.") == ("sync", -2.0, None, "g1", "end", None, "g1:end-2.")
+    spellings = ["b1:end", "b2:end", "b1:stroke_start", "b2:stroke_start", " b3:end", "b3:end ", "b1:ready",
+                 "b2:ready", "b1:relax+1", "a:b+c:end", "a:b+c:d+", "x\ny:end", "b4:end\n"]
+    spellings += ["".join(rng.choice(list("b1:end_rStR+-. \n"), int(rng.integers(1, 14)))) for _ in range(3000)]
+    node = Node("bml", {"id": "b"}, 1, 1, {})
+    once = Adapter(Envelope(node), iter(()).__next__)
+    for value in spellings:
+        assert once._respell_once(value) == Adapter._respell(value), repr(value)

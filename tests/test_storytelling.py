@@ -216,6 +216,53 @@ def test_phoneme_marks_and_the_cache(tmp_path):
     assert b.marks[0].time == b.words[2].start
 
 
+def test_the_cache_keeps_the_timeline_in_columns_in_samples_where_they_are_exact(tmp_path):
+    """A cache entry holds its words and phonemes as columns, their times as whole samples when each is one (read
+    back as the same seconds), else as seconds; an entry of another layout or with columns of unequal lengths is
+    synthesised again."""
+    import json
+    from dataclasses import replace
+
+    from scenarios.storytelling.voice import CACHE_FORMAT
+    from speech_timing.builtin import BuiltinBackend
+
+    class OnSamples(BuiltinBackend):  # every time a whole number of samples, as espeak-ng gives them
+        def synthesize(self, speech):
+            utterance = super().synthesize(speech)
+            rate = utterance.sample_rate
+            return replace(utterance, words=[replace(w, start=round(w.start * rate) / rate, end=round(w.end * rate) / rate)
+                                             for w in utterance.words],
+                           phonemes=[replace(p, start=round(p.start * rate) / rate, end=round(p.end * rate) / rate)
+                                     for p in utterance.phonemes])
+
+    text = "Tell me a story."
+    for backend, times in ((BuiltinBackend(), "seconds"), (OnSamples(), "samples")):
+        folder = tmp_path / times
+        said = CachedBackend(backend, cache_dir=folder).utterance(text)
+        (entry,) = folder.glob("*.json")
+        meta = json.loads(entry.read_text(encoding="utf-8"))
+        assert (meta["format"], meta["times"], CACHE_FORMAT) == (2, times, 2)
+        assert list(meta["words"]) == ["index", "text", "start", "end", "char_start", "char_end"]
+        assert list(meta["phonemes"]) == ["symbol", "start", "end", "word_index", "stressed"]
+        assert meta["words"]["text"] == ["Tell", "me", "a", "story"] and len(meta["phonemes"]["symbol"]) == len(
+            said.phonemes) > 4
+        rate = said.sample_rate
+        assert meta["phonemes"]["start"] == [round(p.start * rate) if times == "samples" else p.start
+                                             for p in said.phonemes]
+        if times == "seconds":  # (the built-in model's times fall between samples)
+            assert any(round(p.start * rate) / rate != p.start for p in said.phonemes)
+        again = CachedBackend(backend, cache_dir=folder)
+        read = again.utterance(text)
+        assert again.hits == 1 and read == said
+        assert [type(p.stressed) for p in read.phonemes] == [bool] * len(said.phonemes)
+        for spoilt in ({**meta, "format": 1, "words": [vars(w) for w in said.words]},
+                       {**meta, "phonemes": {**meta["phonemes"], "end": meta["phonemes"]["end"][:-1]}},
+                       {**meta, "times": "frames"}):
+            entry.write_text(json.dumps(spoilt), encoding="utf-8")
+            third = CachedBackend(backend, cache_dir=folder)
+            assert third.utterance(text) == said and (third.hits, third.misses) == (0, 1)
+
+
 def test_the_cached_audio_is_read_back_as_it_was_said(tmp_path, monkeypatch):
     """The 16-bit samples of a cache file come back as the float32 samples that were cached (read a block at
     a time); a file cut short is not used: the text is synthesised again."""

@@ -25,7 +25,7 @@ from agentsim.bml.dialect_tables import (CLIP_WORDS, COMPOSITIONS, DEICTIC_TARGE
                                          UNMAPPED_HINTS)
 from agentsim.bml.documents import (NUMBER, Envelope, implied_start, is_bml_uri, is_smartbody, remove_nodes,
                                     seconds, speech_marks)
-from agentsim.bml.spelling import REF_SYNC, SYNC_SPELLINGS, canonical_sync, ref_sync
+from agentsim.bml.spelling import REF_SYNC, SYNC_SPELLINGS, canonical_sync, ref_sync, tail_sync
 from agentsim.core.xmltree import Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
@@ -45,6 +45,13 @@ _ALIASED = re.compile("|".join(sorted(
 _ALIAS_NAMES = frozenset(name for aliases in SYNC_ALIASES.values() for name in aliases)
 #: Elements of BMLA and BMLT, which only count in their own namespaces.
 EXTENSION_LOCALS = set().union(*EXTENSION_BEHAVIOURS.values())
+#: The BML 1.0 types whose draft attributes :meth:`Adapter.core` reads (it leaves the others as they are).
+_CORE_REWRITTEN = frozenset(("gesture", "face", "head", "gaze"))
+_UNSEEN = object()
+#: The constraint elements whose references are read.
+_CONSTRAINT_KINDS = frozenset(("synchronize", "before", "after"))
+#: What :meth:`Adapter._respell` gives a reference kept as it is, that names no sync point with an alias.
+_AS_WRITTEN = ("", None, False)
 
 
 class Adapter:
@@ -69,6 +76,8 @@ class Adapter:
         self.constraints: list[Node] = []
         self.written: dict[int, str] = {}  # id() of an element -> its name as written, before mapping
         self._respelled: dict[str, tuple[str, str | None, bool]] = {}  # see ref()
+        self._spelled: dict[str, str | None] = {}  # attribute name -> the sync point it spells (None: none)
+        self._written_tails: dict[str, bool] = {}  # see _respell_once()
         # whether a reference in a constraint names a sync point that has an alias (else retarget_refs has
         # nothing to do in the constraints)
         self._aliased_constraint = False
@@ -215,15 +224,19 @@ class Adapter:
         return True
 
     def make_bml(self, node: Node, new_type: str) -> None:
-        if node.tag != new_type or node.namespace not in (None, "", BML_NAMESPACE):
+        if node.tag != new_type:
             node.namespaces = {**node.namespaces, "": BML_NAMESPACE}
-        node.tag = new_type
+            node.tag = new_type
+        elif node.namespace not in (None, "", BML_NAMESPACE):
+            node.namespaces = {**node.namespaces, "": BML_NAMESPACE}
 
     def core(self, node: Node) -> str:
         """A BML 1.0 element, perhaps with draft attributes: ``type=`` naming the kind of behaviour (a
         pointing gesture, FACS, a head orientation), Greta's ``class=instance`` lexicon keys, EMBR's nods
         written as gestures, a face lexeme in a child element."""
         local, attrs = node.local, node.attrs
+        if local not in _CORE_REWRITTEN:
+            return local  # (nothing below rewrites another type)
         kind = attrs.get("type", "").strip()
         family, _, instance = kind.partition("=")
         family = family.strip().upper()
@@ -442,8 +455,11 @@ class Adapter:
         attributes and in the references; a sync point the behaviour does not have is left out."""
         syncs = BEHAVIOUR_TYPES[node.local].syncs if node.local in BEHAVIOUR_TYPES else ()
         aliases = SYNC_ALIASES.get(node.local, {})
+        spelled = self._spelled
         for key in list(node.attrs):
-            canonical = SYNC_SPELLINGS.get(key.lower().replace("_", "").replace("-", ""))
+            canonical = spelled.get(key, _UNSEEN)
+            if canonical is _UNSEEN:
+                canonical = spelled[key] = SYNC_SPELLINGS.get(key.lower().replace("_", "").replace("-", ""))
             if canonical is None:
                 continue
             if canonical not in syncs and aliases.get(canonical) in syncs:
@@ -472,17 +488,19 @@ class Adapter:
         and ``<after>`` (:meth:`ref`), and say whether it is one: a ``<constraint>`` with no element, or
         with another one, is left as it is (then False)."""
         elements = node.elements()
-        if not elements or any(c.local not in ("synchronize", "before", "after") for c in elements):
+        if not elements or not {c.local for c in elements} <= _CONSTRAINT_KINDS:
             return False
         respelled, notes = self._respelled, self.notes  # (Adapter.ref, without a call per reference)
         aliased = False
         for child in elements:
-            for n in (child, *child.children):
+            for n in (child, *child.children) if child.children else (child,):
                 value = None if isinstance(n, str) else n.attrs.get("ref")
                 if value is not None:
                     found = respelled.get(value)
                     if found is None:
-                        found = respelled[value] = self._respell(value)
+                        found = respelled[value] = self._respell_once(value)
+                    if found is _AS_WRITTEN:  # (most references)
+                        continue
                     if found[1] is not None:
                         notes.add(found[1])
                     n.attrs["ref"] = found[0]
@@ -496,22 +514,38 @@ class Adapter:
         found = self._respelled.get(value)
         if found is None:
             found = self._respelled[value] = self._respell(value)
+        if found is _AS_WRITTEN:
+            return value
         if found[1] is not None:
             self.notes.add(found[1])
         return found[0]
 
+    def _respell_once(self, value: str) -> tuple[str, str | None, bool]:
+        """:meth:`_respell` of ``value``; a reference kept as it is is known from what follows its last colon,
+        which references share (``b1:end``, ``b2:end``), once that has been split."""
+        path, colon, tail = value.rpartition(":")
+        if not colon or "\n" in path or value[:1].isspace() or value[-1:].isspace():
+            return self._respell(value)
+        written = self._written_tails.get(tail)
+        if written is None:  # (split as ref_sync splits the reference, the part before the colon aside)
+            found = self._respell(value)
+            written = self._written_tails[tail] = found is _AS_WRITTEN and tail_sync(tail) is not None
+            return found
+        return _AS_WRITTEN if written else self._respell(value)
+
     @staticmethod
     def _respell(value: str) -> tuple[str, str | None, bool]:
         """The reference spelled as BML does, the note of the respelling (None: none), and whether it names a
-        sync point that has an alias (:data:`_ALIASED`)."""
+        sync point that has an alias (:data:`_ALIASED`); :data:`_AS_WRITTEN` for a reference that is none of
+        these (kept as it is, nothing noted)."""
         match = ref_sync(value)
         if not match:
-            return value, None, False
+            return _AS_WRITTEN
         path, sync, rest = match
         canonical = canonical_sync(sync)
         if canonical and canonical != sync:
             return f"{path}{canonical}{rest}", f"sync point {sync} read as {canonical}", canonical in _ALIAS_NAMES
-        return value, None, sync in _ALIAS_NAMES
+        return (value, None, True) if sync in _ALIAS_NAMES else _AS_WRITTEN
 
     def retarget_refs(self, behaviours: list[Node], constraints: list[Node]) -> None:
         """References to a sync point that the behaviour referred to has under another name (SmartBody's

@@ -143,8 +143,31 @@ _match_plain = _PLAIN_REF.match
 def _plain_ref(text: str) -> SyncRef | None:
     """``text`` read as :func:`_parse_ref` reads it if it is a short reference of the usual form
     (``g1:stroke``, ``g1:end+0.5``: one behaviour's sync point, an offset in range), else None (then
-    :func:`parse_ref` reads it, or says what is wrong with it). A block's constraints are mostly such."""
-    plain = _match_plain(text) if len(text) <= MAX_NUMBER else None
+    :func:`parse_ref` reads it, or says what is wrong with it). A block's constraints are mostly such.
+
+    (Read with string methods where the text is ASCII and plainly of that form, which is quicker than the
+    pattern; anything else, by :data:`_PLAIN_REF`.)"""
+    if len(text) > MAX_NUMBER:
+        return None
+    first, colon, rest = text.partition(":")
+    if colon and text.isascii() and first.isidentifier():  # (an ASCII identifier: [A-Za-z_][A-Za-z0-9_]*)
+        sign = "+" if "+" in rest else "-" if "-" in rest else None
+        if sign is None:
+            if rest.isidentifier():
+                return _new_ref(SyncRef, ("sync", 0.0, None, first, rest, None, text))
+        else:
+            second, _, number = rest.partition(sign)
+            if second.isidentifier() and number[:1].isdigit() and number.replace(".", "", 1).isdigit():
+                offset = float(number) * (-1.0 if sign == "-" else 1.0)
+                if abs(offset) > MAX_TIME:
+                    return None
+                return _new_ref(SyncRef, ("sync", offset, None, first, second, None, text))
+    return _matched_ref(text)
+
+
+def _matched_ref(text: str) -> SyncRef | None:
+    """:func:`_plain_ref` of ``text`` (at most :data:`MAX_NUMBER` characters), read by :data:`_PLAIN_REF`."""
+    plain = _match_plain(text)
     if plain is None:
         return None
     first, second, third, sign, number = plain.groups()
@@ -400,9 +423,10 @@ class _Reader:
         # (made as Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), required=required, index=...,
         # line=..., column=...) makes it, without its __init__: a block has thousands)
         beh = _new_behaviour(Behaviour)
-        beh.__dict__.update(id=bid, type=kind.name, sync_ids=list(kind.syncs), attributes=dict(node.attrs), refs={},
-                            text="", marks=[], prosody=[], params={}, source="", required=required,
-                            index=len(self.block.behaviours), line=node.line, column=node.column)
+        beh.__dict__ = {"id": bid, "type": kind.name, "sync_ids": list(kind.syncs), "attributes": dict(node.attrs),
+                        "refs": {}, "text": "", "marks": [], "prosody": [], "params": {}, "source": "",
+                        "required": required, "index": len(self.block.behaviours), "line": node.line,
+                        "column": node.column}
         if kind.name == "speech":
             if not self.speech_text(node, beh):
                 return
@@ -430,7 +454,7 @@ class _Reader:
                 beh.attributes["repetition"] = str(times)
                 kind_of = "IMPOSSIBLE_TO_SCHEDULE" if times == MAX_REPETITION else "PARSING_FAILURE"
                 self.warn(kind_of, f"{bid}: {problem}", node, [bid])
-        for child in node.elements():
+        for child in node.elements() if node.children else ():
             extension = child.namespace in EXTENSION_BEHAVIOURS
             if kind.name == "speech" and self.lenient:
                 continue  # the speech reading took what it could, and said what it could not
@@ -549,8 +573,8 @@ class _Reader:
             # (made as Constraint(kind, refs, anchor, owner, required, line=, column=) makes it, without its
             # __init__: a block has thousands)
             constraint = new(Constraint)
-            constraint.__dict__.update(kind=kind, refs=refs, anchor=anchor, id=owner, required=required, owner="",
-                                       line=child.line, column=child.column)
+            constraint.__dict__ = {"kind": kind, "refs": refs, "anchor": anchor, "id": owner, "required": required,
+                                   "owner": "", "line": child.line, "column": child.column}
             add(constraint)
 
 

@@ -85,6 +85,13 @@ def _tail(tail: str) -> tuple[str, str] | None:
     return match.groups() if match else None
 
 
+def tail_sync(tail: str) -> tuple[str, str] | None:
+    """``sync`` and ``rest`` of what follows the last colon of a reference without white space at either end:
+    :func:`ref_sync` splits such a reference there when they are not None, whatever precedes the colon (if no
+    line break does)."""
+    return _tail(tail)
+
+
 @functools.lru_cache(maxsize=1024)
 def canonical_sync(sync: str) -> str | None:
     """The sync point a spelling of it names (``stroke_start``: strokeStart), None if none."""

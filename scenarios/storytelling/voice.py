@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import re
 import time
@@ -55,7 +56,7 @@ __all__ = ["CachedBackend", "WholeSpeechCache", "KeptSamples", "PhonemeMarks", "
            "mark_event", "place_mark", "CACHE_FORMAT"]
 
 #: Version of the cache files; bump it when their layout or the meaning of their contents changes.
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2
 
 #: The header of a cache file's samples (numpy's format 1.0, as ``write_array_header_1_0`` writes 16-bit mono).
 _SAMPLES_HEADER = re.compile(rb"\{'descr': '<i2', 'fortran_order': False, 'shape': \((\d+),\), \} *\n")
@@ -172,23 +173,77 @@ def _identity(backend) -> dict:
     return identity
 
 
-_FIELDS = {kind: frozenset(kind.__dataclass_fields__) for kind in (Word, Phoneme)}
 _new = object.__new__
 _set = object.__setattr__
+_WORD_FIELDS = ("index", "text", "start", "end", "char_start", "char_end")
+_PHONEME_FIELDS = ("symbol", "start", "end", "word_index", "stressed")
+assert _WORD_FIELDS == tuple(Word.__dataclass_fields__) and _PHONEME_FIELDS == tuple(Phoneme.__dataclass_fields__)
 
 
-def _made(kind, items: list) -> list:
-    """The ``Word`` or ``Phoneme`` of each of ``items`` (their fields, as ``asdict`` wrote them), made as their
-    ``__init__`` would make them, without a call of it each (a narration has thousands); TypeError for an item
-    that names other fields."""
-    fields = _FIELDS[kind]
+def _in_samples(times: list[float], rate: int) -> list[int] | None:
+    """``times`` (s) as whole numbers of samples at ``rate``, if each is a float that is exactly such a number
+    divided by ``rate`` (as reading divides it again); else None."""
+    samples = []
+    for t in times:
+        if type(t) is not float or not math.isfinite(t):
+            return None
+        n = round(t * rate)
+        if n / rate != t:
+            return None
+        samples.append(n)
+    return samples
+
+
+def _columns(items: list, fields: tuple[str, ...], rate: int) -> dict | None:
+    """The items' fields as columns (one list a field), start and end in samples at ``rate`` (None if not every
+    time of them is a whole number of samples)."""
+    columns = {name: [getattr(item, name) for item in items] for name in fields}
+    if not (isinstance(rate, int) and rate > 0):
+        return None
+    for name in ("start", "end"):
+        columns[name] = _in_samples(columns[name], rate)
+        if columns[name] is None:
+            return None
+    return columns
+
+
+def _timeline(columns: dict, fields: tuple[str, ...], rate: int | None) -> list:
+    """The columns' start and end in seconds (divided by ``rate``, the sample rate, unless it is None), and the
+    columns in ``fields``' order; TypeError or ValueError for columns that are not those fields, all as long."""
+    if columns.keys() != set(fields):
+        raise TypeError(f"cached columns {sorted(columns)}")
+    ordered = [columns[name] for name in fields]
+    if any(len(column) != len(ordered[0]) for column in ordered):
+        raise ValueError("cached columns of different lengths")
+    if rate is not None:
+        start, end = fields.index("start"), fields.index("end")
+        ordered[start] = [n / rate for n in ordered[start]]
+        ordered[end] = [n / rate for n in ordered[end]]
+    return ordered
+
+
+def _words(columns: dict, rate: int | None) -> list[Word]:
+    """The ``Word`` of each row of ``columns``, made as ``Word.__init__`` makes it, without a call of it each (a
+    narration has thousands)."""
     made = []
-    for item in items:
-        if item.keys() != fields:
-            raise TypeError(f"a cached {kind.__name__} with the fields {sorted(item)}")
-        value = _new(kind)
-        _set(value, "__dict__", item)
-        made.append(value)
+    add = made.append
+    for index, text, start, end, char_start, char_end in zip(*_timeline(columns, _WORD_FIELDS, rate)):
+        word = _new(Word)
+        _set(word, "__dict__", {"index": index, "text": text, "start": start, "end": end, "char_start": char_start,
+                                "char_end": char_end})
+        add(word)
+    return made
+
+
+def _phonemes(columns: dict, rate: int | None) -> list[Phoneme]:
+    """The ``Phoneme`` of each row of ``columns``, made as :func:`_words` makes words."""
+    made = []
+    add = made.append
+    for symbol, start, end, word_index, stressed in zip(*_timeline(columns, _PHONEME_FIELDS, rate)):
+        phoneme = _new(Phoneme)
+        _set(phoneme, "__dict__", {"symbol": symbol, "start": start, "end": end, "word_index": word_index,
+                                   "stressed": stressed})
+        add(phoneme)
     return made
 
 
@@ -216,9 +271,15 @@ class CachedBackend:
 
     Notes
     -----
-    A cache entry is ``<key>.json`` (words, phonemes, sentences, duration, sample rate) and, when the
-    backend makes sound, ``<key>.npy`` (the audio as 16-bit samples, exactly as espeak-ng produced
-    them). The key is the SHA-256 of the backend's identity and the text. espeak-ng is only exactly
+    A cache entry is ``<key>.json`` and, when the backend makes sound, ``<key>.npy`` (the audio as 16-bit
+    samples, exactly as espeak-ng produced them). The key is the SHA-256 of the backend's identity and the text.
+    The JSON object holds ``format`` (:data:`CACHE_FORMAT`), ``backend`` (that identity), ``text``, ``duration``
+    (s), ``sample_rate``, ``backend_name``, ``sentences`` (their onsets, s), ``audio`` (whether there is a
+    ``.npy``), ``marks`` when the backend placed its own (``[name, s]`` pairs), and the timeline in columns, one
+    list a field: ``words`` (``index``, ``text``, ``start``, ``end``, ``char_start``, ``char_end``) and
+    ``phonemes`` (``symbol``, ``start``, ``end``, ``word_index``, ``stressed``). ``times`` says what their
+    ``start`` and ``end`` count: ``"samples"`` at ``sample_rate`` (each time divided by it gives back exactly
+    the seconds the backend gave, as for espeak-ng), else ``"seconds"``. espeak-ng is only exactly
     reproducible on the first synthesis in a process; the cache makes every later run identical.
     """
 
@@ -308,12 +369,16 @@ class CachedBackend:
                     f.write(np.clip(block, -32768, 32767).astype("<i2").tobytes())
         meta = {"format": CACHE_FORMAT, "backend": _identity(self.backend), "text": utt.text,
                 "duration": utt.duration, "sample_rate": utt.sample_rate, "backend_name": utt.backend,
-                "sentences": list(utt.sentences), "audio": has_audio,
-                "words": [asdict(w) for w in utt.words], "phonemes": [asdict(p) for p in utt.phonemes]}
+                "sentences": list(utt.sentences), "audio": has_audio, "times": "samples",
+                "words": _columns(utt.words, _WORD_FIELDS, utt.sample_rate),
+                "phonemes": _columns(utt.phonemes, _PHONEME_FIELDS, utt.sample_rate)}
+        if meta["words"] is None or meta["phonemes"] is None:  # times between samples: kept in seconds
+            meta.update(times="seconds", words={name: [getattr(w, name) for w in utt.words] for name in _WORD_FIELDS},
+                        phonemes={name: [getattr(p, name) for p in utt.phonemes] for name in _PHONEME_FIELDS})
         if utt.marks:  # the backend's own marks (WholeSpeechCache)
             meta["marks"] = [[m.name, m.time] for m in utt.marks]
         with written(meta_path) as tmp:
-            tmp.write_text(json.dumps(meta, ensure_ascii=False))
+            tmp.write_text(json.dumps(meta, ensure_ascii=False), encoding="utf-8")
         if has_audio:
             try:
                 stored = PcmFile(audio_path)
@@ -329,13 +394,16 @@ class CachedBackend:
     def _load(self, key: str, text: str) -> Utterance | None:
         meta_path, audio_path = self._paths(key)
         try:
-            with open(meta_path) as file:  # (as Path.read_text reads it, without pathlib's steps)
+            with open(meta_path, "rb") as file:  # (as Path.read_bytes reads it, without pathlib's steps)
                 meta = json.loads(file.read())
             if meta.get("format") != CACHE_FORMAT or meta.get("text") != text:
                 return None
-            words, phonemes = _made(Word, meta["words"]), _made(Phoneme, meta["phonemes"])
+            if meta["times"] not in ("samples", "seconds"):
+                return None
+            rate = int(meta["sample_rate"]) if meta["times"] == "samples" else None
+            words, phonemes = _words(meta["words"], rate), _phonemes(meta["phonemes"], rate)
             audio = self._samples(audio_path) if meta["audio"] else None
-        except (OSError, ValueError, KeyError, TypeError):
+        except (OSError, ValueError, KeyError, TypeError, AttributeError, ZeroDivisionError):
             return None
         return Utterance(text=text, duration=float(meta["duration"]), words=words, phonemes=phonemes,
                          marks=[Mark(name, float(t)) for name, t in meta.get("marks", [])],
@@ -385,17 +453,21 @@ class WholeSpeechCache(CachedBackend):
     def _samples(self, path: Path) -> Pcm16:
         """The samples of the cache file ``path``, read into memory when they are first asked for (no file is
         held open meanwhile: a run may keep thousands of speeches, and most runs never hear them)."""
-        with open(path, "rb") as file:
-            start = file.read(10)  # numpy's magic, format 1.0 (as _save writes it), and the header's length
+        descriptor = os.open(path, os.O_RDONLY)  # (read as a file object reads it, without making one)
+        try:
+            start = os.read(descriptor, 10)  # numpy's magic, format 1.0 (as _save writes it), the header's length
             if len(start) != 10 or start[:8] != b"\x93NUMPY\x01\x00":
                 raise ValueError(f"{path}: not a cache file")
-            header = _SAMPLES_HEADER.fullmatch(file.read(int.from_bytes(start[8:], "little")))
+            text = os.read(descriptor, int.from_bytes(start[8:], "little"))
+            header = _SAMPLES_HEADER.fullmatch(text)
             if header is None:
                 raise ValueError(f"{path}: not 16-bit mono samples as the cache writes them")
-            offset, length = file.tell(), int(header.group(1))
-            status = os.fstat(file.fileno())
-            if status.st_size < offset + 2 * length:
-                raise ValueError(f"{path}: cut short")
+            offset, length = 10 + len(text), int(header.group(1))
+            status = os.fstat(descriptor)
+        finally:
+            os.close(descriptor)
+        if status.st_size < offset + 2 * length:
+            raise ValueError(f"{path}: cut short")
         return KeptSamples(path, offset, length, (status.st_ino, status.st_size, status.st_mtime_ns))
 
 
