@@ -227,7 +227,7 @@ class Retimer:
                 for i, t in zip(indices, times):
                     last[i] = t
             run.note_end(timed, last[-1])
-            if known is None and len(times) == len(timed.sync_ids):  # all of them, just computed
+            if len(times) == len(timed.sync_ids):  # all of them
                 start, syncs = times[0], dict(zip(timed.sync_ids, times))
             else:
                 start, syncs = timed.start, {timed.sync_ids[i]: t for i, t in zip(indices, times)}

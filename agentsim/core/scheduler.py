@@ -191,15 +191,17 @@ class Scheduler:
                 warn(f"{block.id}:{timed.id}", "NO_SUCH_TARGET", f"{timed.id}: {reason}; behaviour dropped",
                      character, [timed.id], timed.behaviour.line, timed.behaviour.column)
         self.board.forget_block(block.id)
+        times = solver.times_now()  # (what the solver computed last: still the times if no peg moved since)
         for timed in run.timed:
-            timed.planned_start = timed.start
+            known = times.get(timed)
+            timed.planned_start = known[0] if known is not None else timed.start
             timed.engine.planner.add(timed)
             self.board.register_behaviour(block.id, timed.id, timed.sync_ids, functools.partial(SyncPeg, timed))
         book.changed()
         book.open(run)
         if run.chunk_after:
             self.composer.coarticulate(run)
-        self.retimer.predict(run, force=True)
+        self.retimer.predict(run, timed_now=solver.times_now(), force=True)
         if self.waits(run) is None:
             self.start(run)
         else:

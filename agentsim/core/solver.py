@@ -129,6 +129,11 @@ class BlockSolver:
         # references live as long as the block; a block refers to one sync point many times)
         self._local_refs: dict[int, tuple[int, float]] = {}
         self._sync_sets: dict[str, tuple[object, frozenset[str]]] = {}
+        # the times of each timed behaviour, computed once for every phase that reads them after placing, and
+        # made again when a peg moved (the generation of the pegs' time cache changed: see times_of)
+        self._cache = self.block_peg.cache
+        self._times: dict[TimedBehaviour, list[float | None]] = {}
+        self._times_in = -1
 
     # ----------------------------------------------------------------- problems
     def drop(self, behaviour_id: str, reason: str, kind: str = "IMPOSSIBLE_TO_SCHEDULE") -> None:
@@ -443,8 +448,22 @@ class BlockSolver:
         return implied
 
     # ----------------------------------------------------------------- after placing
+    def times_of(self, timed: TimedBehaviour) -> list[float | None]:
+        """``timed.times()``, computed once while no peg moves (the list is shared: not to be changed)."""
+        if self._times_in != self._cache.generation:
+            self._times.clear()
+            self._times_in = self._cache.generation
+        times = self._times.get(timed)
+        if times is None:
+            times = self._times[timed] = timed.times()
+        return times
+
+    def times_now(self) -> dict[TimedBehaviour, list[float | None]]:
+        """The times computed by :meth:`times_of` that are still good now (none if a peg moved since)."""
+        return self._times if self._times_in == self._cache.generation else {}
+
     def local(self, timed: TimedBehaviour, sync_id: str) -> float | None:
-        t = timed.sync_time(sync_id)
+        t = self.times_of(timed)[timed.sync_ids.index(sync_id)]
         return None if t is None else t - self.block_peg.time
 
     def ref_time(self, node: int, offset: float, ref: SyncRef) -> tuple[float | None, TimedBehaviour | None]:
@@ -453,7 +472,7 @@ class BlockSolver:
             timed = self.timed.get(ref.behaviour)
             if timed is None:
                 return None, None
-            return timed.sync_time(ref.sync) + offset, timed
+            return self.times_of(timed)[timed.sync_ids.index(ref.sync)] + offset, timed
         root, d = self.ties.find(node)
         peg = self.group_peg.get(root)
         return (None if peg is None or peg.time is None else peg.time + d + offset), None
@@ -601,14 +620,14 @@ class BlockSolver:
 
     def check_validity(self) -> None:
         for beh_id, timed in list(self.timed.items()):
-            times = timed.times()
+            times = self.times_of(timed)
             start = times[0] - self.block_peg.time
             if start < -TOLERANCE:
                 refused = self.shorten_preparation(timed, times)
                 if refused is not None:
                     self.drop(beh_id, f"it would start {-start:.3f} s before the block start{refused}")
                     continue
-                times = timed.times()
+                times = self._times[timed] = timed.times()  # (its first key moved)
             try:
                 timed.engine.planner.check_times(timed.behaviour, timed.preferred, times)
             except ScheduleError as exc:
@@ -647,7 +666,8 @@ class BlockSolver:
             resource = BEHAVIOUR_TYPES[beh.type].resource
             if timed is None or resource is None:
                 continue
-            start, end = timed.start, timed.end
+            times = self.times_of(timed)
+            start, end = times[0], times[-1]
             clash = next((name for s, e, name in holders.get(resource, ())
                           if start < e - EPSILON and s < end - EPSILON), None)
             if clash is not None:
