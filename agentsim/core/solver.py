@@ -122,6 +122,7 @@ class BlockSolver:
         self.local_nodes: dict[str, dict[str, int]] = {}
         self.dropped: dict[str, tuple[str, str]] = {}  # behaviour id -> (warning type, reason)
         self.group_peg: dict[int, OffsetPeg] = {}
+        self._group_name = f"{block.id}:group"  # (the name of every group's peg)
         self.anchors: list[OffsetPeg] = []
         self.timed: dict[str, TimedBehaviour] = {}
         self._anchor_cache: dict[int, int | None] = {}
@@ -303,7 +304,7 @@ class BlockSolver:
         for root, fixed in list(self.ties.fixed_node.items()):
             peg, offset = self.ties.fixed[fixed]
             _, d = self.ties.find(fixed)
-            self.group_peg[root] = OffsetPeg(peg, offset - d, name=f"{self.block.id}:group")
+            self.group_peg[root] = OffsetPeg(peg, offset - d, name=self._group_name)
             ready.extend(priority[i] for i in members.get(root, ()))
         heapq.heapify(ready)
         placed = [False] * len(behaviours)
@@ -343,12 +344,13 @@ class BlockSolver:
         """Resolve and tie one behaviour; returns the groups whose time became known."""
         engine = self.engines[beh.type]
         planner = engine.planner
-        base = self.block_peg.time
         known: dict[str, float] = {}
         groups: dict[str, tuple[int, float]] = {}
         nodes = self.local_nodes.get(beh.id)
+        group_peg = self.group_peg
         if nodes:
-            find, group_peg = self.ties.find, self.group_peg
+            base = self.block_peg.time
+            find = self.ties.find
             # (its tied sync points, in the order they were tied: what is made of them does not depend on it)
             for sync_id, node in nodes.items():
                 root, d = groups[sync_id] = find(node)
@@ -358,22 +360,25 @@ class BlockSolver:
         try:
             preferred = planner.preferred(beh)
             times = planner.resolve(beh, known, preferred=preferred)
-            implied = self.self_ties(beh, groups, known, times)
-            if implied:
-                times = planner.resolve(beh, {**known, **implied}, preferred=preferred)
+            if len(groups) - len(known) > 1:  # (else no two sync points of unknown time: none implies another's)
+                implied = self.self_ties(beh, groups, known, times)
+                if implied:
+                    times = planner.resolve(beh, {**known, **implied}, preferred=preferred)
         except ScheduleError as exc:
             self.drop(beh.id, str(exc), exc.warning_type)
             return []
         except Exception as exc:  # a planner or backend failed on this behaviour: report, keep going
             self.drop(beh.id, f"{type(exc).__name__}: {exc}")
             return []
-        n = len(beh.sync_ids)
+        sync_ids = beh.sync_ids
+        n = len(sync_ids)
         keys: list[KeyRef | None] = [None] * n
         refs: dict[int, KeyRef] = {}
-        for i, sync_id in enumerate(beh.sync_ids):
-            if sync_id in known:
-                root, d = groups[sync_id]
-                keys[i] = refs[i] = KeyRef(self.group_peg[root], d)
+        if known:
+            for i, sync_id in enumerate(sync_ids):
+                if sync_id in known:
+                    root, d = groups[sync_id]
+                    keys[i] = refs[i] = KeyRef(group_peg[root], d)
         if not refs:
             anchor = OffsetPeg(self.block_peg, times[0], name=f"{self.block.id}:{beh.id}:anchor", anchor=True)
             self.anchors.append(anchor)
@@ -381,20 +386,21 @@ class BlockSolver:
         newly_known: list[int] = []
         owns: list[bool] | None = None  # which sync points' groups get their time from this behaviour
         only = next(iter(refs)) if len(refs) == 1 else None  # (the nearest key when there is one)
-        for i, sync_id in enumerate(beh.sync_ids):
+        every, last = planner.rigid, n - 1  # (which sync points get keys: a rigid behaviour's all)
+        for i, sync_id in enumerate(sync_ids):
             if keys[i] is not None:
                 continue
             tied = sync_id in groups
-            if not (tied or i == 0 or i == n - 1 or planner.rigid):
+            if not (tied or every or i == 0 or i == last):
                 continue
             j = only if only is not None else min(refs, key=lambda r: (abs(preferred[r] - preferred[i]), r))
             ref_key = refs[j]
             offset = ref_key.offset + times[i] - times[j]
             if tied:
                 root, d = groups[sync_id]
-                peg = self.group_peg.get(root)
+                peg = group_peg.get(root)
                 if peg is None:
-                    peg = self.group_peg[root] = OffsetPeg(ref_key.peg, offset - d, name=f"{self.block.id}:group")
+                    peg = group_peg[root] = OffsetPeg(ref_key.peg, offset - d, name=self._group_name)
                     newly_known.append(root)
                     if owns is None:
                         owns = [False] * n
@@ -403,12 +409,13 @@ class BlockSolver:
             else:
                 keys[i] = KeyRef(ref_key.peg, offset)
         timed = TimedBehaviour(self.run, beh, preferred, keys, engine, self.board.plan_order())
-        timed.tied = tied = [sync_id in groups for sync_id in beh.sync_ids]
-        fixed_node = self.ties.fixed_node
-        for root, _ in groups.values():
-            if root in fixed_node:  # (a group held by a fixed time: which keys are; else none is, as it was made)
-                timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(beh.sync_ids, tied)]
-                break
+        if groups:  # (else none of its keys is tied, as it was made)
+            timed.tied = tied = [sync_id in groups for sync_id in sync_ids]
+            fixed_node = self.ties.fixed_node
+            for root, _ in groups.values():
+                if root in fixed_node:  # (a group held by a fixed time: which keys are; else none is)
+                    timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(sync_ids, tied)]
+                    break
         if owns is not None:
             timed.owns = owns
         self.timed[beh.id] = timed
@@ -417,7 +424,7 @@ class BlockSolver:
     def drop_dependants(self) -> None:
         """A behaviour whose sync points are tied to one that was dropped is dropped too, with its own
         warning (else it would run at a time nothing gave it)."""
-        changed = True
+        changed = bool(self.dropped)  # (nothing dropped: nothing to look for)
         while changed:
             changed = False
             for beh in self.block.behaviours:
@@ -468,11 +475,15 @@ class BlockSolver:
 
     def ref_time(self, node: int, offset: float, ref: SyncRef) -> tuple[float | None, TimedBehaviour | None]:
         """Current time of a resolved reference, and the behaviour of this block it belongs to."""
-        if ref.kind == "sync" and ref.block in (None, self.block.id):
-            timed = self.timed.get(ref.behaviour)
+        kind, _, block, behaviour, sync, _, _ = ref  # (the fields at once: this is asked of every constraint)
+        if kind == "sync" and (block is None or block == self.block.id):
+            timed = self.timed.get(behaviour)
             if timed is None:
                 return None, None
-            return self.times_of(timed)[timed.sync_ids.index(ref.sync)] + offset, timed
+            times = self._times.get(timed) if self._times_in == self._cache.generation else None
+            if times is None:
+                times = self.times_of(timed)
+            return times[timed.sync_ids.index(sync)] + offset, timed
         root, d = self.ties.find(node)
         peg = self.group_peg.get(root)
         return (None if peg is None or peg.time is None else peg.time + d + offset), None
@@ -481,9 +492,13 @@ class BlockSolver:
         """The free anchors a behaviour's keys hang from, and whether it also hangs from a fixed time."""
         anchors: set[int] = set()
         fixed = False
+        cache = self._anchor_cache
         for key in timed.keys:
             if key is not None:
-                anchor = self.anchor_of(key.peg)
+                peg = key.peg
+                anchor = cache.get(id(peg), cache)  # (the memo, looked up here: the usual answer)
+                if anchor is cache:
+                    anchor = self.anchor_of(peg)
                 if anchor is None:
                     fixed = True
                 else:
@@ -520,17 +535,19 @@ class BlockSolver:
 
     def honour_inequalities(self, inequalities) -> None:
         reported: set[tuple[int, str]] = set()
+        ref_time = self.ref_time
         for _ in range(len(inequalities) + 1):
             changed = False
             for constraint, refs, (a_node, a_offset, a_ref) in inequalities:
-                t_anchor, anchor_beh = self.ref_time(a_node, a_offset, a_ref)
+                t_anchor, anchor_beh = ref_time(a_node, a_offset, a_ref)
                 if t_anchor is None:
                     continue
+                before = constraint.kind == "before"
                 for node, offset, ref in refs:
-                    t, beh = self.ref_time(node, offset, ref)
+                    t, beh = ref_time(node, offset, ref)
                     if t is None:
                         continue
-                    gap = (t - t_anchor) if constraint.kind == "before" else (t_anchor - t)
+                    gap = (t - t_anchor) if before else (t_anchor - t)
                     if gap <= TOLERANCE:
                         continue
                     # Move the constrained behaviour toward the anchor, else the anchor toward it; moving
@@ -570,6 +587,13 @@ class BlockSolver:
     def shift_clusters(self, inequalities) -> bool:
         """Shift every cluster of freely placed behaviours that starts before the block start; returns
         whether any was shifted."""
+        block_start, times_of = self.block_peg.time, self.times_of
+        for timed in self.timed.values():  # (most blocks have none that starts before the block: then none moves)
+            start = times_of(timed)[0]
+            if start is not None and start - block_start < -EPSILON:
+                break
+        else:
+            return False
         parent: dict[int, int] = {}
 
         def find(x: int) -> int:

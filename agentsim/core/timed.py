@@ -100,8 +100,9 @@ class TimedBehaviour:
         self.owns = self.tied.copy()
         self.heap_version = 0  # which of the player's heap entries for this behaviour is current
         self.next_index = 0
-        self._state = ""
-        self._enter(PLANNED)
+        self._state = PLANNED  # (what _enter(PLANNED) does from no state, without its call)
+        if isinstance(run, BlockRun):
+            run.live_count += 1
         self.stopped: float | None = None  # when it was dropped, cut or interrupted, if it was
         self.planned_start: float | None = None  # its start as first planned
         self.interrupted = False  # interrupted: what is left of it runs to its end whatever the timing
