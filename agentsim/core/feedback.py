@@ -118,8 +118,9 @@ def _clean_dict(value: dict) -> dict:
     return out
 
 
-#: The encoder of :func:`to_json` (what ``json.dumps(..., separators=(", ", ": "))`` makes anew each call).
-_ENCODER = json.JSONEncoder(separators=(", ", ": "))
+#: The encoder of :func:`to_json` (what ``json.dumps(..., separators=(", ", ": "))`` makes anew each call); it
+#: does not look for cycles, which :func:`_clean`, going down every value first, would never come back from.
+_ENCODER = json.JSONEncoder(separators=(", ", ": "), check_circular=False)
 
 
 def to_json(feedback: Feedback) -> str:

@@ -205,10 +205,12 @@ class Retimer:
             return
         tolerance = self.prediction_tolerance
         entries = []
+        predicted = run.predicted
         for timed in run.live() if behaviours is None else behaviours:
             if not timed.live:
                 continue
-            last = run.predicted.get(timed.id)
+            behaviour = timed.behaviour
+            last = predicted.get(behaviour.id)
             known = timed_now.get(timed) if timed_now else None
             if until is None or last is None:
                 indices = range(len(timed.sync_ids))
@@ -222,7 +224,7 @@ class Retimer:
                 continue
             first = last is None
             if last is None or len(indices) == len(last):
-                last = run.predicted[timed.id] = list(times)
+                last = predicted[behaviour.id] = list(times)
             else:
                 for i, t in zip(indices, times):
                     last[i] = t
@@ -231,9 +233,9 @@ class Retimer:
                 start, syncs = times[0], dict(zip(timed.sync_ids, times))
             else:
                 start, syncs = timed.start, {timed.sync_ids[i]: t for i, t in zip(indices, times)}
-            entry = {"id": timed.id, "type": timed.behaviour.type, "globalStart": start, "globalEnd": last[-1],
+            entry = {"id": behaviour.id, "type": behaviour.type, "globalStart": start, "globalEnd": last[-1],
                      "syncs": syncs}
-            lexeme = timed.behaviour.attributes.get("lexeme") if first else None
+            lexeme = behaviour.attributes.get("lexeme") if first else None
             if lexeme:  # what it plays, as read (a draft's rotation="SHAKE" is lexeme SHAKE), said once
                 entry["lexeme"] = lexeme
             entries.append(entry)

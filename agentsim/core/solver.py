@@ -161,9 +161,10 @@ class BlockSolver:
         found = self._local_refs.get(id(ref))  # (one to this block's own sync points, met before)
         if found is not None:
             return found
-        if ref.kind == "absolute":
-            return self.block_node, ref.offset
-        if ref.kind == "anticipator":
+        kind, offset, block, behaviour, sync, _, _ = ref  # (its fields at once)
+        if kind == "absolute":
+            return self.block_node, offset
+        if kind == "anticipator":
             key = ("anticipator", ref.anticipator, ref.sync)
             if key not in self.nodes:
                 peg = self.anticipator_peg(ref.anticipator, ref.sync)
@@ -171,11 +172,11 @@ class BlockSolver:
                     raise ScheduleError(f"anticipator {ref.anticipator!r} has no prediction for {ref.sync!r} yet")
                 self.nodes[key] = self.ties.add((peg, 0.0))
             return self.nodes[key], ref.offset
-        if ref.block is None or ref.block == self.block.id:
-            nodes = self.local_nodes.get(ref.behaviour)
-            node = nodes.get(ref.sync) if nodes is not None else None
+        if block is None or block == self.block.id:
+            nodes = self.local_nodes.get(behaviour)
+            node = nodes.get(sync) if nodes is not None else None
             if node is not None:  # a sync point referred to before (by another reference): known to exist
-                found = self._local_refs[id(ref)] = (node, ref.offset)
+                found = self._local_refs[id(ref)] = (node, offset)
                 return found
         else:
             key = ("block", ref.block, ref.behaviour, ref.sync)
@@ -185,16 +186,16 @@ class BlockSolver:
                     raise ScheduleError(f"no sync point {ref.target()} in a planned block")
                 self.nodes[key] = self.ties.add(found)
             return self.nodes[key], ref.offset
-        beh = self.block.behaviour(ref.behaviour)
+        beh = self.block.behaviour(behaviour)
         if beh is None:
-            raise ScheduleError(f"no behaviour {ref.behaviour!r} in block {self.block.id}")
+            raise ScheduleError(f"no behaviour {behaviour!r} in block {self.block.id}")
         syncs = beh.sync_ids  # (a short list is searched as it is; a speech's thousands, in a set)
-        if ref.sync not in (syncs if len(syncs) <= 16 else self._sync_set(beh)):
-            raise ScheduleError(f"behaviour {ref.behaviour!r} has no sync point {ref.sync!r}")
+        if sync not in (syncs if len(syncs) <= 16 else self._sync_set(beh)):
+            raise ScheduleError(f"behaviour {behaviour!r} has no sync point {sync!r}")
         if nodes is None:  # (what local_node does, with the look-up above: the sync point has no node yet)
             nodes = self.local_nodes[beh.id] = {}
-        node = nodes[ref.sync] = self.ties.add()
-        found = self._local_refs[id(ref)] = (node, ref.offset)
+        node = nodes[sync] = self.ties.add()
+        found = self._local_refs[id(ref)] = (node, offset)
         return found
 
     def _sync_set(self, beh) -> frozenset[str]:
@@ -236,17 +237,20 @@ class BlockSolver:
         # (what node() gives for a sync point of this block that has its node already, found here without
         # the call: a block's constraints name thousands)
         local_nodes, own = self.local_nodes, (None, self.block.id)
-        union = self.ties.union
+        union, node_of = self.ties.union, self.node
         for constraint in self.block.constraints:
             resolved = []
             for ref in constraint.refs:
-                nodes = local_nodes.get(ref.behaviour) if ref.block in own and ref.kind == "sync" else None
-                node = nodes.get(ref.sync) if nodes is not None else None
-                if node is not None:
-                    resolved.append((node, ref.offset, ref))
-                    continue
+                kind, offset, block, behaviour, sync, _, _ = ref  # (its fields at once)
+                if kind == "sync" and block in own:
+                    nodes = local_nodes.get(behaviour)
+                    if nodes is not None:
+                        node = nodes.get(sync)
+                        if node is not None:
+                            resolved.append((node, offset, ref))
+                            continue
                 try:
-                    found = self.node(ref)
+                    found = node_of(ref)
                 except ScheduleError as exc:
                     self.constraint_issue(constraint, f"reference {ref.text!r} ignored: {exc}")
                     continue
