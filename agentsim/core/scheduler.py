@@ -251,8 +251,11 @@ class Scheduler:
     def start(self, run: BlockRun) -> None:
         run.start()
         self.reporter.block_progress(run, "start", run.block_peg.time)
+        by_engine: dict[Engine, list[TimedBehaviour]] = {}  # (in the order each engine is first met)
         for timed in run.live():
-            timed.engine.activate(timed)
+            by_engine.setdefault(timed.engine, []).append(timed)
+        for engine, behaviours in by_engine.items():
+            engine.activate_all(behaviours)
         for block_id in run.block.on_start:
             self.activate(block_id, by=run.id, what="onStart: ")
         self.end_if_done(run, run.block_peg.time)
