@@ -84,8 +84,22 @@ class _Ties:
 
     def union(self, a: int, b: int, d: float) -> str | None:
         """Tie ``T(a) = T(b) + d``; returns a reason if that contradicts the ties so far."""
-        ra, da = self.find(a)
-        rb, db = self.find(b)
+        parent, delta = self.parent, self.delta
+        # (what find gives, told here without its call for a root or a node tied to one: the usual cases)
+        ra = parent[a]
+        if ra == a:
+            da = 0.0
+        elif parent[ra] == ra:
+            da = delta[a]
+        else:
+            ra, da = self.find(a)
+        rb = parent[b]
+        if rb == b:
+            db = 0.0
+        elif parent[rb] == rb:
+            db = delta[b]
+        else:
+            rb, db = self.find(b)
         if ra == rb:
             if abs(da - (db + d)) > TOLERANCE:
                 return "contradictory constraints: they put it at two different times"
@@ -93,8 +107,8 @@ class _Ties:
         fa, fb = self.fixed_node.get(ra), self.fixed_node.get(rb)
         if fa is not None and fb is not None:
             return "it ties together two times that are fixed independently"
-        self.parent[ra] = rb
-        self.delta[ra] = db + d - da
+        parent[ra] = rb
+        delta[ra] = db + d - da
         if fa is not None:
             self.fixed_node[rb] = fa
         self.fixed_node.pop(ra, None)
@@ -198,6 +212,20 @@ class BlockSolver:
         found = self._local_refs[id(ref)] = (node, offset)
         return found
 
+    def _new_node(self, behaviour_id: str, sync_id: str, nodes: dict[str, int] | None) -> int | None:
+        """The new node of a sync point of this block that has none yet (``nodes``: its behaviour's nodes so
+        far, if any); None if there is no such sync point (:meth:`node` says why)."""
+        beh = self.block.behaviour(behaviour_id)
+        if beh is None:
+            return None
+        syncs = beh.sync_ids
+        if sync_id not in (syncs if len(syncs) <= 16 else self._sync_set(beh)):
+            return None
+        if nodes is None:
+            nodes = self.local_nodes[beh.id] = {}
+        node = nodes[sync_id] = self.ties.add()
+        return node
+
     def _sync_set(self, beh) -> frozenset[str]:
         """The sync ids of ``beh`` as a set (a speech has thousands: references to them are looked up in
         constant time), made again if they change."""
@@ -237,18 +265,19 @@ class BlockSolver:
         # (what node() gives for a sync point of this block that has its node already, found here without
         # the call: a block's constraints name thousands)
         local_nodes, own = self.local_nodes, (None, self.block.id)
-        union, node_of = self.ties.union, self.node
+        union, node_of, new_node = self.ties.union, self.node, self._new_node
         for constraint in self.block.constraints:
             resolved = []
             for ref in constraint.refs:
                 kind, offset, block, behaviour, sync, _, _ = ref  # (its fields at once)
                 if kind == "sync" and block in own:
                     nodes = local_nodes.get(behaviour)
-                    if nodes is not None:
-                        node = nodes.get(sync)
-                        if node is not None:
-                            resolved.append((node, offset, ref))
-                            continue
+                    node = nodes.get(sync) if nodes is not None else None
+                    if node is None:
+                        node = new_node(behaviour, sync, nodes)
+                    if node is not None:
+                        resolved.append((node, offset, ref))
+                        continue
                 try:
                     found = node_of(ref)
                 except ScheduleError as exc:
