@@ -31,7 +31,8 @@ def stretch_times(preferred: Sequence[float], known: dict[int, float], start: fl
     """
     n = len(preferred)
     if not known:
-        return [start + p - preferred[0] for p in preferred]
+        p_first = preferred[0]
+        return [start + p - p_first for p in preferred]
     if len(known) == 1:  # (the commonest case, at its preferred timing from the one known key)
         (first, t_first), = known.items()
         p_first = preferred[first]
@@ -88,12 +89,15 @@ class Planner:
         """
         pref = preferred if preferred is not None else self.preferred(behaviour)
         sync_ids = behaviour.sync_ids
-        at = None
+        at: dict[int, float] | None = {}
         if len(known) <= 2:  # (a key or two, found in the list: no table of every sync point made)
             try:
-                at = {sync_ids.index(s): t for s, t in known.items()}
+                for s, t in known.items():
+                    at[sync_ids.index(s)] = t
             except ValueError:  # (not one of its sync points: the KeyError below says which)
-                pass
+                at = None
+        else:
+            at = None
         if at is None:
             index = {s: i for i, s in enumerate(sync_ids)}
             at = {index[s]: t for s, t in known.items()}

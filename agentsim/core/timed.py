@@ -198,8 +198,14 @@ class TimedBehaviour:
                 continue
             if lo is not None and hi > lo + 1:
                 t_lo, p_lo, p_hi = times[lo], pref[lo], pref[hi]
-                for i in range(lo + 1, hi):
-                    times[i] = t_lo if p_hi <= p_lo else t_lo + (pref[i] - p_lo) / (p_hi - p_lo) * (t_hi - t_lo)
+                if p_hi <= p_lo:
+                    for i in range(lo + 1, hi):
+                        times[i] = t_lo
+                else:
+                    # (t_lo + (pref[i] - p_lo) / (p_hi - p_lo) * (t_hi - t_lo), its two differences made once)
+                    p_span, t_span = p_hi - p_lo, t_hi - t_lo
+                    for i in range(lo + 1, hi):
+                        times[i] = t_lo + (pref[i] - p_lo) / p_span * t_span
             lo = hi
         return times
 
