@@ -206,6 +206,7 @@ class Retimer:
         tolerance = self.prediction_tolerance
         entries = []
         predicted = run.predicted
+        ends: list[tuple[TimedBehaviour, float | None]] = []  # (the predicted ends, noted at once after)
         for timed in run.live() if behaviours is None else behaviours:
             if not timed.live:
                 continue
@@ -228,7 +229,7 @@ class Retimer:
             else:
                 for i, t in zip(indices, times):
                     last[i] = t
-            run.note_end(timed, last[-1])
+            ends.append((timed, last[-1]))
             if len(times) == len(timed.sync_ids):  # all of them
                 start, syncs = times[0], dict(zip(timed.sync_ids, times))
             else:
@@ -239,6 +240,7 @@ class Retimer:
             if lexeme:  # what it plays, as read (a draft's rotation="SHAKE" is lexeme SHAKE), said once
                 entry["lexeme"] = lexeme
             entries.append(entry)
+        run.note_ends(ends)
         for timed in run.gone:
             entries.append({"id": timed.id, "type": timed.behaviour.type, "status": "removed"})
         run.gone.clear()

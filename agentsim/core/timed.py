@@ -375,6 +375,17 @@ class BlockRun:
         if end is not None and math.isfinite(end):
             heapq.heappush(self._ends, (-end, version, timed))
 
+    def note_ends(self, ends: Iterable[tuple[TimedBehaviour, float | None]]) -> None:
+        """:meth:`note_end` of each ``(behaviour, end)`` in turn."""
+        version = self._ends_noted
+        versions, heap, isfinite = self._end_version, self._ends, math.isfinite
+        for timed, end in ends:
+            versions[timed] = version
+            if end is not None and isfinite(end):
+                heapq.heappush(heap, (-end, version, timed))
+            version += 1
+        self._ends_noted = version
+
     def predicted_end(self) -> float | None:
         """The latest predicted end of its live behaviours, as last noted (None if none is known)."""
         while self._ends:
