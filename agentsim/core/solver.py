@@ -323,13 +323,20 @@ class BlockSolver:
             return []
         members: dict[int, list[int]] = {}
         behaviours = self.block.behaviours
-        find = self.ties.find
+        find, parent = self.ties.find, self.ties.parent
         for index, beh in enumerate(behaviours):
             nodes = self.local_nodes.get(beh.id)
             if not nodes:
                 continue
             for node in nodes.values():  # (each of its sync points tied: in any order, the same index)
-                members.setdefault(find(node)[0], []).append(index)
+                root = parent[node]  # (its root as find gives it, told without the call in the usual cases)
+                if parent[root] != root:
+                    root = find(node)[0]
+                group = members.get(root)
+                if group is None:
+                    members[root] = [index]
+                else:
+                    group.append(index)
         # Among behaviours tied to known times, rigid ones (speech) go first: the others can stretch.
         priority = [(0 if self.engines[b.type].planner.rigid else 1, i) if b.type in self.engines else (1, i)
                     for i, b in enumerate(behaviours)]
