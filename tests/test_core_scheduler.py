@@ -179,3 +179,28 @@ def test_the_recording_holds_actual_times_shared_pegs_and_ties(world):
     seen = recording.until(1.5)
     assert seen.behaviour("b:g1").time("stroke") is None and seen.behaviour("b:g3") is None
     assert all(f["globalTime"] <= 1.5 for f in seen.feedback)
+
+
+def test_the_first_prediction_says_the_times_the_behaviours_have_once_the_block_is_timed():
+    """The solver computes each behaviour's times once while no peg moves and hands them to the first
+    prediction: after a constraint moved one behaviour, a cluster was shifted into the block and a gesture's
+    preparation was shortened, what is predicted is what the behaviours say then, exactly."""
+    from agentsim.realizer import Realizer
+    from speech_timing.builtin import BuiltinBackend
+
+    doc = ('<bml xmlns="http://www.bml-initiative.org/bml/bml-1.0" id="b1">'
+           '<gesture id="g1" lexeme="BEAT" stroke="0.2"/><head id="h1" lexeme="NOD"/>'
+           '<faceLexeme id="f1" lexeme="RAISE_BROWS"/><head id="h4" lexeme="NOD"/>'
+           '<head id="h5" lexeme="NOD" end="h4:start"/>'
+           '<speech id="s1" start="h1:end"><text>we walk <sync id="m"/> along the river.</text></speech>'
+           '<constraint><after ref="h1:end"><sync ref="f1:start"/></after></constraint></bml>')
+    realizer = Realizer(tts=BuiltinBackend())
+    run = realizer.submit(doc)
+    (prediction,) = realizer.feedback.of_type("predictionFeedback")
+    moved = {t.id: t.times() for t in run.timed}
+    assert moved["g1"][:1] + moved["g1"][3:4] == [0.0, 0.2]  # its preparation shortened to the block start
+    assert moved["f1"][0] == moved["h1"][-1] == 0.55  # moved after the nod
+    assert moved["h5"][0] == 0.0 and moved["h4"][0] == 0.55  # the cluster shifted into the block
+    assert [(e["id"], list(e["syncs"].values()), e["globalStart"]) for e in prediction["behaviours"]] == [
+        (t.id, t.times(), t.planned_start) for t in run.timed]
+    assert all(t.planned_start == t.times()[0] for t in run.timed)

@@ -201,7 +201,8 @@ class Scheduler:
         book.open(run)
         if run.chunk_after:
             self.composer.coarticulate(run)
-        self.retimer.predict(run, timed_now=solver.times_now(), force=True)
+        # (the solver's times, unless a peg moved since, or earlier gestures were keyed anew: then made again)
+        self.retimer.predict(run, timed_now=solver.times_now() if not run.chunk_after else None, force=True)
         if self.waits(run) is None:
             self.start(run)
         else:
