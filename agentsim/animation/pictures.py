@@ -79,9 +79,11 @@ def _changed_rc() -> dict:
 
 
 #: What the server that drawing processes are forked from imports once, so that none imports it again:
-#: this module and the parts of matplotlib a picture uses (the figure alone is a third of a second).
-PRELOADED = [__name__, "matplotlib.backends.backend_agg", "matplotlib.figure", "matplotlib.collections",
-             "matplotlib.patches", "matplotlib.colors", "matplotlib.font_manager", "matplotlib.textpath"]
+#: this module and the parts of matplotlib a picture uses (the figure alone is a third of a second), after
+#: :mod:`agentsim.animation.picture_server`, which makes the server leave a terminal's interrupt to the command.
+PRELOADED = ["agentsim.animation.picture_server", __name__, "matplotlib.backends.backend_agg", "matplotlib.figure",
+             "matplotlib.collections", "matplotlib.patches", "matplotlib.colors", "matplotlib.font_manager",
+             "matplotlib.textpath"]
 
 #: In a worker process: the recording and the pose panel it draws (``"run"``).
 _WORKER: dict = {}

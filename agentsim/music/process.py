@@ -20,6 +20,7 @@ from typing import Iterable
 
 import numpy as np
 
+from agentsim.core.children import leave_interrupts_to_the_parent
 from agentsim.errors import Unavailable
 from agentsim.music.events import SynthEvent
 from agentsim.music.rendering import (DEFAULT_SOUNDFONT, PUBLISHED, FluidSynthRenderer, SampleClock,
@@ -49,6 +50,7 @@ def _serve(connection, parents, arguments: tuple) -> None:
     the parent says so or has gone. ``parents``: the parent's end of the pipe, which the fork copied, closed
     here first (held open, it would keep the child from seeing the parent go)."""
     parents.close()
+    leave_interrupts_to_the_parent()  # (a terminal's Ctrl-C: the parent ends, and with it this child)
     try:
         synth = FluidSynthRenderer(*arguments)
     except Exception as exc:  # (said to the parent, which raises it where it asks for samples)

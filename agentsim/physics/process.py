@@ -21,6 +21,8 @@ import threading
 
 import numpy as np
 
+from agentsim.core.children import leave_interrupts_to_the_parent
+
 __all__ = ["PhysicsProcess", "physics_process"]
 
 
@@ -49,6 +51,7 @@ def _serve(connection, parents) -> None:
     ``parents``: the parent's end of the pipe, which the fork copied, closed here first (held open, it would
     keep the child from seeing the parent go)."""
     parents.close()
+    leave_interrupts_to_the_parent()  # (a terminal's Ctrl-C: the parent ends, and with it this child)
     from agentsim.physics.simulation import Stepper
 
     import mujoco  # noqa: F401  (imported while the parent goes on, before the frames come)
