@@ -280,7 +280,6 @@ def test_a_renderer_process_that_cannot_load_its_soundfont_says_so_where_samples
 
 
 def test_a_renderer_is_forked_only_from_a_process_with_no_other_thread(monkeypatch):
-    from agentsim.music import process
     from agentsim.music.process import RenderingProcess, renderer
 
     held = threading.Event()
@@ -292,7 +291,7 @@ def test_a_renderer_is_forked_only_from_a_process_with_no_other_thread(monkeypat
     finally:
         held.set()
         other.join()
-    monkeypatch.setattr(process.threading, "active_count", lambda: 1)  # (as the command line has it)
+    monkeypatch.setattr(threading, "active_count", lambda: 1)  # (as the command line has it)
     with renderer(22050) as r:
         assert isinstance(r, RenderingProcess)
 

@@ -1,18 +1,29 @@
-"""What the child processes of a command do with a terminal's interrupt.
+"""The child processes of a command: where one may be forked, and what it does with a terminal's interrupt.
 
 A terminal's Ctrl-C sends SIGINT to every process of the command: the command itself, the processes that
 render its ensemble, simulate its physical body or draw its pictures. Python answers it in each with a
 ``KeyboardInterrupt`` and, in a child, a traceback of whatever the child was doing. The command ends on it
 (exit status 130, no traceback) and ends its children with it (they see their pipe close), so the children
 ignore it (:func:`leave_interrupts_to_the_parent`).
+
+:func:`may_fork` says whether this process may start a child by forking.
 """
 
 from __future__ import annotations
 
+import multiprocessing
 import signal
 import threading
 
-__all__ = ["leave_interrupts_to_the_parent"]
+__all__ = ["leave_interrupts_to_the_parent", "may_fork"]
+
+
+def may_fork() -> bool:
+    """Whether this process may start a child by forking: it can, it has no thread but its main one (a child
+    forked then finds no lock held by a thread copied half-way), and it is not a daemonic process (such as a
+    pool's worker, which may start none)."""
+    return ("fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon
+            and threading.active_count() == 1)
 
 
 def leave_interrupts_to_the_parent() -> None:

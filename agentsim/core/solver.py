@@ -200,15 +200,11 @@ class BlockSolver:
                     raise ScheduleError(f"no sync point {ref.target()} in a planned block")
                 self.nodes[key] = self.ties.add(found)
             return self.nodes[key], ref.offset
-        beh = self.block.behaviour(behaviour)
-        if beh is None:
-            raise ScheduleError(f"no behaviour {behaviour!r} in block {self.block.id}")
-        syncs = beh.sync_ids  # (a short list is searched as it is; a speech's thousands, in a set)
-        if sync not in (syncs if len(syncs) <= 16 else self._sync_set(beh)):
+        node = self._new_node(behaviour, sync, nodes)
+        if node is None:
+            if self.block.behaviour(behaviour) is None:
+                raise ScheduleError(f"no behaviour {behaviour!r} in block {self.block.id}")
             raise ScheduleError(f"behaviour {behaviour!r} has no sync point {sync!r}")
-        if nodes is None:  # (what local_node does, with the look-up above: the sync point has no node yet)
-            nodes = self.local_nodes[beh.id] = {}
-        node = nodes[sync] = self.ties.add()
         found = self._local_refs[id(ref)] = (node, offset)
         return found
 
@@ -218,10 +214,10 @@ class BlockSolver:
         beh = self.block.behaviour(behaviour_id)
         if beh is None:
             return None
-        syncs = beh.sync_ids
+        syncs = beh.sync_ids  # (a short list is searched as it is; a speech's thousands, in a set)
         if sync_id not in (syncs if len(syncs) <= 16 else self._sync_set(beh)):
             return None
-        if nodes is None:
+        if nodes is None:  # (what local_node does, with the look-up above: the sync point has no node yet)
             nodes = self.local_nodes[beh.id] = {}
         node = nodes[sync_id] = self.ties.add()
         return node

@@ -15,12 +15,11 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import threading
 from typing import Iterable
 
 import numpy as np
 
-from agentsim.core.children import leave_interrupts_to_the_parent
+from agentsim.core.children import leave_interrupts_to_the_parent, may_fork
 from agentsim.errors import Unavailable
 from agentsim.music.events import SynthEvent
 from agentsim.music.rendering import (DEFAULT_SOUNDFONT, PUBLISHED, FluidSynthRenderer, SampleClock,
@@ -34,12 +33,10 @@ _SAMPLES, _FAILED = b"s", b"f"
 
 def renderer(sample_rate: int = 44100, soundfont=DEFAULT_SOUNDFONT, gain: float = 0.3, reverb: bool = True,
              chorus: bool = False, programs: dict[int, int] | None = None):
-    """A :class:`RenderingProcess` where this process may start a child by forking: it has no thread but its
-    main one (a child forked then finds no lock held by a thread copied half-way) and it is not a daemonic
-    process (such as a pool's worker); else a :class:`~agentsim.music.rendering.FluidSynthRenderer`. The
-    arguments are theirs."""
-    if ("fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon
-            and threading.active_count() == 1):
+    """A :class:`RenderingProcess` where this process may start a child by forking
+    (:func:`~agentsim.core.children.may_fork`), else a :class:`~agentsim.music.rendering.FluidSynthRenderer`.
+    The arguments are theirs."""
+    if may_fork():
         return RenderingProcess(sample_rate, soundfont, gain, reverb, chorus, programs)
     return FluidSynthRenderer(sample_rate, soundfont, gain, reverb, chorus, programs)
 

@@ -21,17 +21,15 @@ import threading
 
 import numpy as np
 
-from agentsim.core.children import leave_interrupts_to_the_parent
+from agentsim.core.children import leave_interrupts_to_the_parent, may_fork
 
 __all__ = ["PhysicsProcess", "physics_process"]
 
 
 def physics_process() -> PhysicsProcess | None:
-    """A :class:`PhysicsProcess` where this process may fork a child (see the module), else None."""
-    if ("fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon
-            and threading.active_count() == 1):
-        return PhysicsProcess()
-    return None
+    """A :class:`PhysicsProcess` where this process may fork a child
+    (:func:`~agentsim.core.children.may_fork`), else None."""
+    return PhysicsProcess() if may_fork() else None
 
 
 def _read(connection, frames: queue.Queue) -> None:
@@ -142,12 +140,12 @@ class PhysicsProcess:
 
     def finish(self, made) -> object:
         """Hand every frame not yet taken to ``made(first, poses)`` and return the run's
-        :class:`~agentsim.physics.simulation.PhysicsResult` once the child has made the last frames."""
+        :class:`~agentsim.physics.simulation.PhysicsResult` once the child has made the last frames (then
+        :meth:`close` it)."""
         self._send(("finish",))
         while True:
             message = self._take(wait=True)
             if message[0] == "done":
-                self.close()
                 return message[1]
             made(*message[1:])
 

@@ -112,7 +112,6 @@ class PhysicalManager(DriverManager):
         send()
         return None
 
-
     def _in_memory(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The physical body's frames and the animation's writers, in arrays: simulated by :attr:`process`
         while the animation's next frames are evaluated here, when the manager was given one, else on this
@@ -138,13 +137,11 @@ class PhysicalManager(DriverManager):
                 stepper.feed(values[a:a + PROGRESS_FRAMES])
             self.result = stepper.finish()
         else:
-            values = np.empty((n, self.body.n_dofs))
             writers = np.empty((n, self.body.n_dofs), dtype=np.int32)
 
             def take(first: int, block: np.ndarray, block_writers: np.ndarray) -> None:
-                last = first + len(block)
-                values[first:last], writers[first:last] = block, block_writers
-                process.feed(values[first:last])
+                writers[first:first + len(block)] = block_writers
+                process.feed(block)  # (sent at once: the block's buffer may be reused afterwards)
                 for at, poses in process.made():
                     put(at, poses)
 
@@ -157,6 +154,7 @@ class PhysicalManager(DriverManager):
         if self.progress is not None and made[0] > told[0]:
             self.progress(self.body, times, out)
         return out, writers
+
 
 #: How many of the animation's frames :class:`PhysicalManager` simulates between two calls of its ``progress``.
 PROGRESS_FRAMES = 64
