@@ -263,6 +263,38 @@ def test_the_cache_keeps_the_timeline_in_columns_in_samples_where_they_are_exact
             assert third.utterance(text) == said and (third.hits, third.misses) == (0, 1)
 
 
+def test_an_utterance_read_from_the_cache_makes_its_timeline_when_asked_and_is_one_like_any(tmp_path):
+    """A cached utterance's words and phonemes are made the first time they are read (a block's schedule needs
+    its speeches' lengths and marks only); it equals the utterance said, both ways, and is replaced, copied and
+    pickled as that one is."""
+    import copy
+    import pickle
+    from dataclasses import asdict, replace
+
+    from scenarios.storytelling.voice import ReadUtterance
+    from speech_timing.backend import Utterance, Word
+    from speech_timing.builtin import BuiltinBackend
+
+    speech = SpeechText("Tell me a story, slowly.")
+    said = CachedBackend(BuiltinBackend(), cache_dir=tmp_path).synthesize(speech)
+    read = CachedBackend(BuiltinBackend(), cache_dir=tmp_path).utterance(speech.text)
+    assert type(said) is Utterance and type(read) is ReadUtterance
+    assert "_words" not in vars(read) and "_phonemes" not in vars(read)  # nothing made yet
+    assert read.duration == said.duration and read.sentences == said.sentences
+    assert read == said and said == read and not (read != said)
+    assert vars(read)["_words"] == said.words and vars(read)["_phonemes"] == said.phonemes
+    assert read.words is read.words  # made once
+    for other in (replace(read), copy.deepcopy(read), pickle.loads(pickle.dumps(read))):
+        assert other == said and asdict(other) == asdict(said)
+    assert read.word_after(5) == said.word_after(5) == 1 and read.phonemes_of(3) == said.phonemes_of(3)
+    moved = replace(read, words=[replace(w, start=w.start + 1.0) for w in read.words])
+    assert moved != said and moved.words[0].start == said.words[0].start + 1.0 and moved.phonemes == said.phonemes
+    fresh = CachedBackend(BuiltinBackend(), cache_dir=tmp_path).utterance(speech.text)
+    fresh.words = [Word(0, "Hi", 0.0, 0.1, 0, 2)]  # set before ever read: the cached columns are not made
+    assert [w.text for w in fresh.words] == ["Hi"] and "_word_rows" not in vars(fresh)
+    assert read != replace(said, duration=said.duration + 1.0)
+
+
 def test_the_cached_audio_is_read_back_as_it_was_said(tmp_path, monkeypatch):
     """The 16-bit samples of a cache file come back as the float32 samples that were cached (read a block at
     a time); a file cut short is not used: the text is synthesised again."""

@@ -53,7 +53,7 @@ if TYPE_CHECKING:  # numpy is imported where samples are written or read: a spee
 READ_BLOCK = BLOCK
 
 __all__ = ["CachedBackend", "WholeSpeechCache", "KeptSamples", "PhonemeMarks", "default_cache_dir", "word_after", "stressed_onset",
-           "mark_event", "place_mark", "CACHE_FORMAT"]
+           "mark_event", "place_mark", "CACHE_FORMAT", "ReadUtterance"]
 
 #: Version of the cache files; bump it when their layout or the meaning of their contents changes.
 CACHE_FORMAT = 2
@@ -222,12 +222,12 @@ def _timeline(columns: dict, fields: tuple[str, ...], rate: int | None) -> list:
     return ordered
 
 
-def _words(columns: dict, rate: int | None) -> list[Word]:
-    """The ``Word`` of each row of ``columns``, made as ``Word.__init__`` makes it, without a call of it each (a
-    narration has thousands)."""
+def _words(rows: list) -> list[Word]:
+    """The ``Word`` of each row of ``rows`` (the columns :func:`_timeline` gives), made as ``Word.__init__`` makes
+    it, without a call of it each (a narration has thousands)."""
     made = []
     add = made.append
-    for index, text, start, end, char_start, char_end in zip(*_timeline(columns, _WORD_FIELDS, rate)):
+    for index, text, start, end, char_start, char_end in zip(*rows):
         word = _new(Word)
         _set(word, "__dict__", {"index": index, "text": text, "start": start, "end": end, "char_start": char_start,
                                 "char_end": char_end})
@@ -235,16 +235,59 @@ def _words(columns: dict, rate: int | None) -> list[Word]:
     return made
 
 
-def _phonemes(columns: dict, rate: int | None) -> list[Phoneme]:
-    """The ``Phoneme`` of each row of ``columns``, made as :func:`_words` makes words."""
+def _phonemes(rows: list) -> list[Phoneme]:
+    """The ``Phoneme`` of each row of ``rows``, made as :func:`_words` makes words."""
     made = []
     add = made.append
-    for symbol, start, end, word_index, stressed in zip(*_timeline(columns, _PHONEME_FIELDS, rate)):
+    for symbol, start, end, word_index, stressed in zip(*rows):
         phoneme = _new(Phoneme)
         _set(phoneme, "__dict__", {"symbol": symbol, "start": start, "end": end, "word_index": word_index,
                                    "stressed": stressed})
         add(phoneme)
     return made
+
+
+class ReadUtterance(Utterance):
+    """An utterance read from the cache, whose ``words`` and ``phonemes`` are made from the entry's columns
+    (checked when it was read) the first time they are asked for: a block's schedule asks its speeches for
+    their lengths and marks only, and a thousand-behaviour block has thousands of words and phonemes.
+
+    Otherwise it is an :class:`~speech_timing.backend.Utterance`: equal to one with the same fields, and
+    ``dataclasses.replace``, ``copy`` and ``pickle`` treat it as one.
+    """
+
+    @property
+    def words(self) -> list[Word]:
+        state = self.__dict__
+        made = state.get("_words")
+        if made is None:
+            made = state["_words"] = _words(state.pop("_word_rows"))
+        return made
+
+    @words.setter
+    def words(self, value: list[Word]) -> None:
+        self.__dict__["_words"] = value
+        self.__dict__.pop("_word_rows", None)
+
+    @property
+    def phonemes(self) -> list[Phoneme]:
+        state = self.__dict__
+        made = state.get("_phonemes")
+        if made is None:
+            made = state["_phonemes"] = _phonemes(state.pop("_phoneme_rows"))
+        return made
+
+    @phonemes.setter
+    def phonemes(self, value: list[Phoneme]) -> None:
+        self.__dict__["_phonemes"] = value
+        self.__dict__.pop("_phoneme_rows", None)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Utterance):
+            return NotImplemented
+        return all(getattr(self, name) == getattr(other, name) for name in Utterance.__dataclass_fields__)
+
+    __hash__ = None  # (as a dataclass's that compares its fields)
 
 
 class CachedBackend:
@@ -401,14 +444,17 @@ class CachedBackend:
             if meta["times"] not in ("samples", "seconds"):
                 return None
             rate = int(meta["sample_rate"]) if meta["times"] == "samples" else None
-            words, phonemes = _words(meta["words"], rate), _phonemes(meta["phonemes"], rate)
+            # (checked and in seconds now; the Word and Phoneme objects are made when first asked for)
+            words, phonemes = _timeline(meta["words"], _WORD_FIELDS, rate), _timeline(meta["phonemes"], _PHONEME_FIELDS, rate)
             audio = self._samples(audio_path) if meta["audio"] else None
+            utt = _new(ReadUtterance)
+            utt.__dict__.update(text=text, duration=float(meta["duration"]), _word_rows=words, _phoneme_rows=phonemes,
+                                marks=[Mark(name, float(t)) for name, t in meta.get("marks", [])],
+                                sentences=[float(s) for s in meta["sentences"]], sample_rate=int(meta["sample_rate"]),
+                                audio=audio, backend=meta.get("backend_name", ""))
         except (OSError, ValueError, KeyError, TypeError, AttributeError, ZeroDivisionError):
             return None
-        return Utterance(text=text, duration=float(meta["duration"]), words=words, phonemes=phonemes,
-                         marks=[Mark(name, float(t)) for name, t in meta.get("marks", [])],
-                         sentences=[float(s) for s in meta["sentences"]], sample_rate=int(meta["sample_rate"]),
-                         audio=audio, backend=meta.get("backend_name", ""))
+        return utt
 
     def _samples(self, path: Path) -> Pcm16:
         """The samples of the cache file ``path``: read from the file as they are mixed, never held whole."""
