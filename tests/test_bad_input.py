@@ -286,7 +286,7 @@ def test_the_usual_references_are_read_quickly_as_the_pattern_reads_them():
     rng = np.random.default_rng(5)
     alphabet = list("ab_1.:+- \n\u00e9\u00b2")
     texts += ["".join(rng.choice(alphabet, int(rng.integers(1, 12)))) for _ in range(3000)]
-    for text in texts:
+    for text in texts + texts[::-1]:  # (and again, each tail read before: as the first time)
         assert _plain_ref(text) == _matched_ref(text), text
     assert _plain_ref("g1:end-2.") == ("sync", -2.0, None, "g1", "end", None, "g1:end-2.")
     spellings = ["b1:end", "b2:end", "b1:stroke_start", "b2:stroke_start", " b3:end", "b3:end ", "b1:ready",

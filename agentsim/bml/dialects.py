@@ -21,8 +21,7 @@ import re
 # vocabulary is mapped or noted: reading BML 1.0 does without them.
 from agentsim.bml import lexemes
 from agentsim.bml.dialect_tables import (CLIP_WORDS, COMPOSITIONS, DEICTIC_TARGETS, DRAFT_NAMESPACES, EXPRESSIONS,
-                                         JOINT_RANGE, SACCADE_DIRECTIONS, SYNC_ALIASES, TYPE_IS_LEXEME,
-                                         UNMAPPED_HINTS)
+                                         JOINT_RANGE, SACCADE_DIRECTIONS, SYNC_ALIASES, TYPE_IS_LEXEME, UNMAPPED_HINTS)
 from agentsim.bml.documents import (NUMBER, Envelope, implied_start, is_bml_uri, is_smartbody, remove_nodes,
                                     seconds, speech_marks)
 from agentsim.bml.spelling import REF_SYNC, SYNC_SPELLINGS, canonical_sync, ref_sync, tail_sync
@@ -490,12 +489,15 @@ class Adapter:
         elements = node.elements()
         if not elements or not {c.local for c in elements} <= _CONSTRAINT_KINDS:
             return False
-        respelled, notes = self._respelled, self.notes  # (Adapter.ref, without a call per reference)
+        respelled, notes, tails = self._respelled, self.notes, self._written_tails  # (Adapter.ref, inlined)
         aliased = False
         for child in elements:
             for n in (child, *child.children) if child.children else (child,):
                 value = None if isinstance(n, str) else n.attrs.get("ref")
                 if value is not None:
+                    path, colon, tail = value.rpartition(":")  # (kept, as _respell_once tells most at once)
+                    if colon and tails.get(tail) and "\n" not in path and value.strip() == value:
+                        continue
                     found = respelled.get(value)
                     if found is None:
                         found = respelled[value] = self._respell_once(value)

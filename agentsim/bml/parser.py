@@ -146,23 +146,42 @@ def _plain_ref(text: str) -> SyncRef | None:
     :func:`parse_ref` reads it, or says what is wrong with it). A block's constraints are mostly such.
 
     (Read with string methods where the text is ASCII and plainly of that form, which is quicker than the
-    pattern; anything else, by :data:`_PLAIN_REF`.)"""
+    pattern, what follows the colon once for all references that share it; anything else, by
+    :data:`_PLAIN_REF`.)"""
     if len(text) > MAX_NUMBER:
         return None
     first, colon, rest = text.partition(":")
     if colon and text.isascii() and first.isidentifier():  # (an ASCII identifier: [A-Za-z_][A-Za-z0-9_]*)
-        sign = "+" if "+" in rest else "-" if "-" in rest else None
-        if sign is None:
-            if rest.isidentifier():
-                return _new_ref(SyncRef, ("sync", 0.0, None, first, rest, None, text))
-        else:
-            second, _, number = rest.partition(sign)
-            if second.isidentifier() and number[:1].isdigit() and number.replace(".", "", 1).isdigit():
-                offset = float(number) * (-1.0 if sign == "-" else 1.0)
-                if abs(offset) > MAX_TIME:
-                    return None
-                return _new_ref(SyncRef, ("sync", offset, None, first, second, None, text))
+        read = _rests.get(rest)
+        if read is None:
+            read = _read_rest(rest)
+            if len(_rests) < _KEPT_RESTS:
+                _rests[rest] = read
+        if read is _OUT_OF_RANGE:
+            return None
+        if read is not _BY_PATTERN:
+            return _new_ref(SyncRef, ("sync", read[1], None, first, read[0], None, text))
     return _matched_ref(text)
+
+
+#: What follows the colon of references read by :func:`_plain_ref`: its sync point and offset, or one of the
+#: two marks below (the same few tails, ``end``, ``start+0.5``, follow thousands of behaviours' names).
+_rests: dict[str, tuple[str, float]] = {}
+_KEPT_RESTS = 4096
+_BY_PATTERN, _OUT_OF_RANGE = ("", 0.0), ("", 1.0)
+
+
+def _read_rest(rest: str) -> tuple[str, float]:
+    """``(sync, offset)`` of what follows the colon of a reference whose text is ASCII; :data:`_OUT_OF_RANGE`
+    for an offset too large, :data:`_BY_PATTERN` for another form (the pattern reads it)."""
+    sign = "+" if "+" in rest else "-" if "-" in rest else None
+    if sign is None:
+        return (rest, 0.0) if rest.isidentifier() else _BY_PATTERN
+    second, _, number = rest.partition(sign)
+    if second.isidentifier() and number[:1].isdigit() and number.replace(".", "", 1).isdigit():
+        offset = float(number) * (-1.0 if sign == "-" else 1.0)
+        return _OUT_OF_RANGE if abs(offset) > MAX_TIME else (second, offset)
+    return _BY_PATTERN
 
 
 def _matched_ref(text: str) -> SyncRef | None:
