@@ -273,10 +273,8 @@ def test_the_usual_references_are_read_quickly_as_the_pattern_reads_them():
     refuse); the lenient reader keeps a reference's spelling as it is where one like it was kept."""
     import numpy as np
 
-    from agentsim.bml.dialects import Adapter
-    from agentsim.bml.documents import Envelope
     from agentsim.bml.parser import _matched_ref, _plain_ref
-    from agentsim.core.xmltree import Node
+    from agentsim.bml.spelling import AS_WRITTEN, References, respell
 
     texts = ["g1:stroke", "g1:end+0.5", "g1:end-2.", "b1:g1:start", "g1:end+.5", "g1:end+1.2.3", "g1:end+1-2",
              "g1:end+1e3", "é1:start", "g1:strokeé", "g1:end+²", "g1:end+١", "1g:start", "g1:1", "g1 :start",
@@ -292,7 +290,7 @@ def test_the_usual_references_are_read_quickly_as_the_pattern_reads_them():
     spellings = ["b1:end", "b2:end", "b1:stroke_start", "b2:stroke_start", " b3:end", "b3:end ", "b1:ready",
                  "b2:ready", "b1:relax+1", "a:b+c:end", "a:b+c:d+", "x\ny:end", "b4:end\n"]
     spellings += ["".join(rng.choice(list("b1:end_rStR+-. \n"), int(rng.integers(1, 14)))) for _ in range(3000)]
-    node = Node("bml", {"id": "b"}, 1, 1, {})
-    once = Adapter(Envelope(node), iter(()).__next__)
+    references = References()
     for value in spellings:
-        assert once._respell_once(value) == Adapter._respell(value), repr(value)
+        assert references.once(value) == respell(value), repr(value)
+        assert references.kept(value) is (respell(value) is AS_WRITTEN), repr(value)

@@ -24,8 +24,8 @@ from agentsim.bml.dialect_tables import (CLIP_WORDS, COMPOSITIONS, DEICTIC_TARGE
                                          JOINT_RANGE, SACCADE_DIRECTIONS, SYNC_ALIASES, TYPE_IS_LEXEME, UNMAPPED_HINTS)
 from agentsim.bml.documents import (NUMBER, Envelope, implied_start, is_bml_uri, is_smartbody, remove_nodes,
                                     seconds, speech_marks)
-from agentsim.bml.spelling import REF_SYNC, SYNC_SPELLINGS, canonical_sync, ref_sync, tail_sync
-from agentsim.core.xmltree import Node
+from agentsim.bml.spelling import AS_WRITTEN, REF_SYNC, SYNC_SPELLINGS, References
+from agentsim.core.xmltree import Captured, Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
 from agentsim.animation.lexicon import Lexicon
@@ -40,8 +40,6 @@ HEAD_LEXEMES = lexemes.HEAD_LEXEMES
 _ALIASED = re.compile("|".join(sorted(
     name for name in {n for aliases in SYNC_ALIASES.values() for n in aliases}
     if not any(other != name and other in name for aliases in SYNC_ALIASES.values() for other in aliases))))
-#: The sync point names that have an alias on some type (a reference to another one is never retargeted).
-_ALIAS_NAMES = frozenset(name for aliases in SYNC_ALIASES.values() for name in aliases)
 #: Elements of BMLA and BMLT, which only count in their own namespaces.
 EXTENSION_LOCALS = set().union(*EXTENSION_BEHAVIOURS.values())
 #: The BML 1.0 types whose draft attributes :meth:`Adapter.core` reads (it leaves the others as they are).
@@ -49,8 +47,6 @@ _CORE_REWRITTEN = frozenset(("gesture", "face", "head", "gaze"))
 _UNSEEN = object()
 #: The constraint elements whose references are read.
 _CONSTRAINT_KINDS = frozenset(("synchronize", "before", "after"))
-#: What :meth:`Adapter._respell` gives a reference kept as it is, that names no sync point with an alias.
-_AS_WRITTEN = ("", None, False)
 
 
 class Adapter:
@@ -74,9 +70,8 @@ class Adapter:
         self.prosody: list[Node] = []
         self.constraints: list[Node] = []
         self.written: dict[int, str] = {}  # id() of an element -> its name as written, before mapping
-        self._respelled: dict[str, tuple[str, str | None, bool]] = {}  # see ref()
+        self.references = References()  # how the block's references are spelled, each read once
         self._spelled: dict[str, str | None] = {}  # attribute name -> the sync point it spells (None: none)
-        self._written_tails: dict[str, bool] = {}  # see _respell_once()
         # whether a reference in a constraint names a sync point that has an alias (else retarget_refs has
         # nothing to do in the constraints)
         self._aliased_constraint = False
@@ -486,22 +481,19 @@ class Adapter:
         """Respell the references of a ``<constraint>`` whose elements are all ``<synchronize>``, ``<before>``
         and ``<after>`` (:meth:`ref`), and say whether it is one: a ``<constraint>`` with no element, or
         with another one, is left as it is (then False)."""
+        if type(node) is Captured and node.events is not None and self.held_kept(node.events):
+            return True  # (its references all kept as written: nothing to do, and no node made of it)
         elements = node.elements()
         if not elements or not {c.local for c in elements} <= _CONSTRAINT_KINDS:
             return False
-        respelled, notes, tails = self._respelled, self.notes, self._written_tails  # (Adapter.ref, inlined)
+        references, notes = self.references, self.notes  # (Adapter.ref, without a call per reference)
         aliased = False
         for child in elements:
             for n in (child, *child.children) if child.children else (child,):
                 value = None if isinstance(n, str) else n.attrs.get("ref")
                 if value is not None:
-                    path, colon, tail = value.rpartition(":")  # (kept, as _respell_once tells most at once)
-                    if colon and tails.get(tail) and "\n" not in path and value.strip() == value:
-                        continue
-                    found = respelled.get(value)
-                    if found is None:
-                        found = respelled[value] = self._respell_once(value)
-                    if found is _AS_WRITTEN:  # (most references)
+                    found = references.found(value)
+                    if found is AS_WRITTEN:  # (most references)
                         continue
                     if found[1] is not None:
                         notes.add(found[1])
@@ -510,44 +502,33 @@ class Adapter:
         self._aliased_constraint = self._aliased_constraint or aliased
         return True
 
+    def held_kept(self, events: list) -> bool:
+        """Whether the content of a ``<constraint>`` held as events (:class:`~agentsim.core.xmltree.Captured`)
+        has elements, all ``<synchronize>``, ``<before>`` and ``<after>`` (as written, no prefix), and keeps
+        every reference of theirs and of their children as written (what :meth:`constraint_refs` reads)."""
+        level, kept, elements = 0, self.references.kept, False
+        for event in events:
+            if event is None:
+                level -= 1
+            elif type(event) is not str:
+                level += 1
+                if level == 1 and event[0] not in _CONSTRAINT_KINDS:
+                    return False
+                elements = True
+                value = event[1].get("ref") if level <= 2 else None
+                if value is not None and not kept(value):
+                    return False
+        return elements
+
     def ref(self, value: str) -> str:
         """A reference with its sync point spelled as BML does, noting the respelling (a block repeats its
         references: each one is read once)."""
-        found = self._respelled.get(value)
-        if found is None:
-            found = self._respelled[value] = self._respell(value)
-        if found is _AS_WRITTEN:
+        found = self.references.found(value)
+        if found is AS_WRITTEN:
             return value
         if found[1] is not None:
             self.notes.add(found[1])
         return found[0]
-
-    def _respell_once(self, value: str) -> tuple[str, str | None, bool]:
-        """:meth:`_respell` of ``value``; a reference kept as it is is known from what follows its last colon,
-        which references share (``b1:end``, ``b2:end``), once that has been split."""
-        path, colon, tail = value.rpartition(":")
-        if not colon or "\n" in path or value[:1].isspace() or value[-1:].isspace():
-            return self._respell(value)
-        written = self._written_tails.get(tail)
-        if written is None:  # (split as ref_sync splits the reference, the part before the colon aside)
-            found = self._respell(value)
-            written = self._written_tails[tail] = found is _AS_WRITTEN and tail_sync(tail) is not None
-            return found
-        return _AS_WRITTEN if written else self._respell(value)
-
-    @staticmethod
-    def _respell(value: str) -> tuple[str, str | None, bool]:
-        """The reference spelled as BML does, the note of the respelling (None: none), and whether it names a
-        sync point that has an alias (:data:`_ALIASED`); :data:`_AS_WRITTEN` for a reference that is none of
-        these (kept as it is, nothing noted)."""
-        match = ref_sync(value)
-        if not match:
-            return _AS_WRITTEN
-        path, sync, rest = match
-        canonical = canonical_sync(sync)
-        if canonical and canonical != sync:
-            return f"{path}{canonical}{rest}", f"sync point {sync} read as {canonical}", canonical in _ALIAS_NAMES
-        return (value, None, True) if sync in _ALIAS_NAMES else _AS_WRITTEN
 
     def retarget_refs(self, behaviours: list[Node], constraints: list[Node]) -> None:
         """References to a sync point that the behaviour referred to has under another name (SmartBody's

@@ -25,7 +25,7 @@ from agentsim.bml.dialects import Adapter
 from agentsim.bml.documents import Envelope, Notes, find_blocks
 from agentsim.bml.spelling import fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
-from agentsim.core.xmltree import Node, encode, read_forest, read_tree
+from agentsim.core.xmltree import Captured, Node, encode, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
                                      EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
@@ -229,7 +229,7 @@ def parse_bml(text: str | bytes, lexicon: Lexicon | None = None) -> Block:
     """Parse one BML 1.0 block, strictly. Raises :class:`BMLError` if the block as a whole cannot be used.
     Lexemes that ``lexicon`` (default: the built-in one) has no motion for are warned of."""
     defaults: list[str] = []
-    block = warn_lexemes(read_block(read_tree(_checked(text), defaults), None), lexicon)
+    block = warn_lexemes(read_block(read_tree(_checked(text), defaults, HELD), None), lexicon)
     return warn_defaults(block, defaults)
 
 
@@ -277,7 +277,7 @@ def parse_document(text: str | bytes, strict: bool = False, name_block: Callable
     defaults: list[str] = []
     made: dict = {}
     try:
-        root, forest = read_forest(data, defaults, made)
+        root, forest = read_forest(data, defaults, made, HELD)
     except BMLError as exc:
         return [Refused(guess_block_id(text), exc)]
     folded = fold_case(root, made["names"])
@@ -545,6 +545,11 @@ class _Reader:
             return None
 
     def constraint(self, node: Node, required: bool) -> None:
+        if type(node) is Captured and node.events is not None:  # (as the tree holds it: read at once if plain)
+            made = self.held_constraint(node, required)
+            if made is not None:
+                self.block.constraints += made
+                return
         owner = node.attrs.get("id", "")
         add = self.block.constraints.append
         known = self.refs  # (looked up here at once: a block's constraints repeat their references)
@@ -597,6 +602,75 @@ class _Reader:
             add(constraint)
 
 
+    def held_constraint(self, node: Captured, required: bool) -> list[Constraint] | None:
+        """The constraints of a ``<constraint>`` whose content the tree holds as expat's events, read as
+        :meth:`constraint` reads its nodes, if reading them warns of nothing (else None: then it reads the
+        nodes, and warns). Its elements are plain ``<synchronize>``, ``<before>`` and ``<after>`` with
+        ``<sync ref=...>`` in them, references that read, and text, which is not read."""
+        owner, shift = node.attrs.get("id", ""), node.shift
+        known, plain, new = self.refs, _plain_ref, _new_constraint
+        made: list[Constraint] = []
+        level, kind, refs, anchor_text, line, column = 0, "", [], None, 0, 0
+        for event in node.events:
+            if event is None:  # an element ends
+                level -= 1
+                if level:
+                    continue
+                anchor = None
+                if anchor_text is not None:
+                    anchor = known.get(anchor_text) or plain(anchor_text) or self.ref_at(anchor_text)
+                    if anchor is None:
+                        return None
+                    known[anchor_text] = anchor
+                if kind == "synchronize":
+                    if anchor is not None:
+                        refs.insert(0, anchor)
+                        anchor = None
+                elif anchor is None:
+                    return None
+                constraint = new(Constraint)
+                constraint.__dict__ = {"kind": kind, "refs": refs, "anchor": anchor, "id": owner,
+                                       "required": required, "owner": "", "line": line,
+                                       "column": column + 1 - (shift if line == 1 else 0)}
+                made.append(constraint)
+            elif type(event) is not str:  # (text is not read)
+                level += 1
+                name, attrs, at, where = event
+                if level == 1:
+                    if name not in _CONSTRAINT_KINDS:
+                        return None
+                    kind, refs, anchor_text, line, column = name, [], attrs.get("ref"), at, where
+                    continue
+                text = attrs.get("ref") if name == "sync" and level == 2 else None
+                if text is None:
+                    return None
+                ref = known.get(text)
+                if ref is None:
+                    ref = plain(text)
+                    if ref is None:
+                        ref = self.ref_at(text)
+                        if ref is None:
+                            return None
+                    else:
+                        known[text] = ref
+                refs.append(ref)
+        return made
+
+    def ref_at(self, text: str) -> SyncRef | None:
+        """:meth:`ref` of a reference held as an event, not of the usual form; None where it does not read
+        (then the nodes are read, and the reference warned of where it is)."""
+        try:
+            ref = parse_ref(text, 0, 0, self.lenient)
+        except BMLError:
+            return None
+        self.refs[text] = ref
+        return ref
+
+
+_CONSTRAINT_KINDS = frozenset(("synchronize", "before", "after"))
+#: The elements of a block whose content its tree holds as the reader's events (see
+#: :class:`~agentsim.core.xmltree.Captured`): a block's constraints, read at once where they are plain.
+HELD = frozenset(("constraint",))
 _new_constraint = _new_behaviour = object.__new__
 # (the fields the reader gives a behaviour and a constraint, in their order, are all they have)
 assert list(Behaviour.__dataclass_fields__) == ["id", "type", "sync_ids", "attributes", "refs", "text", "marks",

@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 import re
 
+from agentsim.bml.dialect_tables import SYNC_ALIASES
 from agentsim.core.block import BEHAVIOUR_TYPES
 from agentsim.core.xmltree import Node
 
@@ -96,3 +97,59 @@ def tail_sync(tail: str) -> tuple[str, str] | None:
 def canonical_sync(sync: str) -> str | None:
     """The sync point a spelling of it names (``stroke_start``: strokeStart), None if none."""
     return SYNC_SPELLINGS.get(sync.lower().replace("_", "").replace("-", ""))
+
+
+#: The sync point names that have an alias on some type (a reference to another one is never retargeted).
+ALIAS_NAMES = frozenset(name for aliases in SYNC_ALIASES.values() for name in aliases)
+#: What :func:`respell` gives a reference kept as it is, that names no sync point with an alias.
+AS_WRITTEN = ("", None, False)
+
+
+def respell(value: str) -> tuple[str, str | None, bool]:
+    """The reference spelled as BML does, the note of the respelling (None: none), and whether it names a sync
+    point that has an alias (:data:`ALIAS_NAMES`); :data:`AS_WRITTEN` for a reference that is none of these
+    (kept as it is, nothing noted)."""
+    match = ref_sync(value)
+    if not match:
+        return AS_WRITTEN
+    path, sync, rest = match
+    canonical = canonical_sync(sync)
+    if canonical and canonical != sync:
+        return f"{path}{canonical}{rest}", f"sync point {sync} read as {canonical}", canonical in ALIAS_NAMES
+    return (value, None, True) if sync in ALIAS_NAMES else AS_WRITTEN
+
+
+class References:
+    """The references of one block respelled (:func:`respell`), each one once: a block repeats its references,
+    and thousands of them share what follows their last colon (``b1:end``, ``b2:end``)."""
+
+    def __init__(self) -> None:
+        self.respelled: dict[str, tuple[str, str | None, bool]] = {}
+        self.written_tails: dict[str, bool] = {}  # what follows a last colon -> whether it is kept as written
+
+    def found(self, value: str) -> tuple[str, str | None, bool]:
+        """:func:`respell` of ``value``."""
+        found = self.respelled.get(value)
+        if found is None:
+            found = self.respelled[value] = self.once(value)
+        return found
+
+    def kept(self, value: str) -> bool:
+        """Whether ``value`` is kept as written (:data:`AS_WRITTEN`), told at once for most references."""
+        path, colon, tail = value.rpartition(":")
+        if colon and self.written_tails.get(tail) and "\n" not in path and value.strip() == value:
+            return True
+        return self.found(value) is AS_WRITTEN
+
+    def once(self, value: str) -> tuple[str, str | None, bool]:
+        """:func:`respell` of ``value``; a reference kept as it is is known from what follows its last colon,
+        once that has been split."""
+        path, colon, tail = value.rpartition(":")
+        if not colon or "\n" in path or value[:1].isspace() or value[-1:].isspace():
+            return respell(value)
+        written = self.written_tails.get(tail)
+        if written is None:  # (split as ref_sync splits the reference, the part before the colon aside)
+            found = respell(value)
+            written = self.written_tails[tail] = found is AS_WRITTEN and tail_sync(tail) is not None
+            return found
+        return AS_WRITTEN if written else respell(value)

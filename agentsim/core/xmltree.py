@@ -72,9 +72,49 @@ class Node:
 
 
 _new_node = object.__new__
+_children = Node.__dict__["children"]  # (the slot itself, which Captured's property stands before)
+#: How deep elements inside a held element may nest before it is read into nodes at once (far from MAX_DEPTH).
+HELD_DEPTH = 16
 
 
-def _builder(expat, shift: int, data: bytes) -> dict:
+class Captured(Node):
+    """An element whose content the reader kept as expat gave it, for a reader that knows its form to read at
+    once (a BML block's ``<constraint>``, thousands of ``<sync>`` elements): ``events`` (None once made into
+    nodes) holds, in order, ``(tag, attributes, line, expat's column)`` where an element starts, None where one
+    ends, and each text; ``shift`` is what columns on line 1 lose (see :func:`_builder`).
+
+    Its ``children`` are made from the events the first time anything asks for them: the same nodes, at the
+    same places, that any other element's content is made into.
+    """
+
+    __slots__ = ("events", "shift")
+
+    @property
+    def children(self) -> list:
+        events = self.events
+        if events is not None:
+            self.events = None
+            replay = _builder(None, self.shift, b"")
+            replay["seed"](self)  # (the parent of what is replayed)
+            replay["replay"](events)
+            replay["end"]("")  # (the text before its end tag, as its end would have added it)
+            replay["close"]()
+            replay.clear()
+        return _children.__get__(self)
+
+    @children.setter
+    def children(self, value: list) -> None:
+        self.events = None
+        _children.__set__(self, value)
+
+
+class _Position:
+    """Where a replayed event was (what the builder reads of expat)."""
+
+    __slots__ = ("CurrentLineNumber", "CurrentColumnNumber")
+
+
+def _builder(expat, shift: int, data: bytes, capture: frozenset[str] = frozenset()) -> dict:
     """The expat callbacks that build :class:`Node` trees, recording where each element starts, and what
     they build: ``root``, and ``defaults``, the attribute defaults an internal DTD declares (``gesture
     lexeme="BEAT"``), which are not applied. ``shift`` is subtracted from columns on line 1 (text put
@@ -83,6 +123,12 @@ def _builder(expat, shift: int, data: bytes) -> dict:
     (Closures over local state: one element costs a call of ``start`` and one of ``end``, nothing more.)
     ``data``, the document: where it spells ``xmlns`` fewer times than a namespace could be declared in it,
     no element after that has its attributes searched for declarations.
+
+    ``capture``: tags of the root's children whose content is held as expat's events (a :class:`Captured`
+    element) instead of being made into nodes; content that declares a namespace, or nests deeper than
+    :data:`HELD_DEPTH`, is made into nodes at once (as it would have been). ``replay`` makes events into
+    nodes as ``start``, ``end`` and ``text`` would have made them where they were; ``seed`` puts an element
+    on the stack (a replay's parent).
     """
     state: dict = {"root": None, "defaults": [], "scopes": [{}]}
     stack: list[Node] = []
@@ -107,15 +153,20 @@ def _builder(expat, shift: int, data: bytes) -> dict:
         else:
             children.append(text)
 
+    where = expat  # (what tells where an element starts: expat, or a replayed event's place)
+
     def start(name: str, attrs: dict[str, str]) -> None:
         if pending:
             flush()
+        kind = Node
         if stack:
             if len(stack) >= MAX_DEPTH:
-                raise BMLError(f"elements nested more than {MAX_DEPTH} deep", expat.CurrentLineNumber,
-                               expat.CurrentColumnNumber + 1)
+                raise BMLError(f"elements nested more than {MAX_DEPTH} deep", where.CurrentLineNumber,
+                               where.CurrentColumnNumber + 1)
             parent = stack[-1]
             namespaces = parent.namespaces
+            if capture and len(stack) == 1 and name in capture:
+                kind = Captured
         else:
             parent = None
             namespaces = state["scopes"][0]
@@ -132,9 +183,9 @@ def _builder(expat, shift: int, data: bytes) -> dict:
             declarations[0] = max(declarations[0] - (len(attrs) - len(plain)), 0)
             attrs = plain
             state["scopes"].append(namespaces)
-        line = expat.CurrentLineNumber
+        line = where.CurrentLineNumber
         # (a Node made without its __init__)
-        node = new(Node)
+        node = new(kind)
         node._tag = name
         parts = tags.get(name)
         if parts is None:
@@ -143,7 +194,7 @@ def _builder(expat, shift: int, data: bytes) -> dict:
         node.local, node.prefix = parts
         node.attrs = attrs
         node.line = line
-        node.column = expat.CurrentColumnNumber + 1 - (shift if line == 1 else 0)
+        node.column = where.CurrentColumnNumber + 1 - (shift if line == 1 else 0)
         node.children = []
         node.namespaces = namespaces
         if parent is not None:
@@ -151,6 +202,8 @@ def _builder(expat, shift: int, data: bytes) -> dict:
         else:
             state["root"] = node
         push(node)
+        if kind is Captured:
+            hold(node)
 
     def end(name: str) -> None:
         if pending:
@@ -166,11 +219,69 @@ def _builder(expat, shift: int, data: bytes) -> dict:
             shown = default if len(default) <= 40 else default[:37] + "..."
             state["defaults"].append(f"{element} {attribute}={shown!r}")
 
-    state.update(start=start, end=end, text=text, attlist=attlist, names=tags.keys())
+    def hold(node: Captured) -> None:
+        # (expat's handlers while the content of ``node`` is held: closures over its events and depth)
+        node.events = events = []
+        node.shift = shift
+        add = events.append
+        depth = 0
+
+        def held_start(name: str, attrs: dict[str, str]) -> None:
+            nonlocal depth
+            if depth >= HELD_DEPTH or declarations[0] and attrs and "xmlns" in "".join(attrs):
+                release()  # (made into nodes now, and read on as every element is)
+                node.events = None
+                replay(events)
+                start(name, attrs)
+                return
+            depth += 1
+            add((name, attrs, expat.CurrentLineNumber, expat.CurrentColumnNumber))
+            if name not in tags:
+                prefix, colon, local = name.partition(":")
+                tags[name] = (local, prefix) if colon else (name, None)
+
+        def held_end(name: str) -> None:
+            nonlocal depth
+            if depth:
+                depth -= 1
+                add(None)
+                return
+            release()  # the held element's own end
+            end(name)
+
+        expat.StartElementHandler, expat.EndElementHandler, expat.CharacterDataHandler = held_start, held_end, add
+
+    def release() -> None:
+        expat.StartElementHandler, expat.EndElementHandler, expat.CharacterDataHandler = start, end, text
+
+    def replay(events: list) -> None:
+        nonlocal where
+        place = where = _Position()
+        try:
+            for event in events:
+                if event is None:
+                    end("")
+                elif type(event) is str:
+                    text(event)
+                else:
+                    place.CurrentLineNumber, place.CurrentColumnNumber = event[2], event[3]
+                    start(event[0], event[1])
+        finally:
+            where = expat
+
+    def close() -> None:
+        # (the callbacks refer to each other, and to the parser, which holds the document: cut, so that neither
+        # waits for a collection)
+        nonlocal expat, where, hold, release, replay
+        expat = where = hold = release = replay = None
+
+    state.update(start=start, end=end, text=text, attlist=attlist, names=tags.keys(), seed=push, replay=replay,
+                 close=close)
     return state
 
 
-def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None, made: dict | None = None) -> Node:
+def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None, made: dict | None = None,
+           capture: frozenset[str] = frozenset()) -> Node:
     # defusedxml's reader installs the handlers that refuse entity declarations and external
     # references on its expat parser; the tree is built straight from that parser's callbacks.
     reader = create_parser(forbid_dtd=False, forbid_entities=True, forbid_external=True)
@@ -178,7 +289,7 @@ def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None, made:
     reader.setFeature(xml.sax.handler.feature_string_interning, True)  # (a tag name is one string: hashed once)
     reader.reset()
     expat = reader._parser
-    builder = _builder(expat, shift, data)
+    builder = _builder(expat, shift, data, capture)
     expat.StartElementHandler = builder["start"]
     expat.EndElementHandler = builder["end"]
     expat.CharacterDataHandler = builder["text"]
@@ -207,6 +318,7 @@ def _parse(data: bytes, shift: int = 0, defaults: list[str] | None = None, made:
         expat.AttlistDeclHandler = None
         root, declared = builder["root"], builder["defaults"]
         seen = {"names": set(builder["names"]), "scopes": builder["scopes"]}
+        builder["close"]()
         builder.clear()  # (the callbacks and the state they fill refer to each other: another cycle)
         reader._parser = None
     if root is None:
@@ -232,12 +344,13 @@ def encode(text: str | bytes) -> bytes:
                        f"({text[exc.start:exc.end].encode('unicode_escape').decode('ascii')})", line, column) from None
 
 
-def read_tree(text: str | bytes, defaults: list[str] | None = None) -> Node:
+def read_tree(text: str | bytes, defaults: list[str] | None = None, capture: frozenset[str] = frozenset()) -> Node:
     """The element tree of one XML document. Raises :class:`BMLError` (with line and column).
 
     ``defaults``: gets the attribute defaults the document's internal DTD declares (``gesture
-    lexeme='BEAT'``); they are never applied (an element has the attributes written in it, no more)."""
-    return _parse(encode(text), defaults=defaults)
+    lexeme='BEAT'``); they are never applied (an element has the attributes written in it, no more).
+    ``capture``: the tags of the root's children to hold as :class:`Captured` elements."""
+    return _parse(encode(text), defaults=defaults, capture=capture)
 
 
 #: The element that :func:`read_forest` puts around several top-level elements.
@@ -248,18 +361,19 @@ _JUNK = xml.parsers.expat.errors.messages[xml.parsers.expat.errors.codes[xml.par
 
 
 def read_forest(text: str | bytes, defaults: list[str] | None = None,
-                made: dict | None = None) -> tuple[Node, bool]:
+                made: dict | None = None, capture: frozenset[str] = frozenset()) -> tuple[Node, bool]:
     """The element tree of a document that may hold several top-level elements.
 
     Returns the root, and whether it is a :data:`FOREST` element made here around several elements one
     after another (XML declarations among them are dropped; positions stay those of the text given).
     ``defaults``: as for :func:`read_tree`. ``made``: gets what the tree is made of, without a walk through
     it: ``names``, the set of element names written, and ``scopes``, the namespace mappings the elements
-    share (each element's ``namespaces`` is one of them).
+    share (each element's ``namespaces`` is one of them). ``capture``: as for :func:`read_tree` (where the
+    document has one top-level element).
     """
     data = encode(text)
     try:
-        return _parse(data, defaults=defaults, made=made), False
+        return _parse(data, defaults=defaults, made=made, capture=capture), False
     except BMLError as exc:
         if not exc.reason.endswith(_JUNK):
             raise
