@@ -82,3 +82,47 @@ def test_samples_written_anew_meanwhile_are_not_read(tmp_path):
     fresh.replace(samples)  # the same bytes in another file, put in its place as the cache writes one
     with pytest.raises(AgentsimError, match="written anew while this run used it"):
         read[0:10]
+
+
+def test_keys_are_the_hash_of_the_identity_and_the_speech_as_json(tmp_path):
+    """A key is the SHA-256 of the JSON of the backend's identity and the speech (keys sorted), however it is
+    put together; an identity that changes (another rate) gives other keys from then on."""
+    import hashlib
+    import json
+    from dataclasses import asdict
+
+    from scenarios.storytelling.voice import WholeSpeechCache, _identity
+    from speech_timing.backend import Prosody, SpeechText
+
+    backend = EspeakBackend()
+    kept = WholeSpeechCache(backend, cache_dir=tmp_path)
+
+    def expected(fields: dict) -> str:
+        blob = json.dumps({"backend": _identity(backend), **fields}, sort_keys=True, ensure_ascii=False)
+        return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:32]
+
+    speeches = [SpeechText("Le héron \\ \"dit\"."), SpeechText("Wait.", marks=[(0, "m1")]),
+                SpeechText("Slowly now.", rate=0.8),
+                SpeechText("Now.", prosody=[Prosody("break", 0, 0, (("time", "300ms"),))])]
+    for _ in range(2):  # (the identity's JSON once written, then kept)
+        assert kept.key(speeches[0].text) == expected({"text": speeches[0].text})
+        for speech in speeches[1:]:
+            fields = {"text": speech.text, "marks": [list(m) for m in speech.marks], "rate": speech.rate,
+                      "prosody": [asdict(p) for p in speech.prosody]}
+            assert kept.speech_key(speech) == expected(fields)
+    before = kept.key("Wait.")
+    backend.rate = backend.rate + 20
+    assert kept.key("Wait.") == expected({"text": "Wait."}) != before
+
+
+def test_an_entry_whose_samples_are_cut_short_is_said_again(tmp_path):
+    from scenarios.storytelling.voice import WholeSpeechCache
+    from speech_timing.backend import SpeechText
+
+    speech = SpeechText("The heron waits by the water.")
+    said = WholeSpeechCache(EspeakBackend(), cache_dir=tmp_path).synthesize(speech)
+    (samples,) = tmp_path.glob("*.npy")
+    samples.write_bytes(samples.read_bytes()[:-2])
+    again = WholeSpeechCache(EspeakBackend(), cache_dir=tmp_path)
+    read = again.synthesize(speech)
+    assert (again.hits, again.misses) == (0, 1) and np.array_equal(np.asarray(read.audio), np.asarray(said.audio))

@@ -217,10 +217,12 @@ def test_phoneme_marks_and_the_cache(tmp_path):
 
 
 def test_the_cache_keeps_the_timeline_in_columns_in_samples_where_they_are_exact(tmp_path):
-    """A cache entry holds its words and phonemes as columns, their times as whole samples when each is one (read
-    back as the same seconds), else as seconds; an entry of another layout or with columns of unequal lengths is
-    synthesised again."""
+    """A cache entry is two lines of JSON: what the speech is, then its timeline, the words and phonemes as
+    columns, their times as whole samples when each is one (read back as the same seconds), else as seconds; the
+    first line says the second's length and CRC-32. An entry of another layout, or whose timeline is not the one
+    written (columns of unequal lengths), is synthesised again."""
     import json
+    import zlib
     from dataclasses import replace
 
     from scenarios.storytelling.voice import CACHE_FORMAT
@@ -240,27 +242,37 @@ def test_the_cache_keeps_the_timeline_in_columns_in_samples_where_they_are_exact
         folder = tmp_path / times
         said = CachedBackend(backend, cache_dir=folder).utterance(text)
         (entry,) = folder.glob("*.json")
-        meta = json.loads(entry.read_text(encoding="utf-8"))
-        assert (meta["format"], meta["times"], CACHE_FORMAT) == (2, times, 2)
-        assert list(meta["words"]) == ["index", "text", "start", "end", "char_start", "char_end"]
-        assert list(meta["phonemes"]) == ["symbol", "start", "end", "word_index", "stressed"]
-        assert meta["words"]["text"] == ["Tell", "me", "a", "story"] and len(meta["phonemes"]["symbol"]) == len(
+        head, line = entry.read_bytes().split(b"\n")
+        meta, timeline = json.loads(head), json.loads(line)
+        assert (meta["format"], meta["times"], CACHE_FORMAT) == (3, times, 3)
+        assert meta["timeline"] == [len(line), zlib.crc32(line)] and "words" not in meta
+        assert list(timeline["words"]) == ["index", "text", "start", "end", "char_start", "char_end"]
+        assert list(timeline["phonemes"]) == ["symbol", "start", "end", "word_index", "stressed"]
+        assert timeline["words"]["text"] == ["Tell", "me", "a", "story"] and len(timeline["phonemes"]["symbol"]) == len(
             said.phonemes) > 4
         rate = said.sample_rate
-        assert meta["phonemes"]["start"] == [round(p.start * rate) if times == "samples" else p.start
-                                             for p in said.phonemes]
+        assert timeline["phonemes"]["start"] == [round(p.start * rate) if times == "samples" else p.start
+                                                 for p in said.phonemes]
         if times == "seconds":  # (the built-in model's times fall between samples)
             assert any(round(p.start * rate) / rate != p.start for p in said.phonemes)
         again = CachedBackend(backend, cache_dir=folder)
         read = again.utterance(text)
         assert again.hits == 1 and read == said
         assert [type(p.stressed) for p in read.phonemes] == [bool] * len(said.phonemes)
-        for spoilt in ({**meta, "format": 1, "words": [vars(w) for w in said.words]},
-                       {**meta, "phonemes": {**meta["phonemes"], "end": meta["phonemes"]["end"][:-1]}},
-                       {**meta, "times": "frames"}):
-            entry.write_text(json.dumps(spoilt), encoding="utf-8")
+        unequal = json.dumps({**timeline, "phonemes": {**timeline["phonemes"],
+                                                       "end": timeline["phonemes"]["end"][:-1]}}).encode()
+        for spoilt in (json.dumps({**meta, **timeline, "format": 2}).encode(),  # the layout before
+                       head + b"\n" + unequal,
+                       json.dumps({**meta, "times": "frames"}).encode() + b"\n" + line,
+                       head + b"\n" + line[:-1] + b" ",
+                       head):
+            entry.write_bytes(spoilt)
             third = CachedBackend(backend, cache_dir=folder)
             assert third.utterance(text) == said and (third.hits, third.misses) == (0, 1)
+        forged = json.dumps({**meta, "timeline": [len(unequal), zlib.crc32(unequal)]}).encode() + b"\n" + unequal
+        entry.write_bytes(forged)  # (a timeline written otherwise than by the cache, and its check with it)
+        with pytest.raises(AgentsimError, match="speech cache entry .* is damaged"):
+            CachedBackend(backend, cache_dir=folder).utterance(text).phonemes
 
 
 def test_an_utterance_read_from_the_cache_makes_its_timeline_when_asked_and_is_one_like_any(tmp_path):
@@ -279,10 +291,11 @@ def test_an_utterance_read_from_the_cache_makes_its_timeline_when_asked_and_is_o
     said = CachedBackend(BuiltinBackend(), cache_dir=tmp_path).synthesize(speech)
     read = CachedBackend(BuiltinBackend(), cache_dir=tmp_path).utterance(speech.text)
     assert type(said) is Utterance and type(read) is ReadUtterance
-    assert "_words" not in vars(read) and "_phonemes" not in vars(read)  # nothing made yet
+    assert not {"_words", "_phonemes", "_timeline_rows"} & set(vars(read))  # nothing read yet
     assert read.duration == said.duration and read.sentences == said.sentences
     assert read == said and said == read and not (read != said)
     assert vars(read)["_words"] == said.words and vars(read)["_phonemes"] == said.phonemes
+    assert "_timeline_rows" not in vars(read) and "_timeline" not in vars(read)  # (read, then let go)
     assert read.words is read.words  # made once
     for other in (replace(read), copy.deepcopy(read), pickle.loads(pickle.dumps(read))):
         assert other == said and asdict(other) == asdict(said)
@@ -290,8 +303,8 @@ def test_an_utterance_read_from_the_cache_makes_its_timeline_when_asked_and_is_o
     moved = replace(read, words=[replace(w, start=w.start + 1.0) for w in read.words])
     assert moved != said and moved.words[0].start == said.words[0].start + 1.0 and moved.phonemes == said.phonemes
     fresh = CachedBackend(BuiltinBackend(), cache_dir=tmp_path).utterance(speech.text)
-    fresh.words = [Word(0, "Hi", 0.0, 0.1, 0, 2)]  # set before ever read: the cached columns are not made
-    assert [w.text for w in fresh.words] == ["Hi"] and "_word_rows" not in vars(fresh)
+    fresh.words = [Word(0, "Hi", 0.0, 0.1, 0, 2)]  # set before ever read: the timeline is not read for it
+    assert [w.text for w in fresh.words] == ["Hi"] and "_timeline_rows" not in vars(fresh) and fresh.phonemes == said.phonemes
     assert read != replace(said, duration=said.duration + 1.0)
 
 

@@ -37,6 +37,7 @@ import math
 import os
 import re
 import time
+import zlib
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -56,7 +57,7 @@ __all__ = ["CachedBackend", "WholeSpeechCache", "KeptSamples", "PhonemeMarks", "
            "mark_event", "place_mark", "CACHE_FORMAT", "ReadUtterance"]
 
 #: Version of the cache files; bump it when their layout or the meaning of their contents changes.
-CACHE_FORMAT = 2
+CACHE_FORMAT = 3
 
 #: The header of a cache file's samples (numpy's format 1.0, as ``write_array_header_1_0`` writes 16-bit mono).
 _SAMPLES_HEADER = re.compile(rb"\{'descr': '<i2', 'fortran_order': False, 'shape': \((\d+),\), \} *\n")
@@ -248,9 +249,10 @@ def _phonemes(rows: list) -> list[Phoneme]:
 
 
 class ReadUtterance(Utterance):
-    """An utterance read from the cache, whose ``words`` and ``phonemes`` are made from the entry's columns
-    (checked when it was read) the first time they are asked for: a block's schedule asks its speeches for
-    their lengths and marks only, and a thousand-behaviour block has thousands of words and phonemes.
+    """An utterance read from the cache, whose ``words`` and ``phonemes`` are read from the entry's timeline
+    (the second line of its file, checked by its length and CRC-32 when the entry was read) the first time
+    they are asked for: a block's schedule asks its speeches for their lengths and marks only, and a
+    thousand-behaviour block has thousands of words and phonemes.
 
     Otherwise it is an :class:`~speech_timing.backend.Utterance`: equal to one with the same fields, and
     ``dataclasses.replace``, ``copy`` and ``pickle`` treat it as one.
@@ -258,29 +260,48 @@ class ReadUtterance(Utterance):
 
     @property
     def words(self) -> list[Word]:
-        state = self.__dict__
-        made = state.get("_words")
+        made = self.__dict__.get("_words")
         if made is None:
-            made = state["_words"] = _words(state.pop("_word_rows"))
+            made = self.__dict__["_words"] = _words(self._rows()[0])
+            self._read()
         return made
 
     @words.setter
     def words(self, value: list[Word]) -> None:
         self.__dict__["_words"] = value
-        self.__dict__.pop("_word_rows", None)
 
     @property
     def phonemes(self) -> list[Phoneme]:
-        state = self.__dict__
-        made = state.get("_phonemes")
+        made = self.__dict__.get("_phonemes")
         if made is None:
-            made = state["_phonemes"] = _phonemes(state.pop("_phoneme_rows"))
+            made = self.__dict__["_phonemes"] = _phonemes(self._rows()[1])
+            self._read()
         return made
 
     @phonemes.setter
     def phonemes(self, value: list[Phoneme]) -> None:
         self.__dict__["_phonemes"] = value
-        self.__dict__.pop("_phoneme_rows", None)
+
+    def _read(self) -> None:
+        if "_words" in self.__dict__ and "_phonemes" in self.__dict__:  # (both made: their columns are let go)
+            self.__dict__.pop("_timeline_rows", None)
+
+    def _rows(self) -> tuple[list, list]:
+        """The words' and the phonemes' columns (times in seconds), read from the timeline once."""
+        state = self.__dict__
+        rows = state.get("_timeline_rows")
+        if rows is None:
+            line, rate, path = state["_timeline"]
+            try:
+                columns = json.loads(line)
+                rows = (_timeline(columns["words"], _WORD_FIELDS, rate),
+                        _timeline(columns["phonemes"], _PHONEME_FIELDS, rate))
+            except (ValueError, KeyError, TypeError, AttributeError, ZeroDivisionError) as exc:
+                raise AgentsimError(f"the speech cache entry {path} is damaged ({exc}): delete it, or run with "
+                                    "--no-cache") from None
+            state["_timeline_rows"] = rows
+            del state["_timeline"]
+        return rows
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Utterance):
@@ -316,10 +337,12 @@ class CachedBackend:
     -----
     A cache entry is ``<key>.json`` and, when the backend makes sound, ``<key>.npy`` (the audio as 16-bit
     samples, exactly as espeak-ng produced them). The key is the SHA-256 of the backend's identity and the text.
-    The JSON object holds ``format`` (:data:`CACHE_FORMAT`), ``backend`` (that identity), ``text``, ``duration``
-    (s), ``sample_rate``, ``backend_name``, ``sentences`` (their onsets, s), ``audio`` (whether there is a
-    ``.npy``), ``marks`` when the backend placed its own (``[name, s]`` pairs), and the timeline in columns, one
-    list a field: ``words`` (``index``, ``text``, ``start``, ``end``, ``char_start``, ``char_end``) and
+    The JSON file has two lines. The first holds ``format`` (:data:`CACHE_FORMAT`), ``backend`` (that identity),
+    ``text``, ``duration`` (s), ``sample_rate``, ``backend_name``, ``sentences`` (their onsets, s), ``audio``
+    (whether there is a ``.npy``), ``samples`` (where its samples start, and how many), ``marks`` when the backend
+    placed its own (``[name, s]`` pairs), ``times`` and ``timeline`` (the second line's length and CRC-32). The
+    second holds the timeline in columns, one list a field, read when first asked for (:class:`ReadUtterance`):
+    ``words`` (``index``, ``text``, ``start``, ``end``, ``char_start``, ``char_end``) and
     ``phonemes`` (``symbol``, ``start``, ``end``, ``word_index``, ``stressed``). ``times`` says what their
     ``start`` and ``end`` count: ``"samples"`` at ``sample_rate`` (each time divided by it gives back exactly
     the seconds the backend gave, as for espeak-ng), else ``"seconds"``. espeak-ng is only exactly
@@ -338,6 +361,7 @@ class CachedBackend:
         #: keys of the texts synthesised (not found in the cache) by this backend
         self.synthesised: set[str] = set()
         self._memory: dict[str, Utterance] = {}
+        self._identity_json: tuple[dict | None, str] = (None, "")  # the backend's identity, and its JSON
 
     def key(self, text: str) -> str:
         """Cache key of ``text`` spoken by this backend."""
@@ -345,7 +369,14 @@ class CachedBackend:
 
     def _hashed(self, fields: dict) -> str:
         """The key of ``fields`` with the backend's identity (the hash of their JSON, keys sorted)."""
-        blob = json.dumps({"backend": _identity(self.backend), **fields}, sort_keys=True, ensure_ascii=False)
+        identity = _identity(self.backend)
+        if not fields or min(fields) <= "backend":  # (else the identity's JSON leads: written once, not per text)
+            blob = json.dumps({"backend": identity, **fields}, sort_keys=True, ensure_ascii=False)
+        else:
+            if self._identity_json[0] != identity:
+                self._identity_json = (identity, json.dumps(identity, sort_keys=True, ensure_ascii=False))
+            blob = '{"backend": ' + self._identity_json[1] + ", " + json.dumps(fields, sort_keys=True,
+                                                                                ensure_ascii=False)[1:]
         return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:32]
 
     def utterance(self, text: str) -> Utterance:
@@ -407,21 +438,27 @@ class CachedBackend:
                 # (no 16-bit copy held whole)
                 np.lib.format.write_array_header_1_0(f, {"descr": "<i2", "fortran_order": False,
                                                          "shape": (len(audio),)})
+                samples = [f.tell(), len(audio)]
                 for a in range(0, len(audio), READ_BLOCK):  # no float64 copy of a long narration either
                     block = np.round(np.asarray(audio[a:a + READ_BLOCK], dtype=np.float64) * 32768.0)
                     f.write(np.clip(block, -32768, 32767).astype("<i2").tobytes())
         meta = {"format": CACHE_FORMAT, "backend": _identity(self.backend), "text": utt.text,
                 "duration": utt.duration, "sample_rate": utt.sample_rate, "backend_name": utt.backend,
-                "sentences": list(utt.sentences), "audio": has_audio, "times": "samples",
-                "words": _columns(utt.words, _WORD_FIELDS, utt.sample_rate),
-                "phonemes": _columns(utt.phonemes, _PHONEME_FIELDS, utt.sample_rate)}
-        if meta["words"] is None or meta["phonemes"] is None:  # times between samples: kept in seconds
-            meta.update(times="seconds", words={name: [getattr(w, name) for w in utt.words] for name in _WORD_FIELDS},
-                        phonemes={name: [getattr(p, name) for p in utt.phonemes] for name in _PHONEME_FIELDS})
+                "sentences": list(utt.sentences), "audio": has_audio, "times": "samples"}
+        timeline = {"words": _columns(utt.words, _WORD_FIELDS, utt.sample_rate),
+                    "phonemes": _columns(utt.phonemes, _PHONEME_FIELDS, utt.sample_rate)}
+        if timeline["words"] is None or timeline["phonemes"] is None:  # times between samples: kept in seconds
+            meta["times"] = "seconds"
+            timeline = {"words": {name: [getattr(w, name) for w in utt.words] for name in _WORD_FIELDS},
+                        "phonemes": {name: [getattr(p, name) for p in utt.phonemes] for name in _PHONEME_FIELDS}}
+        if has_audio:
+            meta["samples"] = samples
         if utt.marks:  # the backend's own marks (WholeSpeechCache)
             meta["marks"] = [[m.name, m.time] for m in utt.marks]
-        with written(meta_path) as tmp:
-            tmp.write_text(json.dumps(meta, ensure_ascii=False), encoding="utf-8")
+        line = json.dumps(timeline, ensure_ascii=False).encode("utf-8")
+        meta["timeline"] = [len(line), zlib.crc32(line)]
+        with written(meta_path) as tmp:  # (JSON written with no line break: the timeline is the second line)
+            tmp.write_bytes(json.dumps(meta, ensure_ascii=False).encode("utf-8") + b"\n" + line)
         if has_audio:
             try:
                 stored = PcmFile(audio_path)
@@ -438,17 +475,20 @@ class CachedBackend:
         meta_path, audio_path = self._paths(key)
         try:
             with open(meta_path, "rb") as file:  # (as Path.read_bytes reads it, without pathlib's steps)
-                meta = json.loads(file.read())
-            if meta.get("format") != CACHE_FORMAT or meta.get("text") != text:
+                data = file.read()
+            cut = data.find(b"\n")
+            meta = json.loads(data[:cut]) if cut > 0 else None
+            if type(meta) is not dict or meta.get("format") != CACHE_FORMAT or meta.get("text") != text:
                 return None
             if meta["times"] not in ("samples", "seconds"):
                 return None
             rate = int(meta["sample_rate"]) if meta["times"] == "samples" else None
-            # (checked and in seconds now; the Word and Phoneme objects are made when first asked for)
-            words, phonemes = _timeline(meta["words"], _WORD_FIELDS, rate), _timeline(meta["phonemes"], _PHONEME_FIELDS, rate)
-            audio = self._samples(audio_path) if meta["audio"] else None
+            timeline = data[cut + 1:]  # (read when the words or phonemes are first asked for, as it was written)
+            if [len(timeline), zlib.crc32(timeline)] != meta["timeline"]:
+                return None
+            audio = self._samples(audio_path, meta.get("samples")) if meta["audio"] else None
             utt = _new(ReadUtterance)
-            utt.__dict__.update(text=text, duration=float(meta["duration"]), _word_rows=words, _phoneme_rows=phonemes,
+            utt.__dict__.update(text=text, duration=float(meta["duration"]), _timeline=(timeline, rate, meta_path),
                                 marks=[Mark(name, float(t)) for name, t in meta.get("marks", [])],
                                 sentences=[float(s) for s in meta["sentences"]], sample_rate=int(meta["sample_rate"]),
                                 audio=audio, backend=meta.get("backend_name", ""))
@@ -456,8 +496,9 @@ class CachedBackend:
             return None
         return utt
 
-    def _samples(self, path: Path) -> Pcm16:
-        """The samples of the cache file ``path``: read from the file as they are mixed, never held whole."""
+    def _samples(self, path: Path, where: list | None = None) -> Pcm16:
+        """The samples of the cache file ``path``: read from the file as they are mixed, never held whole.
+        (``where``: the byte they start at and how many there are, as the entry says.)"""
         return PcmFile(path)
 
 
@@ -496,9 +537,16 @@ class WholeSpeechCache(CachedBackend):
             stored.close()
         return utt  # the samples stay in memory
 
-    def _samples(self, path: Path) -> Pcm16:
+    def _samples(self, path: Path, where: list | None = None) -> Pcm16:
         """The samples of the cache file ``path``, read into memory when they are first asked for (no file is
-        held open meanwhile: a run may keep thousands of speeches, and most runs never hear them)."""
+        held open meanwhile: a run may keep thousands of speeches, and most runs never hear them). ``where``:
+        the byte they start at and how many there are, as the entry says (else read from the file's header)."""
+        if where is not None:
+            offset, length = (int(n) for n in where)
+            status = os.stat(path)
+            if offset <= 0 or length < 0 or status.st_size < offset + 2 * length:
+                raise ValueError(f"{path}: cut short")
+            return KeptSamples(path, offset, length, (status.st_ino, status.st_size, status.st_mtime_ns))
         descriptor = os.open(path, os.O_RDONLY)  # (read as a file object reads it, without making one)
         try:
             start = os.read(descriptor, 10)  # numpy's magic, format 1.0 (as _save writes it), the header's length
