@@ -506,18 +506,25 @@ class Adapter:
         """Whether the content of a ``<constraint>`` held as events (:class:`~agentsim.core.xmltree.Captured`)
         has elements, all ``<synchronize>``, ``<before>`` and ``<after>`` (as written, no prefix), and keeps
         every reference of theirs and of their children as written (what :meth:`constraint_refs` reads)."""
-        level, kept, elements = 0, self.references.kept, False
+        level, elements, references = 0, False, self.references
+        tails, found = references.written_tails, references.found
         for event in events:
             if event is None:
                 level -= 1
-            elif type(event) is not str:
+            elif type(event) is tuple:
                 level += 1
-                if level == 1 and event[0] not in _CONSTRAINT_KINDS:
-                    return False
-                elements = True
-                value = event[1].get("ref") if level <= 2 else None
-                if value is not None and not kept(value):
-                    return False
+                if level == 1:
+                    if event[0] not in _CONSTRAINT_KINDS:
+                        return False
+                    elements = True
+                elif level > 2:
+                    continue
+                value = event[1].get("ref")
+                if value is not None:  # (References.kept, without a call for most references)
+                    colon = value.rfind(":")
+                    if not (colon >= 0 and tails.get(value[colon + 1:]) and "\n" not in value
+                            and value.strip() == value) and found(value) is not AS_WRITTEN:
+                        return False
         return elements
 
     def ref(self, value: str) -> str:

@@ -633,27 +633,30 @@ class _Reader:
                                        "required": required, "owner": "", "line": line,
                                        "column": column + 1 - (shift if line == 1 else 0)}
                 made.append(constraint)
-            elif type(event) is not str:  # (text is not read)
-                level += 1
-                name, attrs, at, where = event
-                if level == 1:
-                    if name not in _CONSTRAINT_KINDS:
+            elif type(event) is tuple:  # an element starts (text is not read)
+                if level == 1:  # (in a constraint: a <sync ref=...>, the commonest)
+                    level = 2
+                    text = event[1].get("ref") if event[0] == "sync" else None
+                    if text is None:
                         return None
-                    kind, refs, anchor_text, line, column = name, [], attrs.get("ref"), at, where
-                    continue
-                text = attrs.get("ref") if name == "sync" and level == 2 else None
-                if text is None:
-                    return None
-                ref = known.get(text)
-                if ref is None:
-                    ref = plain(text)
+                    ref = known.get(text)
                     if ref is None:
-                        ref = self.ref_at(text)
+                        ref = plain(text)
                         if ref is None:
-                            return None
-                    else:
-                        known[text] = ref
-                refs.append(ref)
+                            ref = self.ref_at(text)
+                            if ref is None:
+                                return None
+                        else:
+                            known[text] = ref
+                    refs.append(ref)
+                elif level == 0:  # a constraint
+                    level = 1
+                    kind, attrs, line, column = event
+                    if kind not in _CONSTRAINT_KINDS:
+                        return None
+                    refs, anchor_text = [], attrs.get("ref")
+                else:
+                    return None
         return made
 
     def ref_at(self, text: str) -> SyncRef | None:

@@ -136,8 +136,8 @@ class References:
 
     def kept(self, value: str) -> bool:
         """Whether ``value`` is kept as written (:data:`AS_WRITTEN`), told at once for most references."""
-        path, colon, tail = value.rpartition(":")
-        if colon and self.written_tails.get(tail) and "\n" not in path and value.strip() == value:
+        colon = value.rfind(":")
+        if colon >= 0 and self.written_tails.get(value[colon + 1:]) and "\n" not in value and value.strip() == value:
             return True
         return self.found(value) is AS_WRITTEN
 
