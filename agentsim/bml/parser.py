@@ -554,7 +554,6 @@ class _Reader:
         add = self.block.constraints.append
         known = self.refs  # (looked up here at once: a block's constraints repeat their references)
         plain = _plain_ref  # (and the usual form read here at once)
-        new = _new_constraint
         for child in node.children:
             if isinstance(child, str):
                 continue
@@ -580,26 +579,37 @@ class _Reader:
                     else:
                         known[text] = ref
                 refs.append(ref)
-            anchor = None
             text = child.attrs.get("ref")
-            if text is not None:
-                anchor = known.get(text) or plain(text) or self._ref_or_warn(text, child, "constraint")
-                if anchor is None:
-                    continue
-                known[text] = anchor
-            if kind == "synchronize":
-                if anchor is not None:
-                    refs.insert(0, anchor)
-                    anchor = None
-            elif anchor is None:
+            constraint = self.made(kind, refs, text, lambda text: self._ref_or_warn(text, child, "constraint"), owner,
+                                   required, child.line, child.column)
+            if constraint is not None:
+                add(constraint)
+            elif text is None:  # (else its anchor was warned of)
                 self.warn("PARSING_FAILURE", f"<{kind}> needs a ref attribute; constraint ignored", child)
-                continue
-            # (made as Constraint(kind, refs, anchor, owner, required, line=, column=) makes it, without its
-            # __init__: a block has thousands)
-            constraint = new(Constraint)
-            constraint.__dict__ = {"kind": kind, "refs": refs, "anchor": anchor, "id": owner, "required": required,
-                                   "owner": "", "line": child.line, "column": child.column}
-            add(constraint)
+
+    def made(self, kind: str, refs: list[SyncRef], anchor_text: str | None, read, owner: str, required: bool,
+             line: int | None, column: int | None) -> Constraint | None:
+        """The constraint of a ``<synchronize>``, ``<before>`` or ``<after>`` with its references read, and the
+        text of its ``ref`` attribute (``read`` reads one not of the usual form, None where it cannot); None
+        where that does not read, or where it needs one and has none."""
+        anchor = None
+        if anchor_text is not None:
+            anchor = self.refs.get(anchor_text) or _plain_ref(anchor_text) or read(anchor_text)
+            if anchor is None:
+                return None
+            self.refs[anchor_text] = anchor
+        if kind == "synchronize":
+            if anchor is not None:
+                refs.insert(0, anchor)
+                anchor = None
+        elif anchor is None:
+            return None
+        # (made as Constraint(kind, refs, anchor, owner, required, line=, column=) makes it, without its
+        # __init__: a block has thousands)
+        constraint = _new_constraint(Constraint)
+        constraint.__dict__ = {"kind": kind, "refs": refs, "anchor": anchor, "id": owner, "required": required,
+                               "owner": "", "line": line, "column": column}
+        return constraint
 
 
     def held_constraint(self, node: Captured, required: bool) -> list[Constraint] | None:
@@ -608,7 +618,7 @@ class _Reader:
         nodes, and warns). Its elements are plain ``<synchronize>``, ``<before>`` and ``<after>`` with
         ``<sync ref=...>`` in them, references that read, and text, which is not read."""
         owner, shift = node.attrs.get("id", ""), node.shift
-        known, plain, new = self.refs, _plain_ref, _new_constraint
+        known, plain, finish, read = self.refs, _plain_ref, self.made, self.ref_at
         made: list[Constraint] = []
         level, kind, refs, anchor_text, line, column = 0, "", [], None, 0, 0
         for event in node.events:
@@ -616,22 +626,10 @@ class _Reader:
                 level -= 1
                 if level:
                     continue
-                anchor = None
-                if anchor_text is not None:
-                    anchor = known.get(anchor_text) or plain(anchor_text) or self.ref_at(anchor_text)
-                    if anchor is None:
-                        return None
-                    known[anchor_text] = anchor
-                if kind == "synchronize":
-                    if anchor is not None:
-                        refs.insert(0, anchor)
-                        anchor = None
-                elif anchor is None:
+                constraint = finish(kind, refs, anchor_text, read, owner, required, line,
+                                    column + 1 - (shift if line == 1 else 0))
+                if constraint is None:
                     return None
-                constraint = new(Constraint)
-                constraint.__dict__ = {"kind": kind, "refs": refs, "anchor": anchor, "id": owner,
-                                       "required": required, "owner": "", "line": line,
-                                       "column": column + 1 - (shift if line == 1 else 0)}
                 made.append(constraint)
             elif type(event) is tuple:  # an element starts (text is not read)
                 if level == 1:  # (in a constraint: a <sync ref=...>, the commonest)

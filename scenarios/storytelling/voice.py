@@ -258,29 +258,22 @@ class ReadUtterance(Utterance):
     ``dataclasses.replace``, ``copy`` and ``pickle`` treat it as one.
     """
 
-    @property
-    def words(self) -> list[Word]:
-        made = self.__dict__.get("_words")
-        if made is None:
-            made = self.__dict__["_words"] = _words(self._rows()[0])
-            self._read()
-        return made
+    def _made(key: str, make, column: int) -> property:  # (called in the class body, once for each list)
+        def get(self) -> list:
+            made = self.__dict__.get(key)
+            if made is None:
+                made = self.__dict__[key] = make(self._rows()[column])
+                self._read()
+            return made
 
-    @words.setter
-    def words(self, value: list[Word]) -> None:
-        self.__dict__["_words"] = value
+        def put(self, value: list) -> None:
+            self.__dict__[key] = value
 
-    @property
-    def phonemes(self) -> list[Phoneme]:
-        made = self.__dict__.get("_phonemes")
-        if made is None:
-            made = self.__dict__["_phonemes"] = _phonemes(self._rows()[1])
-            self._read()
-        return made
+        return property(get, put)
 
-    @phonemes.setter
-    def phonemes(self, value: list[Phoneme]) -> None:
-        self.__dict__["_phonemes"] = value
+    words = _made("_words", _words, 0)
+    phonemes = _made("_phonemes", _phonemes, 1)
+    del _made
 
     def _read(self) -> None:
         if "_words" in self.__dict__ and "_phonemes" in self.__dict__:  # (both made: their columns are let go)
