@@ -439,13 +439,8 @@ class _Reader:
                           "every behaviour after it ignored", node, [bid])
             return
         self.seen.add(bid)
-        # (made as Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), required=required, index=...,
-        # line=..., column=...) makes it, without its __init__: a block has thousands)
-        beh = _new_behaviour(Behaviour)
-        beh.__dict__ = {"id": bid, "type": kind.name, "sync_ids": list(kind.syncs), "attributes": dict(node.attrs),
-                        "refs": {}, "text": "", "marks": [], "prosody": [], "params": {}, "source": "",
-                        "required": required, "index": len(self.block.behaviours), "line": node.line,
-                        "column": node.column}
+        beh = Behaviour(bid, kind.name, list(kind.syncs), dict(node.attrs), {}, "", [], [], {}, "", required,
+                        len(self.block.behaviours), node.line, node.column)
         if kind.name == "speech":
             if not self.speech_text(node, beh):
                 return
@@ -604,12 +599,7 @@ class _Reader:
                 anchor = None
         elif anchor is None:
             return None
-        # (made as Constraint(kind, refs, anchor, owner, required, line=, column=) makes it, without its
-        # __init__: a block has thousands)
-        constraint = _new_constraint(Constraint)
-        constraint.__dict__ = {"kind": kind, "refs": refs, "anchor": anchor, "id": owner, "required": required,
-                               "owner": "", "line": line, "column": column}
-        return constraint
+        return Constraint(kind, refs, anchor, owner, required, "", line, column)
 
 
     def held_constraint(self, node: Captured, required: bool) -> list[Constraint] | None:
@@ -672,7 +662,6 @@ _CONSTRAINT_KINDS = frozenset(("synchronize", "before", "after"))
 #: The elements of a block whose content its tree holds as the reader's events (see
 #: :class:`~agentsim.core.xmltree.Captured`): a block's constraints, read at once where they are plain.
 HELD = frozenset(("constraint",))
-_new_constraint = _new_behaviour = object.__new__
 # (the fields the reader gives a behaviour and a constraint, in their order, are all they have)
 assert list(Behaviour.__dataclass_fields__) == ["id", "type", "sync_ids", "attributes", "refs", "text", "marks",
                                                 "prosody", "params", "source", "required", "index", "line", "column"]

@@ -48,7 +48,7 @@ class SyncRef(_SyncRefFields):
         return f"{prefix}{self.behaviour}:{self.sync}"
 
 
-@dataclass
+@dataclass(slots=True)
 class Behaviour:
     """One behaviour element of a block."""
 
@@ -84,7 +84,7 @@ class SyncAt:
     offset: float
 
 
-@dataclass
+@dataclass(slots=True)
 class Constraint:
     """A ``synchronize``, ``before`` or ``after`` constraint.
 
