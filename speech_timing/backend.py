@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bisect
 import re
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field
 from typing import TYPE_CHECKING, Protocol, Sequence, runtime_checkable
 
 if TYPE_CHECKING:  # numpy is not needed to read or time a text
@@ -173,6 +173,89 @@ class Utterance:
             raise KeyError(name)
         return mark.time
 
+
+
+_new = object.__new__
+_set = object.__setattr__
+
+
+def words_of(rows: Sequence[list]) -> list[Word]:
+    """The ``Word`` of each row of ``rows`` (one list a field, in the fields' order), made as ``Word.__init__``
+    makes it, without a call of it each (a narration has thousands)."""
+    made = []
+    add = made.append
+    for index, text, start, end, char_start, char_end in zip(*rows):
+        word = _new(Word)
+        _set(word, "__dict__", {"index": index, "text": text, "start": start, "end": end, "char_start": char_start,
+                                "char_end": char_end})
+        add(word)
+    return made
+
+
+def phonemes_of(rows: Sequence[list]) -> list[Phoneme]:
+    """The ``Phoneme`` of each row of ``rows``, made as :func:`words_of` makes words."""
+    made = []
+    add = made.append
+    for symbol, start, end, word_index, stressed in zip(*rows):
+        phoneme = _new(Phoneme)
+        _set(phoneme, "__dict__", {"symbol": symbol, "start": start, "end": end, "word_index": word_index,
+                                   "stressed": stressed})
+        add(phoneme)
+    return made
+
+
+class ColumnUtterance(Utterance):
+    """An :class:`Utterance` whose ``words`` and ``phonemes`` are made from columns (one list a field) the first
+    time they are asked for: scheduling a block asks its speeches for their lengths and marks only, and a
+    thousand-behaviour block has thousands of words and phonemes. :meth:`_rows` gives the columns (here those
+    it was made with, :meth:`of`).
+
+    Otherwise it is an :class:`Utterance`: equal to one with the same fields, and ``dataclasses.replace``,
+    ``copy`` and ``pickle`` treat it as one.
+    """
+
+    @classmethod
+    def of(cls, fields: dict, words: list[Word] | None = None, word_rows: Sequence[list] | None = None,
+           phoneme_rows: Sequence[list] | None = None) -> "ColumnUtterance":
+        """One with the other ``fields`` (text, duration, marks, sentences, sample_rate, audio, backend; those not
+        given have their defaults), its words made or as columns, and its phonemes as columns."""
+        made = _new(cls)
+        for name, known in Utterance.__dataclass_fields__.items():
+            if name not in fields and name not in ("words", "phonemes"):
+                made.__dict__[name] = known.default_factory() if known.default is MISSING else known.default
+        made.__dict__.update(fields, _timeline_rows=(word_rows, phoneme_rows))
+        if words is not None:
+            made.__dict__["_words"] = words
+        return made
+
+    def _made(key: str, make, column: int) -> property:  # (called in the class body, once for each list)
+        def get(self) -> list:
+            made = self.__dict__.get(key)
+            if made is None:
+                made = self.__dict__[key] = make(self._rows()[column])
+                if "_words" in self.__dict__ and "_phonemes" in self.__dict__:  # (both made: columns let go)
+                    self.__dict__.pop("_timeline_rows", None)
+            return made
+
+        def put(self, value: list) -> None:
+            self.__dict__[key] = value
+
+        return property(get, put)
+
+    words = _made("_words", words_of, 0)
+    phonemes = _made("_phonemes", phonemes_of, 1)
+    del _made
+
+    def _rows(self) -> tuple:
+        """The words' and the phonemes' columns (times in seconds)."""
+        return self.__dict__["_timeline_rows"]
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Utterance):
+            return NotImplemented
+        return all(getattr(self, name) == getattr(other, name) for name in Utterance.__dataclass_fields__)
+
+    __hash__ = None  # (as a dataclass's that compares its fields)
 
 @runtime_checkable
 class TTSBackend(Protocol):

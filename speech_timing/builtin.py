@@ -28,7 +28,7 @@ import functools
 import math
 import re
 
-from speech_timing.backend import (Phoneme, Prosody, SpeechText, Utterance, Word, check_prosody,
+from speech_timing.backend import (ColumnUtterance, Prosody, SpeechText, Utterance, Word, check_prosody,
                                      mark_times_from_words, parse_number, parse_time)
 
 _WORD = re.compile(r"[\w']+")
@@ -111,12 +111,20 @@ class BuiltinBackend:
         speed, emphasis, pauses = self._prosody(speech, [m.span() for m in matches], scale)
         t = self.lead * scale
         words: list[Word] = []
-        phonemes: list[Phoneme] = []
+        # the phonemes as columns (symbol, start, end, word index, stressed): made into Phoneme objects only when
+        # asked for (scheduling asks for the words' times and the marks)
+        symbols: list[str] = []
+        starts: list[float] = []
+        ends: list[float] = []
+        indices: list[int] = []
+        stresses: list[bool] = []
         sentences: list[float] = []
         sentence_starts = True
         k = 0  # the next pause
         vowel_time, consonant_time, stress_factor = self.vowel, self.consonant, self.stress_factor
         new, set_fields = object.__new__, object.__setattr__
+        add_symbol, add_start, add_end, add_index, add_stress = (symbols.append, starts.append, ends.append,
+                                                                 indices.append, stresses.append)
         for match in matches:
             while k < len(pauses) and pauses[k][0] <= match.start():
                 t += pauses[k][1]
@@ -136,12 +144,12 @@ class BuiltinBackend:
                 if emphasised != 1.0 and vowel and not emphasised_done and (stressed or not content):
                     duration *= emphasised
                     emphasised_done = True
-                # (Phoneme(symbol, t, end, index, stressed), made without the frozen dataclass's __init__)
-                phoneme = new(Phoneme)
-                set_fields(phoneme, "__dict__", {"symbol": symbol, "start": t, "end": t + duration * word_scale,
-                                                 "word_index": index, "stressed": stressed})
-                phonemes.append(phoneme)
+                add_symbol(symbol)
+                add_start(t)
                 t += duration * word_scale
+                add_end(t)
+                add_index(index)
+                add_stress(stressed)
             # (Word(index, token, start, t, char start, char end), made without the frozen dataclass's __init__)
             word = new(Word)
             set_fields(word, "__dict__", {"index": index, "text": token, "start": start, "end": t,
@@ -157,8 +165,9 @@ class BuiltinBackend:
         duration = t + self.tail * scale
         if not words:
             sentences = [self.lead * scale]
-        return Utterance(text, duration, words, phonemes, mark_times_from_words(speech, words, duration),
-                         sentences, backend=self.name)
+        return ColumnUtterance.of({"text": text, "duration": duration, "sentences": sentences, "backend": self.name,
+                                   "marks": mark_times_from_words(speech, words, duration)},
+                                  words=words, phoneme_rows=(symbols, starts, ends, indices, stresses))
 
     def _prosody(self, speech: SpeechText, word_spans: list[tuple[int, int]], scale: float
                  ) -> tuple[list[float], list[float], list[tuple[int, float]]]:

@@ -463,3 +463,26 @@ def test_realizer_rate_change_keeps_the_prosody():
     spoken = speech_text(speech, 2.0)
     assert spoken.rate == 2.0 and spoken.prosody == (Prosody("break", 4, 4, (("time", "300ms"),)),)
     assert spoken.marks == tuple(speech.marks) and spoken.text == speech.text
+
+
+def test_builtin_phonemes_are_made_when_first_asked_for_and_tile_the_words(builtin):
+    """The built-in model keeps its phonemes as columns until they are asked for (a block's schedule asks for
+    the words' times and the marks); made, they tile each word, stressed vowels included, and the utterance
+    equals a plain one with the same fields."""
+    from dataclasses import replace
+
+    from speech_timing.backend import ColumnUtterance, Utterance
+
+    said = builtin.synthesize(SpeechText("Remember the lighthouse, keeper."))
+    assert type(said) is ColumnUtterance and "_phonemes" not in vars(said)
+    assert [w.text for w in said.words] == ["Remember", "the", "lighthouse", "keeper"]
+    phonemes = said.phonemes
+    assert "_timeline_rows" not in vars(said) and said.phonemes is phonemes  # made once, the columns let go
+    for word in said.words:
+        own = said.phonemes_of(word.index)
+        assert own[0].start == word.start and own[-1].end == word.end
+        assert all(a.end == b.start for a, b in zip(own, own[1:]))
+    assert [p.symbol for p in said.phonemes_of(0) if p.stressed] == ["e"] and not any(
+        p.stressed for p in said.phonemes_of(1))
+    plain = Utterance(**{name: getattr(said, name) for name in Utterance.__dataclass_fields__})
+    assert said == plain and plain == said and replace(said) == plain and said != replace(plain, duration=0.0)

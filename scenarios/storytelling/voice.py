@@ -42,7 +42,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from speech_timing.backend import Mark, Phoneme, SpeechText, Utterance, Word
+from speech_timing.backend import ColumnUtterance, Mark, Phoneme, SpeechText, Utterance, Word
 from speech_timing.samples import BLOCK, Pcm, Pcm16, PcmFile
 from agentsim.errors import AgentsimError
 from agentsim.written import user_cache, written
@@ -175,7 +175,6 @@ def _identity(backend) -> dict:
 
 
 _new = object.__new__
-_set = object.__setattr__
 _WORD_FIELDS = ("index", "text", "start", "end", "char_start", "char_end")
 _PHONEME_FIELDS = ("symbol", "start", "end", "word_index", "stressed")
 assert _WORD_FIELDS == tuple(Word.__dataclass_fields__) and _PHONEME_FIELDS == tuple(Phoneme.__dataclass_fields__)
@@ -223,61 +222,10 @@ def _timeline(columns: dict, fields: tuple[str, ...], rate: int | None) -> list:
     return ordered
 
 
-def _words(rows: list) -> list[Word]:
-    """The ``Word`` of each row of ``rows`` (the columns :func:`_timeline` gives), made as ``Word.__init__`` makes
-    it, without a call of it each (a narration has thousands)."""
-    made = []
-    add = made.append
-    for index, text, start, end, char_start, char_end in zip(*rows):
-        word = _new(Word)
-        _set(word, "__dict__", {"index": index, "text": text, "start": start, "end": end, "char_start": char_start,
-                                "char_end": char_end})
-        add(word)
-    return made
-
-
-def _phonemes(rows: list) -> list[Phoneme]:
-    """The ``Phoneme`` of each row of ``rows``, made as :func:`_words` makes words."""
-    made = []
-    add = made.append
-    for symbol, start, end, word_index, stressed in zip(*rows):
-        phoneme = _new(Phoneme)
-        _set(phoneme, "__dict__", {"symbol": symbol, "start": start, "end": end, "word_index": word_index,
-                                   "stressed": stressed})
-        add(phoneme)
-    return made
-
-
-class ReadUtterance(Utterance):
+class ReadUtterance(ColumnUtterance):
     """An utterance read from the cache, whose ``words`` and ``phonemes`` are read from the entry's timeline
     (the second line of its file, checked by its length and CRC-32 when the entry was read) the first time
-    they are asked for: a block's schedule asks its speeches for their lengths and marks only, and a
-    thousand-behaviour block has thousands of words and phonemes.
-
-    Otherwise it is an :class:`~speech_timing.backend.Utterance`: equal to one with the same fields, and
-    ``dataclasses.replace``, ``copy`` and ``pickle`` treat it as one.
-    """
-
-    def _made(key: str, make, column: int) -> property:  # (called in the class body, once for each list)
-        def get(self) -> list:
-            made = self.__dict__.get(key)
-            if made is None:
-                made = self.__dict__[key] = make(self._rows()[column])
-                self._read()
-            return made
-
-        def put(self, value: list) -> None:
-            self.__dict__[key] = value
-
-        return property(get, put)
-
-    words = _made("_words", _words, 0)
-    phonemes = _made("_phonemes", _phonemes, 1)
-    del _made
-
-    def _read(self) -> None:
-        if "_words" in self.__dict__ and "_phonemes" in self.__dict__:  # (both made: their columns are let go)
-            self.__dict__.pop("_timeline_rows", None)
+    they are asked for (see :class:`~speech_timing.backend.ColumnUtterance`)."""
 
     def _rows(self) -> tuple[list, list]:
         """The words' and the phonemes' columns (times in seconds), read from the timeline once."""
@@ -295,13 +243,6 @@ class ReadUtterance(Utterance):
             state["_timeline_rows"] = rows
             del state["_timeline"]
         return rows
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, Utterance):
-            return NotImplemented
-        return all(getattr(self, name) == getattr(other, name) for name in Utterance.__dataclass_fields__)
-
-    __hash__ = None  # (as a dataclass's that compares its fields)
 
 
 class CachedBackend:
