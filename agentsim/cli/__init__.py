@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 
 from agentsim.errors import AgentsimError
 
@@ -61,7 +63,35 @@ def main(argv: list[str] | None = None) -> int:
         os.environ.setdefault("MUJOCO_GL", "disable")
     args = build_parser().parse_args(argv)
     try:
+        return _run(args, argv)
+    finally:
+        if argv is None:
+            _ending()
+
+
+def _ending() -> None:
+    """The program's own process has done its command and ends: a Ctrl-C from now on ends it at once with
+    status 130, what it has to say said, instead of interrupting the interpreter's own clean-up (which would
+    write a traceback from whatever it was doing there, and end with the command's status)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, _ended)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+
+
+def _ended(signum, frame) -> None:
+    os._exit(130)
+
+
+def _run(args: argparse.Namespace, argv: list[str] | None) -> int:
+    """The command ``args`` asks for, its errors made exit statuses (see :func:`main`)."""
+    try:
         status = args.handler(args) or 0
+        if argv is None:
+            _ending()  # (here, where a Ctrl-C that came before is still an interruption of the command)
         if argv is None and getattr(args, "done_at_exit", False):
             # the program's own command line, whose process ends now: what the command built (a block's
             # thousands of objects) is left for the process's end, not traversed and freed one by one at exit
