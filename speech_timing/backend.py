@@ -174,7 +174,6 @@ class Utterance:
         return mark.time
 
 
-
 _new = object.__new__
 _set = object.__setattr__
 
@@ -215,15 +214,18 @@ class ColumnUtterance(Utterance):
     """
 
     @classmethod
-    def of(cls, fields: dict, words: list[Word] | None = None, word_rows: Sequence[list] | None = None,
-           phoneme_rows: Sequence[list] | None = None) -> "ColumnUtterance":
+    def of(cls, fields: dict, words: list[Word] | None = None,
+           rows: tuple[Sequence[list] | None, Sequence[list] | None] | None = None) -> "ColumnUtterance":
         """One with the other ``fields`` (text, duration, marks, sentences, sample_rate, audio, backend; those not
-        given have their defaults), its words made or as columns, and its phonemes as columns."""
+        given have their defaults), its words if they are made, and ``rows``: the words' and the phonemes'
+        columns (None: :meth:`_rows` of the class gives them)."""
         made = _new(cls)
         for name, known in Utterance.__dataclass_fields__.items():
             if name not in fields and name not in ("words", "phonemes"):
                 made.__dict__[name] = known.default_factory() if known.default is MISSING else known.default
-        made.__dict__.update(fields, _timeline_rows=(word_rows, phoneme_rows))
+        made.__dict__.update(fields)
+        if rows is not None:
+            made.__dict__["_timeline_rows"] = rows
         if words is not None:
             made.__dict__["_words"] = words
         return made
@@ -256,6 +258,7 @@ class ColumnUtterance(Utterance):
         return all(getattr(self, name) == getattr(other, name) for name in Utterance.__dataclass_fields__)
 
     __hash__ = None  # (as a dataclass's that compares its fields)
+
 
 @runtime_checkable
 class TTSBackend(Protocol):

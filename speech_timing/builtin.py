@@ -167,7 +167,7 @@ class BuiltinBackend:
             sentences = [self.lead * scale]
         return ColumnUtterance.of({"text": text, "duration": duration, "sentences": sentences, "backend": self.name,
                                    "marks": mark_times_from_words(speech, words, duration)},
-                                  words=words, phoneme_rows=(symbols, starts, ends, indices, stresses))
+                                  words=words, rows=(None, (symbols, starts, ends, indices, stresses)))
 
     def _prosody(self, speech: SpeechText, word_spans: list[tuple[int, int]], scale: float
                  ) -> tuple[list[float], list[float], list[tuple[int, float]]]:

@@ -27,7 +27,7 @@ from agentsim.bml.documents import (NUMBER, Envelope, implied_start, is_bml_uri,
 from agentsim.bml.spelling import AS_WRITTEN, REF_SYNC, SYNC_SPELLINGS, References
 from agentsim.core.xmltree import Captured, Node
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
-                                     DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
+                                     CONSTRAINT_KINDS, DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
 from agentsim.animation.lexicon import Lexicon
 from agentsim.core.block import BEHAVIOUR_TYPES
 
@@ -45,8 +45,6 @@ EXTENSION_LOCALS = set().union(*EXTENSION_BEHAVIOURS.values())
 #: The BML 1.0 types whose draft attributes :meth:`Adapter.core` reads (it leaves the others as they are).
 _CORE_REWRITTEN = frozenset(("gesture", "face", "head", "gaze"))
 _UNSEEN = object()
-#: The constraint elements whose references are read.
-_CONSTRAINT_KINDS = frozenset(("synchronize", "before", "after"))
 
 
 class Adapter:
@@ -484,7 +482,7 @@ class Adapter:
         if type(node) is Captured and node.events is not None and self.held_kept(node.events):
             return True  # (its references all kept as written: nothing to do, and no node made of it)
         elements = node.elements()
-        if not elements or not {c.local for c in elements} <= _CONSTRAINT_KINDS:
+        if not elements or not {c.local for c in elements} <= CONSTRAINT_KINDS:
             return False
         references, notes = self.references, self.notes  # (Adapter.ref, without a call per reference)
         aliased = False
@@ -506,25 +504,21 @@ class Adapter:
         """Whether the content of a ``<constraint>`` held as events (:class:`~agentsim.core.xmltree.Captured`)
         has elements, all ``<synchronize>``, ``<before>`` and ``<after>`` (as written, no prefix), and keeps
         every reference of theirs and of their children as written (what :meth:`constraint_refs` reads)."""
-        level, elements, references = 0, False, self.references
-        tails, found = references.written_tails, references.found
+        level, elements, kept = 0, False, self.references.kept
         for event in events:
             if event is None:
                 level -= 1
             elif type(event) is tuple:
                 level += 1
                 if level == 1:
-                    if event[0] not in _CONSTRAINT_KINDS:
+                    if event[0] not in CONSTRAINT_KINDS:
                         return False
                     elements = True
                 elif level > 2:
                     continue
                 value = event[1].get("ref")
-                if value is not None:  # (References.kept, without a call for most references)
-                    colon = value.rfind(":")
-                    if not (colon >= 0 and tails.get(value[colon + 1:]) and "\n" not in value
-                            and value.strip() == value) and found(value) is not AS_WRITTEN:
-                        return False
+                if value is not None and not kept(value):
+                    return False
         return elements
 
     def ref(self, value: str) -> str:

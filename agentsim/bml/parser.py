@@ -26,8 +26,8 @@ from agentsim.bml.documents import Envelope, Notes, find_blocks
 from agentsim.bml.spelling import fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
 from agentsim.core.xmltree import Captured, Node, encode, read_forest, read_tree
-from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, DIALECT_BEHAVIOURS,
-                                     EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
+from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, CONSTRAINT_KINDS,
+                                     DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
 from agentsim.errors import BMLError
 
@@ -553,7 +553,7 @@ class _Reader:
             if isinstance(child, str):
                 continue
             kind = child.local
-            if kind not in ("synchronize", "before", "after"):
+            if kind not in CONSTRAINT_KINDS:
                 self.warn("PARSING_FAILURE", f"unknown constraint <{child.tag}> ignored", child)
                 continue
             refs = []
@@ -601,7 +601,6 @@ class _Reader:
             return None
         return Constraint(kind, refs, anchor, owner, required, "", line, column)
 
-
     def held_constraint(self, node: Captured, required: bool) -> list[Constraint] | None:
         """The constraints of a ``<constraint>`` whose content the tree holds as expat's events, read as
         :meth:`constraint` reads its nodes, if reading them warns of nothing (else None: then it reads the
@@ -631,7 +630,7 @@ class _Reader:
                     if ref is None:
                         ref = plain(text)
                         if ref is None:
-                            ref = self.ref_at(text)
+                            ref = read(text)
                             if ref is None:
                                 return None
                         else:
@@ -640,7 +639,7 @@ class _Reader:
                 elif level == 0:  # a constraint
                     level = 1
                     kind, attrs, line, column = event
-                    if kind not in _CONSTRAINT_KINDS:
+                    if kind not in CONSTRAINT_KINDS:
                         return None
                     refs, anchor_text = [], attrs.get("ref")
                 else:
@@ -658,7 +657,6 @@ class _Reader:
         return ref
 
 
-_CONSTRAINT_KINDS = frozenset(("synchronize", "before", "after"))
 #: The elements of a block whose content its tree holds as the reader's events (see
 #: :class:`~agentsim.core.xmltree.Captured`): a block's constraints, read at once where they are plain.
 HELD = frozenset(("constraint",))

@@ -22,6 +22,8 @@ EXTENSION_BEHAVIOURS = {
     EXPRESSION_NAMESPACE: {"emotion"},
 }
 
+#: The elements of a BML 1.0 ``<constraint>``.
+CONSTRAINT_KINDS = frozenset(("synchronize", "before", "after"))
 #: Behaviour types that no BML namespace defines: only the lenient reader makes them, from other realizers'
 #: elements (SmartBody's ``<lips>``, ``<curves>`` and ``<event>``).
 DIALECT_BEHAVIOURS = {"lips", "curves", "event"}

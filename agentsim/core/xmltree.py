@@ -155,6 +155,12 @@ def _builder(expat, shift: int, data: bytes, capture: frozenset[str] = frozenset
 
     where = expat  # (what tells where an element starts: expat, or a replayed event's place)
 
+    def split(name: str) -> tuple[str, str | None]:
+        """The tag's parts, ``(local, prefix)``, kept for every element of that name (and in ``names``)."""
+        prefix, colon, local = name.partition(":")
+        parts = tags[name] = (local, prefix) if colon else (name, None)
+        return parts
+
     def start(name: str, attrs: dict[str, str]) -> None:
         if pending:
             flush()
@@ -189,8 +195,7 @@ def _builder(expat, shift: int, data: bytes, capture: frozenset[str] = frozenset
         node._tag = name
         parts = tags.get(name)
         if parts is None:
-            prefix, colon, local = name.partition(":")
-            parts = tags[name] = (local, prefix) if colon else (name, None)
+            parts = split(name)
         node.local, node.prefix = parts
         node.attrs = attrs
         node.line = line
@@ -237,8 +242,7 @@ def _builder(expat, shift: int, data: bytes, capture: frozenset[str] = frozenset
             depth += 1
             add((name, attrs, expat.CurrentLineNumber, expat.CurrentColumnNumber))
             if name not in tags:
-                prefix, colon, local = name.partition(":")
-                tags[name] = (local, prefix) if colon else (name, None)
+                split(name)
 
         def held_end(name: str) -> None:
             nonlocal depth

@@ -174,7 +174,6 @@ def _identity(backend) -> dict:
     return identity
 
 
-_new = object.__new__
 _WORD_FIELDS = ("index", "text", "start", "end", "char_start", "char_end")
 _PHONEME_FIELDS = ("symbol", "start", "end", "word_index", "stressed")
 assert _WORD_FIELDS == tuple(Word.__dataclass_fields__) and _PHONEME_FIELDS == tuple(Phoneme.__dataclass_fields__)
@@ -421,11 +420,12 @@ class CachedBackend:
             if [len(timeline), zlib.crc32(timeline)] != meta["timeline"]:
                 return None
             audio = self._samples(audio_path, meta.get("samples")) if meta["audio"] else None
-            utt = _new(ReadUtterance)
-            utt.__dict__.update(text=text, duration=float(meta["duration"]), _timeline=(timeline, rate, meta_path),
-                                marks=[Mark(name, float(t)) for name, t in meta.get("marks", [])],
-                                sentences=[float(s) for s in meta["sentences"]], sample_rate=int(meta["sample_rate"]),
-                                audio=audio, backend=meta.get("backend_name", ""))
+            utt = ReadUtterance.of({"text": text, "duration": float(meta["duration"]),
+                                    "marks": [Mark(name, float(t)) for name, t in meta.get("marks", [])],
+                                    "sentences": [float(s) for s in meta["sentences"]],
+                                    "sample_rate": int(meta["sample_rate"]), "audio": audio,
+                                    "backend": meta.get("backend_name", "")})
+            utt.__dict__["_timeline"] = (timeline, rate, meta_path)  # (what ReadUtterance._rows reads)
         except (OSError, ValueError, KeyError, TypeError, AttributeError, ZeroDivisionError):
             return None
         return utt
