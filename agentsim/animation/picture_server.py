@@ -3,7 +3,8 @@
 
 A terminal's Ctrl-C reaches every process of the command, this server too, which would stop with a
 traceback of whatever it was importing. Imported in that server, this module makes it leave the interrupt
-to the command, which ends the server and its workers as it ends (the workers forked from it inherit this).
+to the command, which ends the server and its workers as it ends (the workers forked from it inherit this);
+a worker forked as the command ends, which finds no one to read its work from, ends without a traceback.
 Imported anywhere else, it does nothing.
 """
 
@@ -11,7 +12,7 @@ from __future__ import annotations
 
 import sys
 
-from agentsim.core.children import leave_interrupts_to_the_parent
+from agentsim.core.children import end_quietly_when_the_parent_goes, leave_interrupts_to_the_parent
 
 
 def in_the_server() -> bool:
@@ -21,3 +22,4 @@ def in_the_server() -> bool:
 
 if in_the_server():
     leave_interrupts_to_the_parent()
+    end_quietly_when_the_parent_goes()

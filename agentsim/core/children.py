@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
+import sys
 import threading
 
-__all__ = ["leave_interrupts_to_the_parent", "may_fork"]
+__all__ = ["leave_interrupts_to_the_parent", "may_fork", "end_quietly_when_the_parent_goes"]
 
 
 def may_fork() -> bool:
@@ -31,3 +32,23 @@ def leave_interrupts_to_the_parent() -> None:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
+
+
+def end_quietly_when_the_parent_goes() -> None:
+    """In multiprocessing's fork server: a child it forks, which first reads what to run from the process that
+    asked for it, ends without a traceback if that process has gone meanwhile (its pipe ends, early or half-way
+    through: a Ctrl-C ended the command); any other error of a child is told as before. (The server tells what
+    escapes a child through ``sys.excepthook``, which its children inherit.)"""
+    import pickle
+    import traceback
+
+    told = sys.excepthook
+    ended = (EOFError, pickle.UnpicklingError, BrokenPipeError, ConnectionResetError)
+
+    def tell(kind, value, trace) -> None:
+        reading = any(frame.f_code.co_name == "_main" and frame.f_code.co_filename.endswith("spawn.py")
+                      for frame, _ in traceback.walk_tb(trace))
+        if not (reading and issubclass(kind, ended)):
+            told(kind, value, trace)
+
+    sys.excepthook = tell
