@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 import math
+import re
+from json.encoder import encode_basestring_ascii as _quoted  # (how the encoder writes a string)
 from typing import Any, Callable, Iterable
 
 Feedback = dict[str, Any]
@@ -125,7 +127,87 @@ _ENCODER = json.JSONEncoder(separators=(", ", ": "), check_circular=False)
 
 def to_json(feedback: Feedback) -> str:
     """One line of JSON for a feedback, its times to the nanosecond (:data:`DECIMALS`)."""
+    if feedback.get("type") == "predictionFeedback":  # (a block's prediction: thousands of times)
+        behaviours = feedback.get("behaviours")
+        if type(behaviours) is list and len(behaviours) >= _MANY:
+            written = _prediction_json(feedback, behaviours)
+            if written is not None:
+                return written
     return _ENCODER.encode(_clean(feedback))
+
+
+# A prediction of many behaviours is written by _prediction_json: the same text as the encoder writes of
+# _clean(feedback), made with two string formattings instead of a copy of every entry and a rounding and a
+# repr of each time. A time is written "%.9f" with its trailing zeros dropped (one left after the point),
+# which is the repr of round(t, 9): both take the same nine decimals of t (CPython rounds a float to n
+# decimals from the digits it formats it with), and from 1e-4 to 1e6 no shorter decimal is that float
+# (a float's spacing there is below 1e-9) and repr writes no exponent. Anything else (other entries, a time
+# out of that range or not a float, a string with "%", ".," or ".}") is written by the encoder.
+
+#: Predictions of at least this many behaviours are written by :func:`_prediction_json`.
+_MANY = 16
+#: The fields of a prediction, and of an entry (with a lexeme or not), in their order.
+_PREDICTION = ("type", "id", "globalTime", "characterId", "bml", "behaviours")
+_ENTRY = ("id", "type", "globalStart", "globalEnd", "syncs")
+_ENTRY_LEXEME = (*_ENTRY, "lexeme")
+#: An entry's text with its strings put in (``%s``) and its times left to put (``%%s``), by its fields and its
+#: sync points' names.
+_ENTRY_TEXT: dict[tuple, str] = {}
+#: A time "%.9f" writes from 0 up to 1e-4 (repr writes it with an exponent): the other times do not begin so.
+_SMALL = re.compile(r"0\.0000(?!00000)\d")
+
+
+def _entry_text(fields: tuple, syncs: tuple) -> str | None:
+    if fields != _ENTRY and fields != _ENTRY_LEXEME:
+        return None
+    names = [_quoted(name) for name in syncs]  # (a TypeError for a name that is not a string)
+    if any("%" in name for name in names):
+        return None
+    if len(_ENTRY_TEXT) >= 256:
+        _ENTRY_TEXT.clear()
+    lexeme = ', "lexeme": %s' if len(fields) == 6 else ""
+    text = _ENTRY_TEXT[fields, syncs] = (
+        '{"id": %s, "type": %s, "globalStart": %%s, "globalEnd": %%s, "syncs": {'
+        + ", ".join(f"{name}: %%s" for name in names) + "}" + lexeme + "}")
+    return text
+
+
+def _prediction_json(feedback: Feedback, behaviours: list) -> str | None:
+    """:func:`to_json` of a prediction whose entries are all of the usual form, or None."""
+    if tuple(feedback) != _PREDICTION:
+        return None
+    texts: list[str] = []
+    times: list = []
+    add, more, known = texts.append, times.extend, _ENTRY_TEXT
+    try:
+        for entry in behaviours:
+            syncs = entry["syncs"]
+            fields = tuple(entry)
+            form = known.get((fields, tuple(syncs)))
+            if form is None:
+                form = _entry_text(fields, tuple(syncs))
+                if form is None:
+                    return None
+            if len(fields) == 5:
+                add(form % (_quoted(entry["id"]), _quoted(entry["type"])))
+            else:
+                add(form % (_quoted(entry["id"]), _quoted(entry["type"]), _quoted(entry["lexeme"])))
+            more((entry["globalStart"], entry["globalEnd"]))
+            more(syncs.values())
+    except (TypeError, KeyError, AttributeError):  # (an entry that is not a dict, a string that is not one)
+        return None
+    if set(map(type, times)) != {float} or not _isfinite(sum(times)) or not -1e6 < min(times) <= max(times) < 1e6:
+        return None
+    written = ("%.9f\x00" * len(times)) % tuple(times)
+    if _SMALL.search(written):
+        return None
+    body = ", ".join(texts)
+    if body.count("%") != len(times) or ".," in body or ".}" in body:  # (no "%" but the times', no point there)
+        return None
+    body %= tuple([t.rstrip("0") for t in written[:-1].split("\x00")])
+    body = body.replace(".,", ".0,").replace(".}", ".0}")
+    head = _ENCODER.encode(_clean({**feedback, "behaviours": []}))
+    return f"{head[:-3]}[{body}]}}"
 
 
 class FeedbackLog:
