@@ -33,7 +33,6 @@ def leave_interrupts_to_the_parent() -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-
 def end_quietly_when_the_parent_goes() -> None:
     """In multiprocessing's fork server: a child it forks, which first reads what to run from the process that
     asked for it, ends without a traceback if that process has gone meanwhile (its pipe ends, early or half-way

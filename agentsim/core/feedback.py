@@ -155,6 +155,10 @@ _ENTRY_LEXEME = (*_ENTRY, "lexeme")
 _ENTRY_TEXT: dict[tuple, str] = {}
 #: A time "%.9f" writes from 0 up to 1e-4 (repr writes it with an exponent): the other times do not begin so.
 _SMALL = re.compile(r"0\.0000(?!00000)\d")
+#: How a time is written before its trailing zeros go (a separator after it): to :data:`DECIMALS` decimals.
+_TIME = f"%.{DECIMALS}f\x00"
+# (the range the quicker way takes, and _SMALL, are those of nine decimals)
+assert DECIMALS == 9
 
 
 def _entry_text(fields: tuple, syncs: tuple) -> str | None:
@@ -182,10 +186,10 @@ def _prediction_json(feedback: Feedback, behaviours: list) -> str | None:
     try:
         for entry in behaviours:
             syncs = entry["syncs"]
-            fields = tuple(entry)
-            form = known.get((fields, tuple(syncs)))
+            fields, names = tuple(entry), tuple(syncs)
+            form = known.get((fields, names))
             if form is None:
-                form = _entry_text(fields, tuple(syncs))
+                form = _entry_text(fields, names)
                 if form is None:
                     return None
             if len(fields) == 5:
@@ -198,7 +202,7 @@ def _prediction_json(feedback: Feedback, behaviours: list) -> str | None:
         return None
     if set(map(type, times)) != {float} or not _isfinite(sum(times)) or not -1e6 < min(times) <= max(times) < 1e6:
         return None
-    written = ("%.9f\x00" * len(times)) % tuple(times)
+    written = (_TIME * len(times)) % tuple(times)
     if _SMALL.search(written):
         return None
     body = ", ".join(texts)
