@@ -48,8 +48,10 @@ def _random_document(rng: np.random.Generator) -> str:
                 parts.append("<!-- a comment -->")
             elif roll < 0.83:
                 parts.append("<![CDATA[ <sync/> ]]>")
-            elif roll < 0.88:
+            elif roll < 0.855:
                 parts.append(f'<sync xmlns:x="urn:x" ref="{ref()}"/>')
+            elif roll < 0.88:  # (the reference after another attribute, or none but another)
+                parts.append(f'<sync id="s1" ref="{ref()}"/>' if rng.random() < 0.7 else '<sync id="s1"/>')
             elif roll < 0.92 and depth < 30:
                 deep = int(rng.integers(1, 22))
                 parts.append("<n>" * deep + "<sync ref='b1:end'/>" + "</n>" * deep)
@@ -63,6 +65,8 @@ def _random_document(rng: np.random.Generator) -> str:
         for _ in range(int(rng.integers(0, 5))):
             kind = str(rng.choice(KINDS))
             anchor = f' ref="{ref()}"' if rng.random() < 0.5 else ""
+            if rng.random() < 0.2:  # (the anchor after another attribute)
+                anchor = f' id="k1"{anchor}'
             declared = ' xmlns:bml="http://www.bml-initiative.org/bml/bml-1.0"' if kind.startswith("bml:") else ""
             children.append(f"<{kind}{anchor}{declared}>{content(0)}</{kind}>")
         space = "\n  " if rng.random() < 0.5 else ""

@@ -25,7 +25,7 @@ from agentsim.bml.dialect_tables import (CLIP_WORDS, COMPOSITIONS, DEICTIC_TARGE
 from agentsim.bml.documents import (NUMBER, Envelope, implied_start, is_bml_uri, is_smartbody, remove_nodes,
                                     seconds, speech_marks)
 from agentsim.bml.spelling import AS_WRITTEN, REF_SYNC, SYNC_SPELLINGS, References
-from agentsim.core.xmltree import Captured, Node
+from agentsim.core.xmltree import Captured, Node, held_attribute
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, BMLT_NAMESPACE,
                                      CONSTRAINT_KINDS, DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS)
 from agentsim.animation.lexicon import Lexicon
@@ -516,7 +516,10 @@ class Adapter:
                     elements = True
                 elif level > 2:
                     continue
-                value = event[1].get("ref")
+                attrs = event[1]  # (expat's list: its ref, the usual one, first)
+                if not attrs:
+                    continue
+                value = attrs[1] if attrs[0] == "ref" else held_attribute(attrs, "ref")
                 if value is not None and not kept(value):
                     return False
         return elements

@@ -25,7 +25,7 @@ from agentsim.bml.dialects import Adapter
 from agentsim.bml.documents import Envelope, Notes, find_blocks
 from agentsim.bml.spelling import fold_case, without_doctype
 from agentsim.bml.speech_text import read_speech
-from agentsim.core.xmltree import Captured, Node, encode, read_forest, read_tree
+from agentsim.core.xmltree import Captured, Node, encode, held_attribute, read_forest, read_tree
 from agentsim.bml.vocabulary import (BML_NAMESPACE, BMLA_BLOCK_ATTRIBUTES, BMLA_NAMESPACE, CONSTRAINT_KINDS,
                                      DIALECT_BEHAVIOURS, EXTENSION_BEHAVIOURS, PARAMETER_CHILDREN, READ_ATTRIBUTES)
 from agentsim.core.block import BEHAVIOUR_TYPES, Behaviour, Block, Constraint, ParseWarning, SyncRef
@@ -623,7 +623,10 @@ class _Reader:
             elif type(event) is tuple:  # an element starts (text is not read)
                 if level == 1:  # (in a constraint: a <sync ref=...>, the commonest)
                     level = 2
-                    text = event[1].get("ref") if event[0] == "sync" else None
+                    attrs = event[1]  # (expat's list: names and values in turn)
+                    if event[0] != "sync" or not attrs:
+                        return None
+                    text = attrs[1] if attrs[0] == "ref" else held_attribute(attrs, "ref")
                     if text is None:
                         return None
                     ref = known.get(text)
@@ -641,7 +644,7 @@ class _Reader:
                     kind, attrs, line, column = event
                     if kind not in CONSTRAINT_KINDS:
                         return None
-                    refs, anchor_text = [], attrs.get("ref")
+                    refs, anchor_text = [], held_attribute(attrs, "ref") if attrs else None
                 else:
                     return None
         return made

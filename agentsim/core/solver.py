@@ -444,16 +444,15 @@ class BlockSolver:
                 keys[i] = KeyRef(peg, d)
             else:
                 keys[i] = KeyRef(ref_key.peg, offset)
-        timed = TimedBehaviour(self.run, beh, preferred, keys, engine, self.board.plan_order())
-        if groups:  # (else none of its keys is tied, as it was made)
-            timed.tied = tied = [sync_id in groups for sync_id in sync_ids]
+        tied = fixed = None  # (None: none of its keys is tied, or none of those held by a fixed time)
+        if groups:
+            tied = [sync_id in groups for sync_id in sync_ids]
             fixed_node = self.ties.fixed_node
             for root, _ in groups.values():
                 if root in fixed_node:  # (a group held by a fixed time: which keys are; else none is)
-                    timed.fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(sync_ids, tied)]
+                    fixed = [tie and groups[sync_id][0] in fixed_node for sync_id, tie in zip(sync_ids, tied)]
                     break
-        if owns is not None:
-            timed.owns = owns
+        timed = TimedBehaviour(self.run, beh, preferred, keys, engine, self.board.plan_order(), tied, fixed, owns)
         self.timed[beh.id] = timed
         return newly_known
 

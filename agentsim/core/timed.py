@@ -68,6 +68,7 @@ class KeyRef:
 
 
 _LIVE = ("planned", "active")
+_NONE_SKIPPED: frozenset[int] = frozenset()
 
 
 class TimedBehaviour:
@@ -83,7 +84,8 @@ class TimedBehaviour:
                  "parameters", "phonemes", "__weakref__")
 
     def __init__(self, run: "BlockRun", behaviour: Behaviour, preferred: Sequence[float],
-                 keys: list[KeyRef | None], engine: Any, order: int):
+                 keys: list[KeyRef | None], engine: Any, order: int, tied: list[bool] | None = None,
+                 fixed: list[bool] | None = None, owns: list[bool] | None = None):
         self.run = run
         self.behaviour = behaviour
         self.sync_ids = list(behaviour.sync_ids)
@@ -93,11 +95,12 @@ class TimedBehaviour:
         n = len(self.sync_ids)
         self.passed: list[float | None] = [None] * n
         self.order = order  # ties at one time are passed in planning order
-        self.tied = [False] * n  # which keys share a peg with other sync points
+        # (each of the three below is a list of its own, all False unless it is given: the solver gives them)
+        self.tied = tied if tied is not None else [False] * n  # which keys share a peg with other sync points
         # which of those pegs are held by a time given from outside: a number, an anticipator, another block
-        self.fixed = self.tied.copy()
+        self.fixed = fixed if fixed is not None else [False] * n
         # which of those pegs get their time from this behaviour (what else hangs from them follows it)
-        self.owns = self.tied.copy()
+        self.owns = owns if owns is not None else [False] * n
         self.heap_version = 0  # which of the player's heap entries for this behaviour is current
         self.next_index = 0
         self._state = PLANNED  # (what _enter(PLANNED) does from no state, without its call)
@@ -106,7 +109,8 @@ class TimedBehaviour:
         self.stopped: float | None = None  # when it was dropped, cut or interrupted, if it was
         self.planned_start: float | None = None  # its start as first planned
         self.interrupted = False  # interrupted: what is left of it runs to its end whatever the timing
-        self.skipped: set[int] = set()  # sync points an interruption means will never come
+        # sync points an interruption means will never come (none: one empty set shared until there are)
+        self.skipped: frozenset[int] | set[int] = _NONE_SKIPPED
         #: parameter changes (BMLA parametervaluechange) that apply to it, in the order they started
         self.parameters: list = []
         #: a speech's phonemes as it was spoken, ``(symbol, start, end)`` in seconds on its own timeline

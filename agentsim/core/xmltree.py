@@ -81,7 +81,8 @@ class Captured(Node):
     """An element whose content the reader kept as expat gave it, for a reader that knows its form to read at
     once (a BML block's ``<constraint>``, thousands of ``<sync>`` elements): ``events`` (None once made into
     nodes) holds, in order, ``(tag, attributes, line, expat's column)`` where an element starts, None where one
-    ends, and each text; ``shift`` is what columns on line 1 lose (see :func:`_builder`).
+    ends, and each text; ``shift`` is what columns on line 1 lose (see :func:`_builder`). The attributes are
+    expat's list of them, names and values in turn (:func:`held_attribute` reads one).
 
     Its ``children`` are made from the events the first time anything asks for them: the same nodes, at the
     same places, that any other element's content is made into.
@@ -108,6 +109,15 @@ class Captured(Node):
         _children.__set__(self, value)
 
 
+def held_attribute(attrs: list[str], name: str) -> str | None:
+    """The value of the attribute ``name`` in the attributes of an element :class:`Captured` holds (expat's list:
+    names and values in turn), or None."""
+    for i in range(0, len(attrs) - 1, 2):
+        if attrs[i] == name:
+            return attrs[i + 1]
+    return None
+
+
 class _Position:
     """Where a replayed event was (what the builder reads of expat)."""
 
@@ -125,8 +135,8 @@ def _builder(expat, shift: int, data: bytes, capture: frozenset[str] = frozenset
     no element after that has its attributes searched for declarations.
 
     ``capture``: tags of the root's children whose content is held as expat's events (a :class:`Captured`
-    element) instead of being made into nodes; content that declares a namespace, or nests deeper than
-    :data:`HELD_DEPTH`, is made into nodes at once (as it would have been). ``replay`` makes events into
+    element, the attributes as expat's list) instead of being made into nodes; content that declares a
+    namespace, or nests deeper than :data:`HELD_DEPTH`, is made into nodes at once (as it would have been). ``replay`` makes events into
     nodes as ``start``, ``end`` and ``text`` would have made them where they were; ``seed`` puts an element
     on the stack (a replay's parent).
     """
@@ -231,13 +241,13 @@ def _builder(expat, shift: int, data: bytes, capture: frozenset[str] = frozenset
         add = events.append
         depth = 0
 
-        def held_start(name: str, attrs: dict[str, str]) -> None:
+        def held_start(name: str, attrs: list[str]) -> None:
             nonlocal depth
-            if depth >= HELD_DEPTH or declarations[0] and attrs and "xmlns" in "".join(attrs):
+            if depth >= HELD_DEPTH or declarations[0] and attrs and "xmlns" in "".join(attrs[::2]):
                 release()  # (made into nodes now, and read on as every element is)
                 node.events = None
                 replay(events)
-                start(name, attrs)
+                start(name, dict(zip(attrs[::2], attrs[1::2])))
                 return
             depth += 1
             add((name, attrs, expat.CurrentLineNumber, expat.CurrentColumnNumber))
@@ -254,9 +264,11 @@ def _builder(expat, shift: int, data: bytes, capture: frozenset[str] = frozenset
             end(name)
 
         expat.StartElementHandler, expat.EndElementHandler, expat.CharacterDataHandler = held_start, held_end, add
+        expat.ordered_attributes = True  # (a held element's attributes as expat's list: smaller than a dict)
 
     def release() -> None:
         expat.StartElementHandler, expat.EndElementHandler, expat.CharacterDataHandler = start, end, text
+        expat.ordered_attributes = False
 
     def replay(events: list) -> None:
         nonlocal where
@@ -269,7 +281,8 @@ def _builder(expat, shift: int, data: bytes, capture: frozenset[str] = frozenset
                     text(event)
                 else:
                     place.CurrentLineNumber, place.CurrentColumnNumber = event[2], event[3]
-                    start(event[0], event[1])
+                    attrs = event[1]
+                    start(event[0], dict(zip(attrs[::2], attrs[1::2])))
         finally:
             where = expat
 

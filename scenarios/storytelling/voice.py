@@ -244,6 +244,11 @@ class ReadUtterance(ColumnUtterance):
         return rows
 
 
+#: ``json.dumps(value, sort_keys=True, ensure_ascii=False)``, with one encoder made once (a key is made for each
+#: speech of a block).
+_key_json = json.JSONEncoder(sort_keys=True, ensure_ascii=False).encode
+
+
 class CachedBackend:
     """A backend that synthesises each text once and keeps the utterance on disk and in memory.
 
@@ -304,12 +309,11 @@ class CachedBackend:
         """The key of ``fields`` with the backend's identity (the hash of their JSON, keys sorted)."""
         identity = _identity(self.backend)
         if not fields or min(fields) <= "backend":  # (else the identity's JSON leads: written once, not per text)
-            blob = json.dumps({"backend": identity, **fields}, sort_keys=True, ensure_ascii=False)
+            blob = _key_json({"backend": identity, **fields})
         else:
             if self._identity_json[0] != identity:
-                self._identity_json = (identity, json.dumps(identity, sort_keys=True, ensure_ascii=False))
-            blob = '{"backend": ' + self._identity_json[1] + ", " + json.dumps(fields, sort_keys=True,
-                                                                                ensure_ascii=False)[1:]
+                self._identity_json = (identity, _key_json(identity))
+            blob = '{"backend": ' + self._identity_json[1] + ", " + _key_json(fields)[1:]
         return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:32]
 
     def utterance(self, text: str) -> Utterance:
@@ -476,7 +480,8 @@ class WholeSpeechCache(CachedBackend):
         held open meanwhile: a run may keep thousands of speeches, and most runs never hear them). ``where``:
         the byte they start at and how many there are, as the entry says (else read from the file's header)."""
         if where is not None:
-            offset, length = (int(n) for n in where)
+            offset, length = where
+            offset, length = int(offset), int(length)
             status = os.stat(path)
             if offset <= 0 or length < 0 or status.st_size < offset + 2 * length:
                 raise ValueError(f"{path}: cut short")
@@ -505,8 +510,8 @@ class KeptSamples(Pcm16):
     file written anew since, by another process, is not read: an :class:`~agentsim.errors.AgentsimError` says
     so)."""
 
-    def __init__(self, path: Path, offset: int, length: int, seen: tuple[int, int, int] | None = None) -> None:
-        self.path, self.offset, self.length, self.seen = Path(path), offset, length, seen
+    def __init__(self, path: str | Path, offset: int, length: int, seen: tuple[int, int, int] | None = None) -> None:
+        self.path, self.offset, self.length, self.seen = path, offset, length, seen  # (the path as given)
         self._samples: Pcm | None = None
 
     @property
