@@ -505,6 +505,7 @@ class Adapter:
         has elements, all ``<synchronize>``, ``<before>`` and ``<after>`` (as written, no prefix), and keeps
         every reference of theirs and of their children as written (what :meth:`constraint_refs` reads)."""
         level, elements, kept = 0, False, self.references.kept
+        tails = self.references.written_tails  # (what References.kept tells at once, told without its call)
         for event in events:
             if event is None:
                 level -= 1
@@ -520,7 +521,10 @@ class Adapter:
                 if not attrs:
                     continue
                 value = attrs[1] if attrs[0] == "ref" else held_attribute(attrs, "ref")
-                if value is not None and not kept(value):
+                if value is None or tails.get(value[value.rfind(":") + 1:]) and ":" in value and "\n" not in value \
+                        and value.strip() == value:
+                    continue
+                if not kept(value):
                     return False
         return elements
 

@@ -405,9 +405,10 @@ class _Reader:
 
     def read(self, nodes: list[Node], required: bool) -> None:
         for node in nodes:
-            if node.local in EXTENSION_BEHAVIOURS.get(node.namespace, ()):
+            uri = node.namespace
+            if node.local in EXTENSION_BEHAVIOURS.get(uri, ()):
                 self.behaviour(node, required)
-            elif not self.is_bml(node):
+            elif not (uri in (None, "", BML_NAMESPACE) if node.prefix is None else uri == BML_NAMESPACE):  # is_bml
                 self.warn("BEHAVIOR_TYPE_NOT_SUPPORTED", f"extension element <{node.tag}> ignored", node)
             elif node.local == "required":
                 self.read(node.elements(), required=True)
@@ -607,7 +608,8 @@ class _Reader:
         nodes, and warns). Its elements are plain ``<synchronize>``, ``<before>`` and ``<after>`` with
         ``<sync ref=...>`` in them, references that read, and text, which is not read."""
         owner, shift = node.attrs.get("id", ""), node.shift
-        known, plain, finish, read = self.refs, _plain_ref, self.made, self.ref_at
+        known, plain, finish, read, new_constraint = self.refs, _plain_ref, self.made, self.ref_at, Constraint
+        rests, new_ref = _rests, _new_ref
         made: list[Constraint] = []
         level, kind, refs, anchor_text, line, column = 0, "", [], None, 0, 0
         for event in node.events:
@@ -615,8 +617,11 @@ class _Reader:
                 level -= 1
                 if level:
                     continue
-                constraint = finish(kind, refs, anchor_text, read, owner, required, line,
-                                    column + 1 - (shift if line == 1 else 0))
+                column += 1 - (shift if line == 1 else 0)
+                if anchor_text is None and kind == "synchronize":  # (what made() makes of it, without its call)
+                    made.append(new_constraint(kind, refs, None, owner, required, "", line, column))
+                    continue
+                constraint = finish(kind, refs, anchor_text, read, owner, required, line, column)
                 if constraint is None:
                     return None
                 made.append(constraint)
@@ -631,20 +636,28 @@ class _Reader:
                         return None
                     ref = known.get(text)
                     if ref is None:
-                        ref = plain(text)
-                        if ref is None:
-                            ref = read(text)
-                            if ref is None:
-                                return None
+                        # (what _plain_ref gives for a tail it has read before, without its call: the commonest)
+                        first, colon, rest = text.partition(":")
+                        tail = rests.get(rest) if colon else None
+                        if tail is not None and tail[0] and len(text) <= MAX_NUMBER and text.isascii() \
+                                and first.isidentifier():
+                            ref = known[text] = new_ref(SyncRef, ("sync", tail[1], None, first, tail[0], None, text))
                         else:
-                            known[text] = ref
+                            ref = plain(text)
+                            if ref is None:
+                                ref = read(text)
+                                if ref is None:
+                                    return None
+                            else:
+                                known[text] = ref
                     refs.append(ref)
                 elif level == 0:  # a constraint
                     level = 1
                     kind, attrs, line, column = event
                     if kind not in CONSTRAINT_KINDS:
                         return None
-                    refs, anchor_text = [], held_attribute(attrs, "ref") if attrs else None
+                    refs, anchor_text = [], (attrs[1] if attrs[0] == "ref" else held_attribute(attrs, "ref")) \
+                        if attrs else None
                 else:
                     return None
         return made

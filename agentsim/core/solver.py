@@ -219,7 +219,11 @@ class BlockSolver:
             return None
         if nodes is None:  # (what local_node does, with the look-up above: the sync point has no node yet)
             nodes = self.local_nodes[beh.id] = {}
-        node = nodes[sync_id] = self.ties.add()
+        ties = self.ties  # (what ties.add() does for a node of no fixed time, without its call)
+        node = nodes[sync_id] = len(ties.parent)
+        ties.parent.append(node)
+        ties.delta.append(0.0)
+        ties.fixed.append(None)
         return node
 
     def _sync_set(self, beh) -> frozenset[str]:
@@ -386,10 +390,17 @@ class BlockSolver:
         group_peg = self.group_peg
         if nodes:
             base = self.block_peg.time
-            find = self.ties.find
+            find, parent, delta = self.ties.find, self.ties.parent, self.ties.delta
             # (its tied sync points, in the order they were tied: what is made of them does not depend on it)
             for sync_id, node in nodes.items():
-                root, d = groups[sync_id] = find(node)
+                root = parent[node]  # (what find gives, told without its call for a root or a node tied to one)
+                if root == node:
+                    d = 0.0
+                elif parent[root] == root:
+                    d = delta[node]
+                else:
+                    root, d = find(node)
+                groups[sync_id] = root, d
                 peg = group_peg.get(root)
                 if peg is not None:
                     known[sync_id] = peg.time + d - base

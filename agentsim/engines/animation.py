@@ -61,7 +61,11 @@ class AnimationPlanner(Planner):
 
     def check_times(self, behaviour, preferred, times) -> None:
         super().check_times(behaviour, preferred, times)
-        unit = self.unit(behaviour)
+        # (the unit as unit() gives it, found here without its call where it is remembered: each behaviour's
+        # times are checked twice)
+        unit = None if behaviour.type in _FORMS else self._units.get((behaviour.type, behaviour.attributes.get("lexeme")))
+        if unit is None:
+            unit = self.unit(behaviour)
         duration = times[-1] - times[0]
         if duration < unit.min_duration - 1e-9:
             raise ScheduleError(f"{duration:.3f} s is shorter than the shortest {unit.name} "
