@@ -575,9 +575,12 @@ class Adapter:
                 self.notes.add(found[1])
             return found[0]
 
-        for b in behaviours:
-            for key in self.sync_keys(b):
-                b.attrs[key] = fix(b.attrs[key])
+        for b in behaviours:  # (what sync_keys gives, without its calls: most behaviours have no such attribute)
+            syncs = BEHAVIOUR_TYPES[b.local].syncs if b.local in BEHAVIOUR_TYPES else ()
+            attrs = b.attrs
+            for key in list(attrs):
+                if key in syncs:
+                    attrs[key] = fix(attrs[key])
         if not self._aliased_constraint:
             return  # (no reference in the constraints can be retargeted)
         for c in constraints:

@@ -492,7 +492,8 @@ class _Reader:
             self.warn("PARSING_FAILURE", f"{bid}: <{node.tag}> has no <murml-description>; behaviour ignored", node,
                       [bid])
             return
-        missing = [name for name in REQUIRED_ATTRIBUTES.get(kind.name, ()) if not node.attrs.get(name, "").strip()]
+        needed = REQUIRED_ATTRIBUTES.get(kind.name)  # (most kinds need none)
+        missing = [name for name in needed if not node.attrs.get(name, "").strip()] if needed else None
         if missing:
             self.warn("PARSING_FAILURE", f"{bid}: <{node.tag}> needs {' and '.join(missing)}; behaviour ignored",
                       node, [bid])

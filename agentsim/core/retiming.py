@@ -207,9 +207,7 @@ class Retimer:
         entries = []
         predicted = run.predicted
         ends: list[tuple[TimedBehaviour, float | None]] = []  # (the predicted ends, noted at once after)
-        for timed in run.live() if behaviours is None else behaviours:
-            if not timed.live:
-                continue
+        for timed in run.live() if behaviours is None else [t for t in behaviours if t.live]:
             behaviour = timed.behaviour
             last = predicted.get(behaviour.id)
             known = timed_now.get(timed) if timed_now else None

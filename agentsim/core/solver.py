@@ -634,8 +634,10 @@ class BlockSolver:
         """Shift every cluster of freely placed behaviours that starts before the block start; returns
         whether any was shifted."""
         block_start, times_of = self.block_peg.time, self.times_of
+        known = self.times_now()  # (the times times_of has, told without its call: no peg moves in this loop)
         for timed in self.timed.values():  # (most blocks have none that starts before the block: then none moves)
-            start = times_of(timed)[0]
+            times = known.get(timed)
+            start = (times if times is not None else times_of(timed))[0]
             if start is not None and start - block_start < -EPSILON:
                 break
         else:
@@ -689,9 +691,13 @@ class BlockSolver:
         return shifted
 
     def check_validity(self) -> None:
+        block_start, times_of = self.block_peg.time, self.times_of  # (no peg moves here)
+        known = self.times_now()  # (the times times_of has, told without its call)
         for beh_id, timed in list(self.timed.items()):
-            times = self.times_of(timed)
-            start = times[0] - self.block_peg.time
+            times = known.get(timed)
+            if times is None:
+                times = times_of(timed)
+            start = times[0] - block_start
             if start < -TOLERANCE:
                 refused = self.shorten_preparation(timed, times)
                 if refused is not None:
