@@ -144,6 +144,8 @@ class BlockSolver:
         # references live as long as the block; a block refers to one sync point many times)
         self._local_refs: dict[int, tuple[int, float]] = {}
         self._sync_sets: dict[str, tuple[object, frozenset[str]]] = {}
+        # the block's behaviours by id, as Block.behaviour finds them (asked for each sync point given a node)
+        self._behaviour_of = {b.id: b for b in block.behaviours}.get
         # the times of each timed behaviour, computed once for every phase that reads them after placing, and
         # made again when a peg moved (the generation of the pegs' time cache changed: see times_of)
         self._cache = self.block_peg.cache
@@ -211,7 +213,7 @@ class BlockSolver:
     def _new_node(self, behaviour_id: str, sync_id: str, nodes: dict[str, int] | None) -> int | None:
         """The new node of a sync point of this block that has none yet (``nodes``: its behaviour's nodes so
         far, if any); None if there is no such sync point (:meth:`node` says why)."""
-        beh = self.block.behaviour(behaviour_id)
+        beh = self._behaviour_of(behaviour_id)
         if beh is None:
             return None
         syncs = beh.sync_ids  # (a short list is searched as it is; a speech's thousands, in a set)
@@ -421,11 +423,12 @@ class BlockSolver:
         n = len(sync_ids)
         keys: list[KeyRef | None] = [None] * n
         refs: dict[int, KeyRef] = {}
-        if known:
-            for i, sync_id in enumerate(sync_ids):
-                if sync_id in known:
-                    root, d = groups[sync_id]
-                    keys[i] = refs[i] = KeyRef(group_peg[root], d)
+        if known:  # (each known sync point found where it is; the first of a name, as resolve finds it)
+            index = sync_ids.index
+            for sync_id in known:
+                i = index(sync_id)
+                root, d = groups[sync_id]
+                keys[i] = refs[i] = KeyRef(group_peg[root], d)
         if not refs:
             anchor = OffsetPeg(self.block_peg, times[0], name=f"{self.block.id}:{beh.id}:anchor", anchor=True)
             self.anchors.append(anchor)

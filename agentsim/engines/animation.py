@@ -60,7 +60,7 @@ class AnimationPlanner(Planner):
         return list(keys)
 
     def check_times(self, behaviour, preferred, times) -> None:
-        super().check_times(behaviour, preferred, times)
+        Planner.check_times(self, behaviour, preferred, times)  # (super()'s, without making a super object)
         # (the unit as unit() gives it, found here without its call where it is remembered: each behaviour's
         # times are checked twice)
         unit = None if behaviour.type in _FORMS else self._units.get((behaviour.type, behaviour.attributes.get("lexeme")))
