@@ -505,7 +505,6 @@ class Adapter:
         has elements, all ``<synchronize>``, ``<before>`` and ``<after>`` (as written, no prefix), and keeps
         every reference of theirs and of their children as written (what :meth:`constraint_refs` reads)."""
         level, elements, kept = 0, False, self.references.kept
-        tails = self.references.written_tails  # (what References.kept tells at once, told without its call)
         for event in events:
             if event is None:
                 level -= 1
@@ -521,10 +520,7 @@ class Adapter:
                 if not attrs:
                     continue
                 value = attrs[1] if attrs[0] == "ref" else held_attribute(attrs, "ref")
-                if value is None or tails.get(value[value.rfind(":") + 1:]) and ":" in value and "\n" not in value \
-                        and value.strip() == value:
-                    continue
-                if not kept(value):
+                if value is not None and not kept(value):
                     return False
         return elements
 
@@ -575,12 +571,9 @@ class Adapter:
                 self.notes.add(found[1])
             return found[0]
 
-        for b in behaviours:  # (what sync_keys gives, without its calls: most behaviours have no such attribute)
-            syncs = BEHAVIOUR_TYPES[b.local].syncs if b.local in BEHAVIOUR_TYPES else ()
-            attrs = b.attrs
-            for key in list(attrs):
-                if key in syncs:
-                    attrs[key] = fix(attrs[key])
+        for b in behaviours:
+            for key in self.sync_keys(b):
+                b.attrs[key] = fix(b.attrs[key])
         if not self._aliased_constraint:
             return  # (no reference in the constraints can be retargeted)
         for c in constraints:

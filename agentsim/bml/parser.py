@@ -140,6 +140,12 @@ def _parse_ref(raw: str, lenient: bool = False) -> SyncRef:
 _match_plain = _PLAIN_REF.match
 
 
+def _in_bml(uri: str | None, prefix: str | None) -> bool:
+    """Whether an element of namespace ``uri`` written with ``prefix`` is BML's (no namespace declared, unprefixed,
+    counts as BML's)."""
+    return uri in (None, "", BML_NAMESPACE) if prefix is None else uri == BML_NAMESPACE
+
+
 def _plain_ref(text: str) -> SyncRef | None:
     """``text`` read as :func:`_parse_ref` reads it if it is a short reference of the usual form
     (``g1:stroke``, ``g1:end+0.5``: one behaviour's sync point, an offset in range), else None (then
@@ -400,15 +406,14 @@ class _Reader:
         return ref
 
     def is_bml(self, node: Node) -> bool:
-        uri = node.namespace
-        return uri in (None, "", BML_NAMESPACE) if node.prefix is None else uri == BML_NAMESPACE
+        return _in_bml(node.namespace, node.prefix)
 
     def read(self, nodes: list[Node], required: bool) -> None:
         for node in nodes:
             uri = node.namespace
             if node.local in EXTENSION_BEHAVIOURS.get(uri, ()):
                 self.behaviour(node, required)
-            elif not (uri in (None, "", BML_NAMESPACE) if node.prefix is None else uri == BML_NAMESPACE):  # is_bml
+            elif not _in_bml(uri, node.prefix):
                 self.warn("BEHAVIOR_TYPE_NOT_SUPPORTED", f"extension element <{node.tag}> ignored", node)
             elif node.local == "required":
                 self.read(node.elements(), required=True)
@@ -610,7 +615,6 @@ class _Reader:
         ``<sync ref=...>`` in them, references that read, and text, which is not read."""
         owner, shift = node.attrs.get("id", ""), node.shift
         known, plain, finish, read, new_constraint = self.refs, _plain_ref, self.made, self.ref_at, Constraint
-        rests, new_ref = _rests, _new_ref
         made: list[Constraint] = []
         level, kind, refs, anchor_text, line, column = 0, "", [], None, 0, 0
         for event in node.events:
@@ -637,28 +641,20 @@ class _Reader:
                         return None
                     ref = known.get(text)
                     if ref is None:
-                        # (what _plain_ref gives for a tail it has read before, without its call: the commonest)
-                        first, colon, rest = text.partition(":")
-                        tail = rests.get(rest) if colon else None
-                        if tail is not None and tail[0] and len(text) <= MAX_NUMBER and text.isascii() \
-                                and first.isidentifier():
-                            ref = known[text] = new_ref(SyncRef, ("sync", tail[1], None, first, tail[0], None, text))
-                        else:
-                            ref = plain(text)
+                        ref = plain(text)
+                        if ref is None:
+                            ref = read(text)
                             if ref is None:
-                                ref = read(text)
-                                if ref is None:
-                                    return None
-                            else:
-                                known[text] = ref
+                                return None
+                        else:
+                            known[text] = ref
                     refs.append(ref)
                 elif level == 0:  # a constraint
                     level = 1
                     kind, attrs, line, column = event
                     if kind not in CONSTRAINT_KINDS:
                         return None
-                    refs, anchor_text = [], (attrs[1] if attrs[0] == "ref" else held_attribute(attrs, "ref")) \
-                        if attrs else None
+                    refs, anchor_text = [], held_attribute(attrs, "ref")
                 else:
                     return None
         return made

@@ -144,8 +144,6 @@ class BlockSolver:
         # references live as long as the block; a block refers to one sync point many times)
         self._local_refs: dict[int, tuple[int, float]] = {}
         self._sync_sets: dict[str, tuple[object, frozenset[str]]] = {}
-        # the block's behaviours by id, as Block.behaviour finds them (asked for each sync point given a node)
-        self._behaviour_of = {b.id: b for b in block.behaviours}.get
         # the times of each timed behaviour, computed once for every phase that reads them after placing, and
         # made again when a peg moved (the generation of the pegs' time cache changed: see times_of)
         self._cache = self.block_peg.cache
@@ -213,7 +211,7 @@ class BlockSolver:
     def _new_node(self, behaviour_id: str, sync_id: str, nodes: dict[str, int] | None) -> int | None:
         """The new node of a sync point of this block that has none yet (``nodes``: its behaviour's nodes so
         far, if any); None if there is no such sync point (:meth:`node` says why)."""
-        beh = self._behaviour_of(behaviour_id)
+        beh = self.block.behaviour(behaviour_id)
         if beh is None:
             return None
         syncs = beh.sync_ids  # (a short list is searched as it is; a speech's thousands, in a set)
@@ -221,11 +219,7 @@ class BlockSolver:
             return None
         if nodes is None:  # (what local_node does, with the look-up above: the sync point has no node yet)
             nodes = self.local_nodes[beh.id] = {}
-        ties = self.ties  # (what ties.add() does for a node of no fixed time, without its call)
-        node = nodes[sync_id] = len(ties.parent)
-        ties.parent.append(node)
-        ties.delta.append(0.0)
-        ties.fixed.append(None)
+        node = nodes[sync_id] = self.ties.add()
         return node
 
     def _sync_set(self, beh) -> frozenset[str]:

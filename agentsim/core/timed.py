@@ -401,7 +401,7 @@ class BlockRun:
 
     def live(self) -> list[TimedBehaviour]:
         """Its behaviours that are planned or playing, in document order."""
-        return [t for t in self.timed if t._state in _LIVE] if self.live_count else []  # (t.live, without its call)
+        return [t for t in self.timed if t.live] if self.live_count else []
 
     def has_live(self) -> bool:
         """Whether any of its behaviours is planned or playing (:attr:`live_count`, kept as they change)."""

@@ -136,9 +136,9 @@ def _builder(expat, shift: int, data: bytes, capture: frozenset[str] = frozenset
 
     ``capture``: tags of the root's children whose content is held as expat's events (a :class:`Captured`
     element, the attributes as expat's list) instead of being made into nodes; content that declares a
-    namespace, or nests deeper than :data:`HELD_DEPTH`, is made into nodes at once (as it would have been). ``replay`` makes events into
-    nodes as ``start``, ``end`` and ``text`` would have made them where they were; ``seed`` puts an element
-    on the stack (a replay's parent).
+    namespace, or nests deeper than :data:`HELD_DEPTH`, is made into nodes at once (as it would have been).
+    ``replay`` makes events into nodes as ``start``, ``end`` and ``text`` would have made them where they were;
+    ``seed`` puts an element on the stack (a replay's parent).
     """
     state: dict = {"root": None, "defaults": [], "scopes": [{}]}
     stack: list[Node] = []

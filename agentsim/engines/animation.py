@@ -60,12 +60,8 @@ class AnimationPlanner(Planner):
         return list(keys)
 
     def check_times(self, behaviour, preferred, times) -> None:
-        Planner.check_times(self, behaviour, preferred, times)  # (super()'s, without making a super object)
-        # (the unit as unit() gives it, found here without its call where it is remembered: each behaviour's
-        # times are checked twice)
-        unit = None if behaviour.type in _FORMS else self._units.get((behaviour.type, behaviour.attributes.get("lexeme")))
-        if unit is None:
-            unit = self.unit(behaviour)
+        super().check_times(behaviour, preferred, times)
+        unit = self.unit(behaviour)
         duration = times[-1] - times[0]
         if duration < unit.min_duration - 1e-9:
             raise ScheduleError(f"{duration:.3f} s is shorter than the shortest {unit.name} "
