@@ -152,6 +152,10 @@ def write_textgrid(path: str | Path, recording, gestures=(), end: float | None =
         return out
 
     words, phones, marks = [], [], {}
+    synced: dict[tuple[str, str], list[tuple[str, str, float]]] = {}  # each speech's sync points, in their order
+    for sync_id, t in sync_times.items() if recording.speech else ():
+        block, behaviour, sync = sync_id.split(":", 2)
+        synced.setdefault((block, behaviour), []).append((sync_id, sync, t))
     for heard in recording.speech:
         words.extend(heard_words(heard))
         speed = 1.0 + heard.drift_ppm * 1e-6
@@ -159,9 +163,8 @@ def write_textgrid(path: str | Path, recording, gestures=(), end: float | None =
             a, b = heard.t0 + p.start * speed, heard.t0 + p.end * speed
             if heard.stopped is None or a < heard.stopped:
                 phones.append((p.symbol + ("ˈ" if p.stressed else ""), a, b))
-        for sync_id, t in sync_times.items():
-            block, behaviour, sync = sync_id.split(":", 2)
-            if (block, behaviour) == (heard.block, heard.behaviour) and sync not in ("start", "end") and t <= end:
+        for sync_id, sync, t in synced.get((heard.block, heard.behaviour), ()):
+            if sync not in ("start", "end") and t <= end:
                 marks.setdefault(round(t, 9), []).append(sync_id)
     strokes: dict[float, list[str]] = {}
     for row in gestures:
