@@ -15,15 +15,16 @@ $SUDO apt-get install -y -qq python3-venv python3-pip espeak-ng espeak-ng-data l
 # is 3.11 or newer, else from the python3 first on the PATH; AGENTSIM_PYTHON=/path/to/python3 names another.
 # Debian's is a statically linked, optimised build: where python3 is another build (pyenv's, with a shared
 # libpython), the same run takes a sixth to a fifth longer with it. A .venv made before is kept as it is.
+new_enough() { "$1" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; }
 if [ ! -x .venv/bin/python ]; then
     PYTHON="${AGENTSIM_PYTHON:-}"
     if [ -z "$PYTHON" ]; then
         PYTHON=python3
-        if [ -x /usr/bin/python3 ] && /usr/bin/python3 -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
+        if [ -x /usr/bin/python3 ] && new_enough /usr/bin/python3; then
             PYTHON=/usr/bin/python3
         fi
     fi
-    if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
+    if ! new_enough "$PYTHON"; then
         echo "install.sh: $PYTHON is not Python 3.11 or newer: install it, or name one with" \
              "AGENTSIM_PYTHON=/path/to/python3" >&2
         exit 1
