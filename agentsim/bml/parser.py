@@ -614,7 +614,7 @@ class _Reader:
         nodes, and warns). Its elements are plain ``<synchronize>``, ``<before>`` and ``<after>`` with
         ``<sync ref=...>`` in them, references that read, and text, which is not read."""
         owner, shift = node.attrs.get("id", ""), node.shift
-        known, plain, finish, read, new_constraint = self.refs, _plain_ref, self.made, self.ref_at, Constraint
+        known, plain, finish, read = self.refs, _plain_ref, self.made, self.ref_at
         made: list[Constraint] = []
         level, kind, refs, anchor_text, line, column = 0, "", [], None, 0, 0
         for event in node.events:
@@ -622,11 +622,8 @@ class _Reader:
                 level -= 1
                 if level:
                     continue
-                column += 1 - (shift if line == 1 else 0)
-                if anchor_text is None and kind == "synchronize":  # (what made() makes of it, without its call)
-                    made.append(new_constraint(kind, refs, None, owner, required, "", line, column))
-                    continue
-                constraint = finish(kind, refs, anchor_text, read, owner, required, line, column)
+                constraint = finish(kind, refs, anchor_text, read, owner, required, line,
+                                    column + 1 - (shift if line == 1 else 0))
                 if constraint is None:
                     return None
                 made.append(constraint)
